@@ -1,0 +1,187 @@
+"""The paper's control law (eqs. 7-11), pure and batched over agents. No zenoh, no I/O.
+
+Sign convention (PAPER_NOTES): u_i = -(∇U_att + ∇U_rep^a + ∇U_rep^o) with Ψ < 0, so attraction pulls
+toward the slot p* + Δ_i and repulsion pushes apart.
+
+Every function takes arrays whose first axis is "the agents being computed" (N): the in-process engine
+passes the whole swarm, an agent process passes itself (N = 1). Neighbours and obstacles come as padded
+tables (N, K) in a canonical order (neighbour id, obstacle id) and are summed column by column, so one
+agent's row is bit-identical whichever way it is computed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from reconswarm.geometry import norm2
+from reconswarm.scenario import PlannerConfig
+
+Array = NDArray[np.float64]
+Mask = NDArray[np.bool_]
+
+
+def attraction(p: Array, center: Array, offset: Array, k_att: float, r_c: float) -> Array:
+    """-∇U_att of eq. (9) for a circular target region (R_i* = R_c).
+
+    p (N, 2), center (N, 2) or (2,), offset (N, 2) -> (N, 2).
+    Inside B(center, R_c): -k_att e_i with e_i = p_i - (center + Δ_i) (R_c / R_i* = 1).
+    Outside: constant magnitude R_c k_att toward the centre. At the switch the two branches differ by
+    k_att Δ_i (the paper claims continuity; we keep its form and switch on ‖p - center‖ <= R_c).
+    """
+    rel = p - center  # (N, 2)
+    dist = norm2(rel)  # (N,)
+    inside = dist <= r_c
+    e = rel - offset
+    safe = np.where(dist > 0.0, dist, 1.0)
+    out_x = -r_c * k_att * rel[:, 0] / safe
+    out_y = -r_c * k_att * rel[:, 1] / safe
+    ux = np.where(inside, -k_att * e[:, 0], out_x)
+    uy = np.where(inside, -k_att * e[:, 1], out_y)
+    return np.stack([ux, uy], axis=1)
+
+
+def repulsion_speed(d: Array, d_min: Array, d_max: Array, psi: float) -> Array:
+    """Magnitude of one repulsive term of eq. (11): -Ψ (d_max - d) / (d_max - d_min) for d <= d_max.
+
+    |Ψ| at d = d_min, 0 at d_max, linear between and continuing upward below d_min. Shapes broadcast.
+    """
+    return np.where(d <= d_max, -psi * (d_max - d) / (d_max - d_min), 0.0)
+
+
+def _accumulate(terms: Array, valid: Mask) -> Array:
+    """Sum (N, K, 2) terms over K in column order, skipping invalid entries. -> (N, 2)"""
+    acc = np.zeros((terms.shape[0], 2))
+    for c in range(terms.shape[1]):
+        acc = acc + np.where(valid[:, c, None], terms[:, c, :], 0.0)
+    return acc
+
+
+def agent_repulsion(p: Array, r: Array, nb_p: Array, nb_r: Array, nb_valid: Mask,
+                    d_safe: float, d_max: float, psi: float) -> Array:
+    """-∇U_rep^a of eq. (11) over each agent's neighbour table.
+
+    p (N, 2), r (N,), nb_p (N, K, 2), nb_r (N, K), nb_valid (N, K) -> (N, 2).
+    A table entry beyond d_max,ij contributes nothing, so tables may hold more than N_i(t).
+    """
+    rel = p[:, None, :] - nb_p  # (N, K, 2)
+    d = norm2(rel)  # (N, K)
+    rr = r[:, None] + nb_r
+    dmin = rr + d_safe
+    dmax = rr + d_max
+    mag = repulsion_speed(d, dmin, dmax, psi)
+    safe = np.where(d > 0.0, d, 1.0)
+    # Coincident centres have no direction: push along +x (a measure-zero case, but never NaN).
+    ux = np.where(d > 0.0, rel[..., 0] / safe, 1.0)
+    uy = np.where(d > 0.0, rel[..., 1] / safe, 0.0)
+    terms = np.stack([mag * ux, mag * uy], axis=-1)
+    return _accumulate(terms, nb_valid & (d <= dmax))
+
+
+def obstacle_repulsion(r: Array, ob_d: Array, ob_n: Array, ob_valid: Mask,
+                       d_safe: float, d_max: float, psi: float) -> Array:
+    """-∇U_rep^o: the same form as (11) against the nearest point of each known obstacle.
+
+    r (N,), ob_d (N, M) signed distance from p_i to the known hull, ob_n (N, M, 2) outward unit normal
+    at the nearest point, ob_valid (N, M) -> (N, 2). d_min = r_i + d_safe, d_max = r_i + d_max.
+    """
+    dmin = r[:, None] + d_safe
+    dmax = r[:, None] + d_max
+    mag = repulsion_speed(ob_d, dmin, dmax, psi)
+    terms = mag[..., None] * ob_n
+    return _accumulate(terms, ob_valid & (ob_d <= dmax))
+
+
+def containment(p: Array, r: Array, center: Array, r_c: float, d_safe: float, d_max: float,
+                psi: float) -> Array:
+    """Virtual-leader benchmark: keep agents inside B(center, R_c) with the same linear wall.
+
+    p (N, 2), r (N,), center (N, 2) -> (N, 2). The boundary acts only from inside; an agent pushed out
+    is pulled back by the attraction (the paper's benchmark can lose agents for good; ours rejoin).
+    """
+    rel = center - p
+    dist = norm2(rel)
+    d = r_c - dist
+    mag = repulsion_speed(d, r + d_safe, r + d_max, psi)
+    mag = np.where(dist <= r_c, mag, 0.0)
+    safe = np.where(dist > 0.0, dist, 1.0)
+    return np.stack([mag * rel[:, 0] / safe, mag * rel[:, 1] / safe], axis=1)
+
+
+@dataclass
+class Neighbours:
+    """Padded neighbour table, rows = computed agents, columns in increasing neighbour id."""
+
+    p: Array  # (N, K, 2)
+    r: Array  # (N, K)
+    valid: Mask  # (N, K)
+
+    @staticmethod
+    def empty(n: int) -> Neighbours:
+        return Neighbours(np.zeros((n, 0, 2)), np.zeros((n, 0)), np.zeros((n, 0), dtype=bool))
+
+
+@dataclass
+class ObstacleView:
+    """What each agent knows of the obstacles near it, columns in increasing obstacle id."""
+
+    d: Array  # (N, M) signed distance to the known hull
+    n: Array  # (N, M, 2) outward unit normal
+    valid: Mask  # (N, M)
+
+    @staticmethod
+    def empty(n: int) -> ObstacleView:
+        return ObstacleView(np.zeros((n, 0)), np.zeros((n, 0, 2)), np.zeros((n, 0), dtype=bool))
+
+
+def command(cfg: PlannerConfig, p: Array, r: Array, offset: Array, center: Array, nb: Neighbours,
+            ob: ObstacleView, perturbation: Array, leader_velocity: Array | None = None) -> Array:
+    """The head-point velocity u_i (N, 2) of eq. (7), plus Remark 1's perturbation.
+
+    center (N, 2): p* for the reconfigurable planner, each agent's copy of the virtual leader for the
+    benchmark (which also passes the leader's velocity as feed-forward and adds containment).
+    """
+    u = attraction(p, center, offset, cfg.k_att, cfg.target_radius_m)
+    u = u + agent_repulsion(p, r, nb.p, nb.r, nb.valid, cfg.d_safe_m, cfg.d_max_m, cfg.psi_mps)
+    u = u + obstacle_repulsion(r, ob.d, ob.n, ob.valid, cfg.d_safe_m, cfg.d_max_m, cfg.psi_mps)
+    if leader_velocity is not None:
+        u = u + leader_velocity
+        u = u + containment(p, r, center, cfg.target_radius_m, cfg.d_safe_m, cfg.d_max_m, cfg.psi_mps)
+    return u + perturbation
+
+
+def neighbour_table(p: Array, r: Array, pairs: NDArray[np.int64], d_max: float) -> Neighbours:
+    """Build every agent's table from candidate index pairs (i < j) over the whole swarm.
+
+    p (N, 2), r (N,), pairs (E, 2) -> Neighbours with rows for all N agents, neighbours j sorted by
+    index (the swarm is indexed in increasing id). Pairs beyond d_max,ij are dropped here.
+    """
+    n = p.shape[0]
+    if pairs.shape[0] == 0:
+        return Neighbours.empty(n)
+    i, j = pairs[:, 0], pairs[:, 1]
+    d = norm2(p[i] - p[j])
+    keep = d <= r[i] + r[j] + d_max
+    i, j = i[keep], j[keep]
+    src = np.concatenate([i, j])
+    dst = np.concatenate([j, i])
+    order = np.lexsort((dst, src))
+    src, dst = src[order], dst[order]
+    counts = np.bincount(src, minlength=n)
+    k = int(counts.max()) if counts.size else 0
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    col = np.arange(src.shape[0]) - starts[src]
+    nb_p = np.zeros((n, k, 2))
+    nb_r = np.zeros((n, k))
+    valid = np.zeros((n, k), dtype=bool)
+    nb_p[src, col] = p[dst]
+    nb_r[src, col] = r[dst]
+    valid[src, col] = True
+    return Neighbours(nb_p, nb_r, valid)
+
+
+def errors(p: Array, target: Array, offset: Array) -> Array:
+    """Tracking error norms ‖p_i - (p* + Δ_i)‖: (N, 2), (2,), (N, 2) -> (N,)."""
+    return norm2(p - (target + offset))

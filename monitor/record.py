@@ -1,0 +1,201 @@
+"""The run record `run.db` (SQLite), written as the run goes, read by every monitor command.
+
+One schema for every mode (in-process, lockstep, realtime). Per tick one row holds the head points,
+headings and liveness of all agents as float64 / uint8 blobs in agent-id order, so writing stays cheap
+at thousands of agents; the writer commits at least every `commit_interval_s` of wall time (WAL mode),
+so a run killed midway keeps a readable record that lacks at most that much.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from monitor.metrics import Episode
+from reconswarm.errors import BadInput
+from reconswarm.scenario import Scenario, parse, to_toml
+
+SCHEMA_VERSION = "1"
+DDL = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS ticks (
+    k INTEGER PRIMARY KEY, t REAL NOT NULL,
+    px BLOB NOT NULL, py BLOB NOT NULL, theta BLOB NOT NULL, alive BLOB NOT NULL,
+    max_error_m REAL, min_agent_gap_m REAL, min_obstacle_gap_m REAL, groups INTEGER);
+CREATE TABLE IF NOT EXISTS beacons (k INTEGER PRIMARY KEY, t REAL NOT NULL, px BLOB NOT NULL, py BLOB NOT NULL);
+CREATE TABLE IF NOT EXISTS events (seq INTEGER PRIMARY KEY AUTOINCREMENT, t REAL NOT NULL, kind TEXT NOT NULL,
+    data TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS contacts (seq INTEGER PRIMARY KEY AUTOINCREMENT, kind TEXT NOT NULL, a TEXT NOT NULL,
+    b TEXT NOT NULL, t_start REAL NOT NULL, t_end REAL, gap_m REAL NOT NULL);
+CREATE TABLE IF NOT EXISTS counters (process TEXT PRIMARY KEY, messages_rejected INTEGER NOT NULL);
+CREATE TABLE IF NOT EXISTS gaps (t_from REAL NOT NULL, t_to REAL NOT NULL, note TEXT NOT NULL);
+"""
+
+Array = NDArray[np.float64]
+
+
+def _blob(a: NDArray[Any], dtype: str) -> bytes:
+    return np.ascontiguousarray(a, dtype=dtype).tobytes()
+
+
+class RunWriter:
+    """Appends to run.db. Not thread-safe: one writer per process, called from its main loop."""
+
+    def __init__(self, path: str | Path, scenario: Scenario, mode: str, *, append: bool = False,
+                 commit_interval_s: float = 0.5) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if not append and self.path.exists():
+            for suffix in ("", "-wal", "-shm"):
+                Path(str(self.path) + suffix).unlink(missing_ok=True)
+        self.db = sqlite3.connect(str(self.path), isolation_level=None, check_same_thread=False)
+        self.db.execute("PRAGMA journal_mode=WAL")
+        self.db.execute("PRAGMA synchronous=NORMAL")
+        self.db.executescript(DDL)
+        self.commit_interval_s = commit_interval_s
+        self._last_commit = time.monotonic()
+        self.db.execute("BEGIN")
+        existing = dict(self.db.execute("SELECT key, value FROM meta").fetchall())
+        if not existing:
+            self.set_meta(schema=SCHEMA_VERSION, scenario=scenario.meta.name, planner=scenario.planner.kind,
+                          mode=mode, scenario_toml=to_toml(scenario), scenario_source=scenario.source,
+                          agent_ids=json.dumps([a.id for a in scenario.agents]),
+                          started_unix=f"{time.time():.3f}", finished="0")
+        self.commit()
+
+    def set_meta(self, **kv: Any) -> None:
+        self.db.executemany("INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)",
+                            [(k, v if isinstance(v, str) else json.dumps(v)) for k, v in kv.items()])
+
+    def last_tick(self) -> tuple[int, float] | None:
+        row = self.db.execute("SELECT k, t FROM ticks ORDER BY k DESC LIMIT 1").fetchone()
+        return (int(row[0]), float(row[1])) if row else None
+
+    def tick(self, k: int, t: float, p: Array, theta: Array, alive: NDArray[np.bool_], max_error_m: float,
+             min_agent_gap_m: float, min_obstacle_gap_m: float, groups: int) -> None:
+        """p (N, 2), theta (N,), alive (N,) in agent-id order; NaN where a state is unknown."""
+        self.db.execute(
+            "INSERT OR REPLACE INTO ticks VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            (k, t, _blob(p[:, 0], "<f8"), _blob(p[:, 1], "<f8"), _blob(theta, "<f8"), _blob(alive, "u1"),
+             _finite(max_error_m), _finite(min_agent_gap_m), _finite(min_obstacle_gap_m), groups))
+        self.maybe_commit()
+
+    def beacon(self, k: int, t: float, p: Array) -> None:
+        self.db.execute("INSERT OR REPLACE INTO beacons VALUES (?, ?, ?, ?)",
+                        (k, t, _blob(p[:, 0], "<f8"), _blob(p[:, 1], "<f8")))
+
+    def event(self, ev: dict[str, Any]) -> None:
+        self.db.execute("INSERT INTO events(t, kind, data) VALUES (?, ?, ?)", (ev["t"], ev["kind"], json.dumps(ev)))
+
+    def episode(self, e: Episode) -> None:
+        self.db.execute("INSERT INTO contacts(kind, a, b, t_start, gap_m) VALUES (?, ?, ?, ?, ?)",
+                        (e.kind, e.a, e.b, e.t_start, e.gap_m))
+
+    def episode_end(self, key: tuple[str, str, str], t: float) -> None:
+        self.db.execute("UPDATE contacts SET t_end = ? WHERE kind = ? AND a = ? AND b = ? AND t_end IS NULL",
+                        (t, *key))
+
+    def counters(self, counts: dict[str, int]) -> None:
+        self.db.executemany("INSERT OR REPLACE INTO counters VALUES (?, ?)", list(counts.items()))
+
+    def note_gap(self, t_from: float, t_to: float, note: str) -> None:
+        self.db.execute("INSERT INTO gaps VALUES (?, ?, ?)", (t_from, t_to, note))
+
+    def maybe_commit(self) -> None:
+        if time.monotonic() - self._last_commit >= self.commit_interval_s:
+            self.commit()
+
+    def commit(self) -> None:
+        if self.db.in_transaction:
+            self.db.execute("COMMIT")
+        self._last_commit = time.monotonic()
+        self.db.execute("BEGIN")
+
+    def close(self, **final_meta: Any) -> None:
+        self.set_meta(**final_meta)
+        if self.db.in_transaction:
+            self.db.execute("COMMIT")
+        self.db.close()
+
+
+def _finite(v: float) -> float | None:
+    return float(v) if np.isfinite(v) else None
+
+
+@dataclass
+class Ticks:
+    k: NDArray[np.int64]  # (T,)
+    t: Array  # (T,)
+    px: Array  # (T, N)
+    py: Array  # (T, N)
+    theta: Array  # (T, N)
+    alive: NDArray[np.bool_]  # (T, N)
+    max_error_m: Array  # (T,) NaN where not recorded
+    min_agent_gap_m: Array
+    min_obstacle_gap_m: Array
+    groups: NDArray[np.int64]
+
+
+class RunRecord:
+    """Read access to a run.db (complete or still being written)."""
+
+    def __init__(self, path: str | Path) -> None:
+        p = Path(path)
+        if not p.is_file():
+            raise BadInput(f"{path}: no such run record")
+        try:
+            self.db = sqlite3.connect(f"file:{p}?mode=ro", uri=True)
+            self.meta = dict(self.db.execute("SELECT key, value FROM meta").fetchall())
+        except sqlite3.DatabaseError as exc:
+            raise BadInput(f"{path}: not a reconswarm run record ({exc})") from None
+        if "scenario_toml" not in self.meta:
+            raise BadInput(f"{path}: not a reconswarm run record (meta.scenario_toml missing)")
+        self.path = p
+        self.scenario = parse(self.meta["scenario_toml"], str(p))
+        self.ids = np.array(json.loads(self.meta["agent_ids"]), dtype=np.int64)
+
+    def close(self) -> None:
+        self.db.close()
+
+    def meta_json(self, key: str, default: Any = None) -> Any:
+        return json.loads(self.meta[key]) if key in self.meta else default
+
+    def ticks(self, every: int = 1) -> Ticks:
+        rows = self.db.execute(
+            "SELECT k, t, px, py, theta, alive, max_error_m, min_agent_gap_m, min_obstacle_gap_m, groups "
+            "FROM ticks WHERE k % ? = 0 ORDER BY k", (every,)).fetchall()
+        n = len(self.ids)
+
+        def stack(col: int, dtype: str) -> NDArray[Any]:
+            if not rows:
+                return np.zeros((0, n), dtype=dtype)
+            return np.frombuffer(b"".join(r[col] for r in rows), dtype=dtype).reshape(len(rows), n)
+
+        def column(col: int) -> Array:
+            return np.array([np.nan if r[col] is None else r[col] for r in rows], dtype=np.float64)
+
+        return Ticks(np.array([r[0] for r in rows], dtype=np.int64), np.array([r[1] for r in rows]),
+                     stack(2, "<f8"), stack(3, "<f8"), stack(4, "<f8"), stack(5, "u1").astype(bool),
+                     column(6), column(7), column(8),
+                     np.array([r[9] if r[9] is not None else -1 for r in rows], dtype=np.int64))
+
+    def events(self) -> list[dict[str, Any]]:
+        return [json.loads(r[0]) for r in self.db.execute("SELECT data FROM events ORDER BY t, seq")]
+
+    def contacts(self) -> list[dict[str, Any]]:
+        cols = ("kind", "a", "b", "t_start", "t_end", "gap_m")
+        rows = self.db.execute(f"SELECT {', '.join(cols)} FROM contacts ORDER BY t_start, seq")
+        return [dict(zip(cols, r, strict=True)) for r in rows]
+
+    def counters(self) -> dict[str, int]:
+        return {p: int(n) for p, n in self.db.execute("SELECT process, messages_rejected FROM counters")}
+
+    def gaps(self) -> list[dict[str, Any]]:
+        return [{"t_from": a, "t_to": b, "note": c} for a, b, c in self.db.execute("SELECT * FROM gaps")]

@@ -1,0 +1,63 @@
+"""Truth-side bookkeeping shared by the in-process engine and the monitor process: per tick, the safety
+metrics, the swarm graph's split / merge events and the row of run.db."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from monitor.metrics import SafetyMonitor
+from monitor.record import RunWriter
+from monitor.topology import TopologyTracker
+from reconswarm.scenario import Scenario
+from simworld.sensing import ContourField
+
+Array = NDArray[np.float64]
+
+
+class Recorder:
+    """Truth-side bookkeeping shared by the engine and the monitor process: safety, topology, run.db."""
+
+    def __init__(self, s: Scenario, writer: RunWriter | None) -> None:
+        self.s = s
+        self.writer = writer
+        self.ids = s.ids
+        self.slots = np.asarray(s.target_m) + s.offsets
+        self.field = ContourField.from_scenario(s)
+        self.topology = TopologyTracker(self.ids, s.planner.link_range_m)
+        self.events: list[dict[str, Any]] = []
+        self.max_error_m = float("inf")
+        p_cfg = s.planner
+        # Pairs within this distance cover the swarm graph (link + hysteresis) and the safety reach.
+        self.reach_m = max(p_cfg.link_range_m + self.topology.hysteresis_m, 2 * float(s.radii.max()) + p_cfg.d_max_m)
+        self.safety = SafetyMonitor(self.ids, s.radii, self.field.ids, p_cfg.d_safe_m,
+                                    self.reach_m - 2 * float(s.radii.max()))
+
+    def tick(self, k: int, t: float, p: Array, theta: Array, alive: NDArray[np.bool_],
+             true_d: Array | None = None, cand: NDArray[np.int64] | None = None) -> list[dict[str, Any]]:
+        """Record the truth at tick k; returns the topology events confirmed now.
+
+        true_d (N, M) and cand (pairs within `self.reach_m`) may be passed when already computed.
+        """
+        if true_d is None:
+            true_d = self.field.true_distances(p)
+        err = np.sqrt(np.sum((p - self.slots) ** 2, axis=1))
+        self.max_error_m = float(err[alive].max()) if alive.any() else float("inf")
+        gap_a, gap_o, started, ended = self.safety.step(t, p, true_d, cand)
+        events = self.topology.step(t, p, alive, cand)
+        self.events += events
+        if self.writer is not None:
+            w = self.writer
+            for ep in started:
+                w.episode(ep)
+            for key in ended:
+                w.episode_end(key, t)
+            for ev in events:
+                w.event(ev)
+            w.tick(k, t, p, theta, alive, self.max_error_m, gap_a, gap_o, self.topology.n_groups)
+        return events
+
+    def converged(self) -> bool:
+        return self.max_error_m <= self.s.planner.converge_tol_m

@@ -1,0 +1,107 @@
+"""The run summary of INTERFACES.md, computed from a run record alone."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from monitor.record import RunRecord
+
+FIELDS = ("scenario", "planner", "mode", "agents", "duration_s", "converged", "convergence_time_s",
+          "final_max_error_m", "min_agent_gap_m", "min_obstacle_gap_m", "collisions", "safety_violations",
+          "splits", "merges", "agents_lost", "messages_rejected", "path_length_m", "wall_time_s")
+
+
+def _r(v: float | None, nd: int = 3) -> float | None:
+    if v is None or not np.isfinite(v):
+        return None
+    return round(float(v), nd)
+
+
+def lost_agents(events: list[dict[str, Any]]) -> list[int]:
+    """Agents whose last membership event is agent_lost."""
+    last: dict[int, str] = {}
+    for e in events:
+        if e["kind"] in ("agent_lost", "agent_joined") and "agent" in e:
+            last[int(e["agent"])] = e["kind"]
+    return sorted(a for a, k in last.items() if k == "agent_lost")
+
+
+def convergence_time(t: np.ndarray, max_err: np.ndarray, tol: float) -> float | None:
+    """Start of the final stretch with every live agent within tol, if the run ends inside it."""
+    if max_err.size == 0 or not (max_err[-1] <= tol):
+        return None
+    above = np.flatnonzero(~(max_err <= tol))
+    return float(t[above[-1] + 1]) if above.size else float(t[0])
+
+
+def summarize(rec: RunRecord) -> dict[str, Any]:
+    s = rec.scenario
+    tk = rec.ticks()
+    events = rec.events()
+    contacts = rec.contacts()
+    tol = s.planner.converge_tol_m
+    err = tk.max_error_m
+    conv_t = convergence_time(tk.t, err, tol)
+    converged = conv_t is not None
+    if tk.t.size > 1:
+        step = np.sqrt(np.diff(tk.px, axis=0) ** 2 + np.diff(tk.py, axis=0) ** 2)
+        path = np.nansum(step, axis=0)
+    else:
+        path = np.zeros(len(rec.ids))
+    counters = rec.counters()
+    wall = rec.meta.get("wall_time_s")
+    out: dict[str, Any] = {
+        "scenario": rec.meta.get("scenario", s.meta.name),
+        "planner": rec.meta.get("planner", s.planner.kind),
+        "mode": rec.meta.get("mode"),
+        "agents": len(rec.ids),
+        "duration_s": _r(float(tk.t[-1]) if tk.t.size else 0.0),
+        "converged": converged,
+        "convergence_time_s": _r(conv_t),
+        "final_max_error_m": _r(float(err[-1]) if err.size else None),
+        "min_agent_gap_m": _r(float(np.nanmin(tk.min_agent_gap_m)) if np.isfinite(tk.min_agent_gap_m).any() else None),
+        "min_obstacle_gap_m": _r(float(np.nanmin(tk.min_obstacle_gap_m))
+                                 if np.isfinite(tk.min_obstacle_gap_m).any() else None),
+        "collisions": sum(1 for c in contacts if c["kind"] == "collision"),
+        "safety_violations": sum(1 for c in contacts if c["kind"] == "safety"),
+        "splits": sum(1 for e in events if e["kind"] == "split"),
+        "merges": sum(1 for e in events if e["kind"] == "merge"),
+        "agents_lost": lost_agents(events),
+        "messages_rejected": int(sum(counters.values())),
+        "path_length_m": {str(int(i)): _r(float(v), 2) for i, v in zip(rec.ids, path, strict=True)},
+        "wall_time_s": _r(float(wall)) if wall is not None else None,
+        # Beyond the documented fields:
+        "seed": s.meta.seed,
+        "ticks": int(tk.k.size),
+        "finished": rec.meta.get("finished") == "1",
+        "messages_rejected_by_process": counters,
+        "record_gaps": rec.gaps(),
+    }
+    extra = rec.meta_json("extra", {})
+    if isinstance(extra, dict):
+        out.update(extra)
+    return out
+
+
+def render(summary: dict[str, Any]) -> Any:
+    """A rich Table of the summary (path lengths condensed)."""
+    from rich.table import Table
+
+    table = Table(title=f"reconswarm run: {summary['scenario']} ({summary['planner']}, {summary['mode']})",
+                  show_header=True)
+    table.add_column("field")
+    table.add_column("value", overflow="fold")
+    for key, val in summary.items():
+        if key in ("path_length_m", "messages_rejected_by_process", "record_gaps"):
+            if isinstance(val, dict) and val:
+                nums = [v for v in val.values() if isinstance(v, int | float)]
+                if key == "path_length_m" and nums:
+                    val = f"min {min(nums):.1f}, mean {sum(nums) / len(nums):.1f}, max {max(nums):.1f} m"
+            elif not val:
+                continue
+        if isinstance(val, bool):
+            val = "[green]yes[/green]" if val else "[red]no[/red]"
+        table.add_row(key, str(val))
+    return table

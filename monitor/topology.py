@@ -1,0 +1,185 @@
+"""The swarm graph and its split / merge events (INTERFACES.md). Pure; used live by the in-process
+engine and by the monitor process.
+
+Edge i–j forms when ‖p_i - p_j‖ <= link_range and, once made, breaks only beyond link_range + 2 m.
+Groups are the connected components over active agents. A change of the grouping is recorded once the
+new grouping has held for 1 s of simulated time: a group dividing is a *split*, groups joining a
+*merge*, each with the groups before and after (agent ids), timed when the change happened.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from reconswarm.geometry import norm2, pairs_within
+
+HYSTERESIS_M = 2.0
+PERSISTENCE_S = 1.0
+
+Array = NDArray[np.float64]
+Groups = tuple[frozenset[int], ...]
+
+
+def graph_edges(p: Array, active: NDArray[np.bool_], prev: NDArray[np.int64], link_m: float,
+                hysteresis_m: float = HYSTERESIS_M, cand: NDArray[np.int64] | None = None) -> NDArray[np.int64]:
+    """Edges (E, 2) (i < j, agent indices) of the swarm graph at this tick.
+
+    p (N, 2), active (N,), prev (E', 2) the edges of the previous tick; cand (C, 2) optional candidate
+    pairs that include every pair within link_m + hysteresis_m.
+    """
+    n = p.shape[0]
+    if cand is None:
+        cand = pairs_within(p, link_m + hysteresis_m)
+    if cand.shape[0] == 0:
+        return cand
+    cand = cand[active[cand[:, 0]] & active[cand[:, 1]]]
+    d = norm2(p[cand[:, 0]] - p[cand[:, 1]])
+    keep = d <= link_m
+    band = np.flatnonzero(~keep & (d <= link_m + hysteresis_m))
+    if band.size and prev.shape[0]:
+        keys = cand[band, 0] * n + cand[band, 1]
+        keep[band] = np.isin(keys, prev[:, 0] * n + prev[:, 1])
+    return cand[keep]
+
+
+def labels(n: int, edges: NDArray[np.int64], active: NDArray[np.bool_]) -> NDArray[np.int64]:
+    """Component label per agent: the smallest agent index of its group; -1 if inactive. -> (N,)"""
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    if edges.shape[0] <= 4 * n and n <= 256:  # small graphs: union-find beats scipy's overhead
+        parent = list(range(n))
+
+        def find(x: int) -> int:
+            while parent[x] != x:
+                parent[x] = parent[parent[x]]
+                x = parent[x]
+            return x
+
+        for a, b in edges.tolist():
+            ra, rb = find(a), find(b)
+            if ra != rb:
+                parent[max(ra, rb)] = min(ra, rb)  # the root is always the smallest index
+        roots = np.array([find(x) for x in range(n)], dtype=np.int64)
+        return np.where(active, roots, -1)
+    g = coo_matrix((np.ones(edges.shape[0]), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    _, comp = connected_components(g, directed=False)
+    first = np.full(comp.max() + 1, n, dtype=np.int64)
+    np.minimum.at(first, comp, np.arange(n))
+    out = first[comp]
+    return np.where(active, out, -1)
+
+
+def groups_of(lab: NDArray[np.int64], ids: NDArray[np.int64]) -> Groups:
+    """Partition as frozensets of agent ids, ordered by their smallest member."""
+    out: dict[int, list[int]] = {}
+    for idx in np.flatnonzero(lab >= 0):
+        out.setdefault(int(lab[idx]), []).append(int(ids[idx]))
+    return tuple(frozenset(v) for _, v in sorted(out.items()))
+
+
+def _sorted_groups(gs: list[frozenset[int]] | Groups) -> list[list[int]]:
+    return sorted((sorted(g) for g in gs), key=lambda g: g[0])
+
+
+def diff(old: Groups, new: Groups) -> list[tuple[str, list[list[int]], list[list[int]]]]:
+    """Splits and merges turning partition `old` into `new`, over the agents present in both.
+
+    Returns (kind, before, after) triples. A many-to-many change is a split into the intersections
+    followed by a merge of them.
+    """
+    common = frozenset().union(*old) & frozenset().union(*new) if old and new else frozenset()
+    o = [g & common for g in old if g & common]
+    nw = [g & common for g in new if g & common]
+    # Overlap components between old and new groups.
+    out: list[tuple[str, list[list[int]], list[list[int]]]] = []
+    seen_o: set[int] = set()
+    for a in range(len(o)):
+        if a in seen_o:
+            continue
+        olds, news = {a}, set()
+        frontier = [("o", a)]
+        while frontier:
+            side, k = frontier.pop()
+            if side == "o":
+                for b, g in enumerate(nw):
+                    if b not in news and g & o[k]:
+                        news.add(b)
+                        frontier.append(("n", b))
+            else:
+                for b, g in enumerate(o):
+                    if b not in olds and g & nw[k]:
+                        olds.add(b)
+                        frontier.append(("o", b))
+        seen_o |= olds
+        before = [o[k] for k in olds]
+        after = [nw[k] for k in news]
+        if len(before) == 1 and len(after) > 1:
+            out.append(("split", _sorted_groups(before), _sorted_groups(after)))
+        elif len(before) > 1 and len(after) == 1:
+            out.append(("merge", _sorted_groups(before), _sorted_groups(after)))
+        elif len(before) > 1 and len(after) > 1:
+            middle = [x & y for x in before for y in after if x & y]
+            for x in before:
+                parts = [m for m in middle if m <= x]
+                if len(parts) > 1:
+                    out.append(("split", _sorted_groups([x]), _sorted_groups(parts)))
+            for y in after:
+                parts = [m for m in middle if m <= y]
+                if len(parts) > 1:
+                    out.append(("merge", _sorted_groups(parts), _sorted_groups([y])))
+    return out
+
+
+@dataclass
+class TopologyTracker:
+    """Follows the swarm graph tick by tick and emits confirmed split / merge events."""
+
+    ids: NDArray[np.int64]  # (N,) agent ids in index order
+    link_m: float
+    hysteresis_m: float = HYSTERESIS_M
+    persistence_s: float = PERSISTENCE_S
+    edges: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
+    confirmed: Groups | None = None
+    pending: Groups | None = None
+    pending_since: float = 0.0
+    current: Groups = ()
+    _labels: NDArray[np.int64] | None = None
+
+    def step(self, t: float, p: Array, active: NDArray[np.bool_],
+             cand: NDArray[np.int64] | None = None) -> list[dict[str, Any]]:
+        """Feed the positions at time t (cand: optional superset of the pairs within link + hysteresis);
+        returns the events confirmed at this tick."""
+        prev_edges = self.edges
+        self.edges = graph_edges(p, active, prev_edges, self.link_m, self.hysteresis_m, cand)
+        same_graph = (self._labels is not None and np.array_equal(self.edges, prev_edges)
+                      and np.array_equal(active, self._labels >= 0))
+        if not same_graph:
+            lab = labels(p.shape[0], self.edges, active)
+            if self._labels is None or not np.array_equal(lab, self._labels):
+                self.current = groups_of(lab, self.ids)
+            self._labels = lab
+        if self.confirmed is None:
+            self.confirmed = self.current
+            return []
+        if self.current == self.confirmed:
+            self.pending = None
+            return []
+        if self.pending != self.current:
+            self.pending, self.pending_since = self.current, t
+        if t - self.pending_since < self.persistence_s - 1e-9:
+            return []
+        events = [{"t": round(self.pending_since, 9), "kind": kind, "before": before, "after": after,
+                   "t_confirmed": round(t, 9)}
+                  for kind, before, after in diff(self.confirmed, self.current)]
+        self.confirmed, self.pending = self.current, None
+        return events
+
+    @property
+    def n_groups(self) -> int:
+        return len(self.current)

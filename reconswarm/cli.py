@@ -1,0 +1,144 @@
+"""`reconswarm`: the command line. Each command parses its options and calls a module's run(config).
+
+Exit codes (INTERFACES.md): 0 success, 1 mission failed (not converged, or a collision), 2 bad input,
+3 a process of the run died or could not start. Errors are one line on stderr; `--debug` shows the
+traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from reconswarm.errors import BadInput, ReconswarmError
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="Multi-agent path planning with reconfigurable topology, over Eclipse Zenoh.")
+scenario_app = typer.Typer(no_args_is_help=True, help="Generate and validate scenario files.")
+app.add_typer(scenario_app, name="scenario")
+
+_debug = False
+
+
+@app.callback()
+def _root(debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False) -> None:
+    global _debug
+    _debug = debug
+
+
+def fail(exc: BaseException) -> None:
+    """Print one line and exit with the error's code."""
+    if _debug:
+        raise exc
+    code = exc.exit_code if isinstance(exc, ReconswarmError) else 1
+    typer.echo(f"reconswarm: error: {exc}", err=True)
+    raise typer.Exit(code)
+
+
+def print_json(obj: Any) -> None:
+    sys.stdout.write(json.dumps(obj, indent=2) + "\n")
+
+
+def mission_exit_code(summary: dict[str, Any]) -> int:
+    return 0 if summary.get("converged") and not summary.get("collisions") else 1
+
+
+@app.command()
+def sim(
+    scenario: Annotated[Path, typer.Argument(help="Scenario TOML file.")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Output directory for run.db.")] = Path("runs/sim"),
+    planner: Annotated[str | None, typer.Option("--planner", help="reconfigurable | virtual-leader")] = None,
+    seed: Annotated[int | None, typer.Option("--seed", help="Override the scenario's seed.")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+) -> None:
+    """Run the mission in one process, vectorized (same math as the distributed deployment)."""
+    from reconswarm import engine
+    from reconswarm.scenario import load, warnings
+
+    try:
+        s = load(scenario)
+        if planner is not None:
+            s = s.with_planner(planner)
+        if seed is not None:
+            if seed < 0:
+                raise BadInput(f"--seed: must be >= 0, got {seed}")
+            s = s.with_seed(seed)
+        for w in warnings(s):
+            typer.echo(f"warning: {w}", err=True)
+        summary = engine.run(engine.SimConfig(s, out, progress=not as_json))
+    except (ReconswarmError, OSError) as exc:
+        fail(exc)
+        return
+    if as_json:
+        print_json(summary)
+    else:
+        from rich.console import Console
+
+        from monitor.summary import render
+
+        Console().print(render(summary))
+        typer.echo(f"record: {out / 'run.db'}")
+    raise typer.Exit(mission_exit_code(summary))
+
+
+@scenario_app.command("generate")
+def scenario_generate(
+    agents: Annotated[int, typer.Option("--agents", "-n", help="Number of agents.", min=1, max=100_000)],
+    obstacles: Annotated[int, typer.Option("--obstacles", "-m", help="Number of obstacles.", min=0, max=1000)] = 3,
+    seed: Annotated[int, typer.Option("--seed", "-s", help="Random seed.", min=0)] = 0,
+    out: Annotated[Path | None, typer.Option("-o", "--out", help="Write to a file instead of stdout.")] = None,
+) -> None:
+    """Print a valid random scenario (TOML)."""
+    from reconswarm.generate import generate
+    from reconswarm.scenario import to_toml
+
+    try:
+        text = to_toml(generate(agents, obstacles, seed))
+    except RuntimeError as exc:
+        fail(BadInput(f"--obstacles: {exc}"))
+        return
+    if out is None:
+        sys.stdout.write(text)
+    else:
+        out.write_text(text)
+
+
+@scenario_app.command("check")
+def scenario_check(file: Annotated[Path, typer.Argument(help="Scenario TOML file.")]) -> None:
+    """Validate a scenario: exit 0, or one line naming the file and field and exit 2."""
+    from reconswarm.scenario import check
+
+    try:
+        s, warns = check(file)
+    except ReconswarmError as exc:
+        fail(exc)
+        return
+    for w in warns:
+        typer.echo(f"warning: {w}", err=True)
+    typer.echo(f"{file}: ok ({len(s.agents)} agents, {len(s.obstacles)} obstacles, planner {s.planner.kind})")
+
+
+def _register() -> None:
+    from monitor.cli import monitor_app
+
+    app.add_typer(monitor_app, name="monitor")
+    try:
+        from reconswarm import processes
+    except ImportError:  # pragma: no cover - the distributed commands need zenoh
+        return
+    processes.register(app)
+
+
+_register()
+
+
+def main() -> None:
+    app()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,102 @@
+"""Random valid scenarios of any size: `reconswarm scenario generate --agents N --obstacles M --seed S`.
+
+Layout: starts on a jittered hexagonal lattice around the origin, the target formation a hexagonal
+lattice around p* = (D, 0) with spacing 2 r_max + d_max + 2 m (Assumption 4.1 holds for every pair),
+and M random convex polygons in the corridor between, apart from each other by more than the largest
+robot plus its safety band and out of reach of the target slots (Assumption 4.2). The planner's gains
+are the paper's; R_c grows with the formation so every slot lies well inside the target disk.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from reconswarm.scenario import AgentSpec, ObstacleSpec, PlannerConfig, Scenario, ScenarioMeta, WorldConfig
+
+R_MIN_M, R_MAX_M = 2.5, 5.0
+D_SAFE_M, D_MAX_M = 2.0, 10.0
+
+
+def _hex_lattice(n: int, spacing: float) -> NDArray[np.float64]:
+    """The n points of a hexagonal lattice closest to the origin, nearest first. -> (n, 2)"""
+    k = math.ceil(math.sqrt(n / 2.5)) + 2
+    while True:
+        i, j = np.meshgrid(np.arange(-k, k + 1), np.arange(-k, k + 1))
+        pts = np.stack([(i + 0.5 * (j % 2)) * spacing, j * spacing * math.sqrt(3) / 2], axis=-1).reshape(-1, 2)
+        d = np.hypot(pts[:, 0], pts[:, 1])
+        if np.sum(d <= k * spacing * 0.8) >= n:
+            order = np.lexsort((pts[:, 1], pts[:, 0], np.round(d, 9)))
+            return pts[order][:n]
+        k *= 2
+
+
+def _convex_polygon(rng: np.random.Generator, centre: NDArray[np.float64], size: float) -> NDArray[np.float64]:
+    """A strictly convex polygon: 3-7 points on an ellipse (an affine image of a circle), rotated."""
+    k = int(rng.integers(3, 8))
+    while True:
+        ang = np.sort(rng.uniform(0, 2 * math.pi, k))
+        gaps = np.diff(np.r_[ang, ang[0] + 2 * math.pi])
+        if gaps.min() > 0.5 and gaps.max() < math.pi - 0.2:
+            break
+    a, b = size, size * rng.uniform(0.5, 1.0)
+    rot = rng.uniform(0, math.pi)
+    x, y = a * np.cos(ang), b * np.sin(ang)
+    c, s = math.cos(rot), math.sin(rot)
+    return np.round(np.stack([centre[0] + c * x - s * y, centre[1] + s * x + c * y], axis=1), 3)
+
+
+def generate(n_agents: int, n_obstacles: int = 3, seed: int = 0) -> Scenario:
+    if n_agents < 1:
+        raise ValueError("n_agents must be >= 1")
+    if n_obstacles < 0:
+        raise ValueError("n_obstacles must be >= 0")
+    rng = np.random.default_rng(seed)
+    radii = np.round(rng.uniform(R_MIN_M, R_MAX_M, n_agents), 2)
+    spacing = 2 * R_MAX_M + D_MAX_M + 2.0
+    offsets = np.round(_hex_lattice(n_agents, spacing), 2)
+    rng.shuffle(offsets)
+    form_r = float(np.hypot(offsets[:, 0], offsets[:, 1]).max())
+    r_c = max(80.0, math.ceil(form_r + R_MAX_M + D_MAX_M + 15.0))
+    # Starts: a jittered lattice (spacing minus twice the jitter still clears r_i + r_j + d_safe).
+    jitter = 3.0
+    starts = _hex_lattice(n_agents, spacing) + rng.uniform(-jitter, jitter, (n_agents, 2))
+    starts = np.round(starts, 2)
+    start_r = float(np.hypot(starts[:, 0], starts[:, 1]).max())
+    width = max(100.0, form_r + 40.0)
+    corridor = max(300.0, 2.5 * width)
+    x0 = start_r + 60.0  # obstacles begin here
+    target_x = x0 + corridor + r_c + 60.0
+    obstacles: list[ObstacleSpec] = []
+    placed: list[tuple[NDArray[np.float64], float]] = []
+    clearance = 2 * R_MAX_M + D_MAX_M + 4.0  # wider than any robot plus both repulsion bands
+    tries = 0
+    while len(obstacles) < n_obstacles:
+        tries += 1
+        if tries > 20000:
+            raise RuntimeError(f"could not place {n_obstacles} obstacles (placed {len(obstacles)})")
+        size = rng.uniform(0.12, 0.3) * width
+        centre = np.array([rng.uniform(x0 + size, x0 + corridor - size), rng.uniform(-width, width)])
+        if any(float(np.hypot(*(centre - c))) < size + r + clearance for c, r in placed):
+            continue
+        poly = _convex_polygon(rng, centre, size)
+        obstacles.append(ObstacleSpec(id=f"obs{len(obstacles):03d}", vertices_m=tuple(map(tuple, poly))))
+        placed.append((centre, size))
+    speed = r_c * 0.08
+    travel = target_x / speed
+    settle = math.log(max(r_c, 1.0) / 0.5) / 0.08
+    duration = math.ceil((1.6 * travel + 2.0 * settle) / 10.0) * 10.0
+    return Scenario(
+        meta=ScenarioMeta(name=f"gen-n{n_agents}-m{n_obstacles}-s{seed}", seed=seed, duration_s=duration, dt_s=0.05),
+        planner=PlannerConfig(kind="reconfigurable", k_att=0.08, target_radius_m=float(r_c), psi_mps=-65.0,
+                              d_safe_m=D_SAFE_M, d_max_m=D_MAX_M, sensing_range_m=40.0, link_range_m=40.0,
+                              perturbation_mps=1.0, converge_tol_m=0.5),
+        world=WorldConfig(),
+        target_m=(float(round(target_x, 2)), 0.0),
+        agents=tuple(AgentSpec(id=i + 1, start_m=(float(starts[i, 0]), float(starts[i, 1])), radius_m=float(radii[i]),
+                               offset_m=(float(offsets[i, 0]), float(offsets[i, 1]))) for i in range(n_agents)),
+        obstacles=tuple(sorted(obstacles, key=lambda o: o.id)),
+        source=f"<generated n={n_agents} m={n_obstacles} seed={seed}>",
+    )

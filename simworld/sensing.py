@@ -1,0 +1,94 @@
+"""Range-limited sensing and ground-truth distances to the obstacles. Pure and batched.
+
+Each obstacle's contour is sampled once, vertices included, at <= 1 m spacing; an agent senses every
+contour point within R_v of its head point, labelled with the obstacle id (Assumption 2.1: the red
+crosses of the paper's Fig. 1). No occlusion is modelled.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from reconswarm.geometry import Edges, norm2, sample_boundary, signed_distance, tile_edges
+from reconswarm.scenario import Scenario
+
+Array = NDArray[np.float64]
+SAMPLE_SPACING_M = 1.0
+
+
+@dataclass(frozen=True)
+class ContourField:
+    ids: tuple[str, ...]  # obstacle ids, sorted (the canonical obstacle order everywhere)
+    polygons: tuple[Array, ...]  # (V_l, 2) each, CCW
+    samples: Array  # (S, 2) contour points of every obstacle, block by block
+    start: NDArray[np.int64]  # (M,) first sample of each obstacle
+    count: NDArray[np.int64]  # (M,) samples of each obstacle
+    owner: NDArray[np.int64]  # (S,) obstacle index of each sample
+    edges: Edges  # the true polygons, for ground-truth distances
+    centre: Array  # (M, 2) centre of each polygon's bounding circle
+    reach: Array  # (M,) its radius
+    _tiled: dict[int, Edges] = field(default_factory=dict, compare=False, repr=False)
+
+    @staticmethod
+    def from_scenario(s: Scenario, spacing_m: float = SAMPLE_SPACING_M) -> ContourField:
+        polys = tuple(s.polygon(k) for k in range(len(s.obstacles)))
+        blocks = [sample_boundary(poly, spacing_m) for poly in polys]
+        count = np.array([b.shape[0] for b in blocks], dtype=np.int64)
+        start = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64) if blocks else count
+        samples = np.concatenate(blocks) if blocks else np.zeros((0, 2))
+        owner = np.repeat(np.arange(len(blocks)), count).astype(np.int64)
+        centre = np.array([poly.mean(axis=0) for poly in polys]).reshape(-1, 2)
+        reach = np.array([float(norm2(poly - c).max()) for poly, c in zip(polys, centre, strict=True)])
+        return ContourField(tuple(o.id for o in s.obstacles), polys, samples, start, count, owner,
+                            Edges.of(list(polys)), centre, reach)
+
+    @property
+    def n_obstacles(self) -> int:
+        return len(self.ids)
+
+    def true_distances(self, p: Array, exact_within_m: float = np.inf) -> Array:
+        """Signed distance from every head point to every obstacle: p (N, 2) -> d (N, M).
+
+        Exact wherever the distance is <= exact_within_m; beyond, a lower bound from the obstacle's
+        bounding circle (still > exact_within_m), which saves the work for far-away obstacles.
+        """
+        n, m = p.shape[0], self.n_obstacles
+        if m == 0:
+            return np.zeros((n, 0))
+        if not np.isinf(exact_within_m):
+            bound = norm2(p[:, None, :] - self.centre[None, :, :]) - self.reach  # (N, M)
+            if not np.any(bound <= exact_within_m):
+                return bound
+        tiled = self._tiled.get(n)
+        if tiled is None:
+            tiled = self._tiled[n] = tile_edges(self.edges, n)
+        d, _, _ = signed_distance(p[:, 0:1], p[:, 1:2], tiled)
+        return d
+
+    def scan(self, p: Array, sensing_range_m: float, true_d: Array) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """Contour points within R_v of each head point.
+
+        p (N, 2), true_d (N, M) from true_distances -> (agent index (Q,), sample index (Q,)), sorted by
+        agent then sample.
+        """
+        agents, samples = [], []
+        for m in range(self.n_obstacles):
+            near = np.flatnonzero(true_d[:, m] <= sensing_range_m)
+            if near.size == 0:
+                continue
+            s0, sc = int(self.start[m]), int(self.count[m])
+            block = self.samples[s0:s0 + sc]  # (S_l, 2)
+            d = norm2(p[near, None, :] - block[None, :, :])  # (n, S_l)
+            a, s = np.nonzero(d <= sensing_range_m)
+            agents.append(near[a])
+            samples.append(s + s0)
+        if not agents:
+            empty = np.zeros(0, dtype=np.int64)
+            return empty, empty
+        a_all = np.concatenate(agents).astype(np.int64)
+        s_all = np.concatenate(samples).astype(np.int64)
+        order = np.lexsort((s_all, a_all))
+        return a_all[order], s_all[order]

@@ -1,0 +1,84 @@
+"""Unicycle plant with head point and feedback linearization (eqs. 1-3). Pure and batched.
+
+State per robot: head point p (N, 2) and heading θ (N,); the body centre is s = p - l [cos θ, sin θ].
+The world receives the commanded head-point velocity u and applies [v, ω] = M(θ)⁻¹ u continuously over
+the step with u held (zero-order hold). Without actuator limits the head point then moves by exactly
+u·dt and θ has a closed form: with φ = atan2(u_y, u_x) and ψ = θ - φ, ψ̇ = -(‖u‖/l) sin ψ, so
+tan(ψ/2) decays as exp(-‖u‖ t / l). With limits (|v| <= v_max, |ω| <= ω_max) the body is integrated in
+substeps on exact arcs and the head point no longer follows u: that lag is part of what the world emulates.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from reconswarm.geometry import norm2
+
+Array = NDArray[np.float64]
+SUBSTEPS = 10
+
+
+def wrap(a: Array) -> Array:
+    """Angles to (-π, π]."""
+    return -((-a + np.pi) % (2 * np.pi) - np.pi)
+
+
+def body_centre(p: Array, theta: Array, l: Array) -> Array:
+    """s = p - l [cos θ, sin θ]: (N, 2), (N,), (N,) -> (N, 2)."""
+    return p - l[:, None] * np.stack([np.cos(theta), np.sin(theta)], axis=1)
+
+
+def head_point(s: Array, theta: Array, l: Array) -> Array:
+    """Eq. (2): p = s + l [cos θ, sin θ]."""
+    return s + l[:, None] * np.stack([np.cos(theta), np.sin(theta)], axis=1)
+
+
+def inputs(u: Array, theta: Array, l: Array) -> tuple[Array, Array]:
+    """[v, ω] = M(θ)⁻¹ u (eq. 3 inverted): (N, 2), (N,), (N,) -> v (N,), ω (N,)."""
+    c, s = np.cos(theta), np.sin(theta)
+    v = u[:, 0] * c + u[:, 1] * s
+    w = (-u[:, 0] * s + u[:, 1] * c) / l
+    return v, w
+
+
+def step(p: Array, theta: Array, u: Array, l: Array, dt: float, max_speed: float = 0.0,
+         max_turn_rate: float = 0.0) -> tuple[Array, Array]:
+    """Advance the robots by dt under command u. Returns the new (p (N, 2), θ (N,)).
+
+    max_speed / max_turn_rate of 0 mean no limit.
+    """
+    if max_speed <= 0.0 and max_turn_rate <= 0.0:
+        return p + u * dt, _heading_exact(theta, u, l, dt)
+    return _step_limited(p, theta, u, l, dt, max_speed, max_turn_rate)
+
+
+def _heading_exact(theta: Array, u: Array, l: Array, dt: float) -> Array:
+    speed = norm2(u)
+    phi = np.arctan2(u[:, 1], u[:, 0])
+    psi0 = wrap(theta - phi)
+    decay = np.exp(-speed * dt / l)
+    psi = 2.0 * np.arctan2(np.sin(psi0 / 2) * decay, np.cos(psi0 / 2))
+    return np.where(speed > 0.0, wrap(phi + psi), theta)
+
+
+def _step_limited(p: Array, theta: Array, u: Array, l: Array, dt: float, max_speed: float,
+                  max_turn_rate: float) -> tuple[Array, Array]:
+    s = body_centre(p, theta, l)
+    th = theta.copy()
+    h = dt / SUBSTEPS
+    for _ in range(SUBSTEPS):
+        v, w = inputs(u, th, l)
+        if max_speed > 0.0:
+            v = np.clip(v, -max_speed, max_speed)
+        if max_turn_rate > 0.0:
+            w = np.clip(w, -max_turn_rate, max_turn_rate)
+        small = np.abs(w * h) < 1e-9
+        th_new = th + w * h
+        safe_w = np.where(small, 1.0, w)
+        dx = np.where(small, v * h * np.cos(th), v / safe_w * (np.sin(th_new) - np.sin(th)))
+        dy = np.where(small, v * h * np.sin(th), v / safe_w * (np.cos(th) - np.cos(th_new)))
+        s = s + np.stack([dx, dy], axis=1)
+        th = th_new
+    th = wrap(th)
+    return head_point(s, th, l), th
