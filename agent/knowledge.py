@@ -59,13 +59,20 @@ def obstacle_view(p: Array, n_rows: int, n_cols: int,
 
     p (N, 2); entries: (row, column, hull) with columns in increasing obstacle id.
     """
-    view = ObstacleView(np.zeros((n_rows, n_cols)), np.zeros((n_rows, n_cols, 2)),
-                        np.zeros((n_rows, n_cols), dtype=bool))
     if not entries:
-        return view
+        return ObstacleView(np.zeros((n_rows, n_cols)), np.zeros((n_rows, n_cols, 2)),
+                            np.zeros((n_rows, n_cols), dtype=bool))
     rows = np.array([e[0] for e in entries], dtype=np.int64)
     cols = np.array([e[1] for e in entries], dtype=np.int64)
-    d, nx, ny = signed_distance(p[rows, 0], p[rows, 1], Edges.of([e[2] for e in entries]))
+    return view_of_edges(p, n_rows, n_cols, rows, cols, Edges.of([e[2] for e in entries]))
+
+
+def view_of_edges(p: Array, n_rows: int, n_cols: int, rows: NDArray[np.int64], cols: NDArray[np.int64],
+                  edges: Edges) -> ObstacleView:
+    """obstacle_view's table from entries already split: rows (Q,), cols (Q,), the Q hulls' edges (Q,)."""
+    view = ObstacleView(np.zeros((n_rows, n_cols)), np.zeros((n_rows, n_cols, 2)),
+                        np.zeros((n_rows, n_cols), dtype=bool))
+    d, nx, ny = signed_distance(p[rows, 0], p[rows, 1], edges)
     view.d[rows, cols] = d
     view.n[rows, cols, 0] = nx
     view.n[rows, cols, 1] = ny
@@ -78,6 +85,9 @@ class SwarmKnowledge:
 
     Bits of obstacle l occupy a byte-aligned block, so one agent's knowledge of one obstacle is a bytes
     key for the hull cache: agents of a linked group share their hulls' computation.
+
+    `update` is `add` then `share` done incrementally (the engine's path); `add` and `share` remain for
+    callers that hold their own previous bits, and reset the incremental state.
     """
 
     def __init__(self, samples: Array, start: NDArray[np.int64], count: NDArray[np.int64], n_agents: int):
@@ -91,19 +101,27 @@ class SwarmKnowledge:
         bit = 8 * self.b0[owner] + local if samples.shape[0] else np.zeros(0, np.int64)
         self.byte_of = (bit // 8).astype(np.int64)
         self.mask_of = (np.uint8(0x80) >> (bit % 8).astype(np.uint8)).astype(np.uint8)
-        self.bits = np.zeros((n_agents, int(self.b1[-1]) if count.size else 0), dtype=np.uint8)
+        self.bits = np.zeros((n_agents, int(self.b1[-1]) if count.size else 0), dtype=np.uint8)  # (N, B)
         self._cache: dict[tuple[int, bytes], Array] = {}
+        # OR of every agent's bits (only sensing adds to it: sharing moves bits between agents). (B,)
+        self.union = np.zeros(self.bits.shape[1], dtype=np.uint8)
+        self.union_prev = self.union.copy()  # the union before the last update (B,)
+        self._link_keys: NDArray[np.int64] | None = None  # sorted i * N + j of the last update's links
+        self._dirty = np.zeros(0, dtype=np.int64)  # byte columns that changed during the last update
 
     def add(self, agents: NDArray[np.int64], samples: NDArray[np.int64]) -> None:
         """Mark sensed samples: agent index (Q,), global sample index (Q,)."""
         if agents.size:
             np.bitwise_or.at(self.bits, (agents, self.byte_of[samples]), self.mask_of[samples])
+            np.bitwise_or.at(self.union, self.byte_of[samples], self.mask_of[samples])
+        self._link_keys = None
 
     def share(self, prev: NDArray[np.uint8], pairs: NDArray[np.int64]) -> None:
         """OR into each agent what its linked neighbours knew at the previous tick.
 
         prev (N, B) the bits at k-1; pairs (E, 2) the linked pairs (i < j) at tick k.
         """
+        self._link_keys = None
         if pairs.shape[0] == 0 or self.bits.shape[1] == 0 or not prev.any():
             return
         dst = np.concatenate([pairs[:, 0], pairs[:, 1]])
@@ -115,9 +133,82 @@ class SwarmKnowledge:
         rows = dst[firsts]
         self.bits[rows] |= reduced
 
+    def update(self, agents: NDArray[np.int64], samples: NDArray[np.int64], links: NDArray[np.int64]) -> None:
+        """`add(agents, samples)` then `share(prev, links)` with prev the bits before this call.
+
+        Same result, computed over what can change: over a link that already existed at the previous
+        update, the previous update passed on everything but the byte columns that changed during it, so
+        only those are shared again; a new link shares every column anyone knew. links (E, 2), i < j.
+        """
+        n = self.bits.shape[0]
+        self.union_prev = self.union.copy()
+        if self.bits.shape[1] == 0:
+            return
+        keys = links[:, 0] * n + links[:, 1]  # (E,)
+        last = self._link_keys
+        if last is None or last.size == 0:
+            new = np.ones(keys.shape[0], dtype=bool)
+        else:
+            at = np.minimum(np.searchsorted(last, keys), last.size - 1)
+            new = last[at] != keys
+        self._link_keys = np.sort(keys)
+        dirty = self._dirty
+        known = np.flatnonzero(self.union_prev)  # columns anyone knew: the only ones sharing can bring
+        fresh_links = links[new]  # (E', 2)
+        # What share needs from the bits before add: dirty columns over every link, the rest over new ones.
+        dst = src = None
+        if links.shape[0] and dirty.size:
+            dst = np.concatenate([links[:, 0], links[:, 1]])
+            src = np.concatenate([links[:, 1], links[:, 0]])
+            vals_dirty = self.bits[:, dirty][src]  # (2E, C)
+        if fresh_links.shape[0] and known.size:
+            dst_new = np.concatenate([fresh_links[:, 0], fresh_links[:, 1]])
+            src_new = np.concatenate([fresh_links[:, 1], fresh_links[:, 0]])
+            vals_new = self.bits[src_new][:, known]  # (2E', K)
+        changed = []
+        if agents.size:
+            byte, mask = self.byte_of[samples], self.mask_of[samples]  # (Q,)
+            fresh = (self.bits[agents, byte] & mask) == 0
+            if fresh.any():
+                byte, mask = byte[fresh], mask[fresh]
+                np.bitwise_or.at(self.bits, (agents[fresh], byte), mask)
+                np.bitwise_or.at(self.union, byte, mask)
+                changed.append(byte)
+        if dst is not None:
+            changed.append(self._or_in(dirty, dst, vals_dirty))
+        if fresh_links.shape[0] and known.size:
+            changed.append(self._or_in(known, dst_new, vals_new))
+        self._dirty = np.unique(np.concatenate(changed)) if changed else np.zeros(0, dtype=np.int64)
+
+    def _or_in(self, cols: NDArray[np.int64], dst: NDArray[np.int64], vals: NDArray[np.uint8]) -> NDArray[np.int64]:
+        """bits[dst, cols] |= vals row by row (dst may repeat); returns the columns that changed.
+
+        cols (C,), dst (Q,), vals (Q, C). The bytes are ORed eight at a time as uint64 words.
+        """
+        c = cols.shape[0]
+        w = (c + 7) // 8
+        packed = np.zeros((vals.shape[0], 8 * w), dtype=np.uint8)  # (Q, 8W)
+        packed[:, :c] = vals
+        acc = np.zeros((self.bits.shape[0], w), dtype=np.uint64)  # (N, W)
+        if w == 1:
+            np.bitwise_or.at(acc.reshape(-1), dst, packed.view(np.uint64).reshape(-1))
+        else:
+            np.bitwise_or.at(acc, dst, packed.view(np.uint64))
+        add = acc.view(np.uint8)[:, :c]  # (N, C)
+        before = self.bits[:, cols]
+        gained = (add & ~before).any(axis=0)
+        if not gained.any():
+            return np.zeros(0, dtype=np.int64)
+        self.bits[:, cols] = before | add
+        return cols[gained]
+
     def knows(self, l: int) -> NDArray[np.bool_]:
         """(N,) whether each agent knows any of obstacle l."""
         return np.any(self.bits[:, self.b0[l]:self.b1[l]] != 0, axis=1)
+
+    def knows_rows(self, l: int, rows: NDArray[np.int64]) -> NDArray[np.bool_]:
+        """knows(l)[rows]. rows (R,) -> (R,)"""
+        return np.any(self.bits[rows, self.b0[l]:self.b1[l]] != 0, axis=1)
 
     def hull_of_bits(self, l: int, block: NDArray[np.uint8]) -> Array:
         key = (l, block.tobytes())
@@ -137,6 +228,13 @@ class SwarmKnowledge:
     def union_hull(self, l: int, bits: NDArray[np.uint8]) -> Array | None:
         """Hull of what any agent knew of obstacle l (bits (N, B)); None if nobody knows it."""
         block = np.bitwise_or.reduce(bits[:, self.b0[l]:self.b1[l]], axis=0)
+        if not block.any():
+            return None
+        return self.hull_of_bits(l, block)
+
+    def union_hull_before(self, l: int) -> Array | None:
+        """union_hull(l, bits before the last update), from the running union."""
+        block = self.union_prev[self.b0[l]:self.b1[l]]
         if not block.any():
             return None
         return self.hull_of_bits(l, block)

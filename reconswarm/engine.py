@@ -23,14 +23,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agent.deadlock import StallState, generator, stall_step, window_ticks
-from agent.knowledge import SwarmKnowledge, obstacle_view
+from agent.knowledge import SwarmKnowledge, view_of_edges
 from agent.leader import VirtualLeader
-from agent.planner import command, errors, neighbour_table
+from agent.planner import ObstacleView, command, errors, neighbour_table
 from monitor.record import RunRecord, RunWriter
 from monitor.recorder import Recorder
 from monitor.summary import summarize
 from monitor.topology import HYSTERESIS_M
-from reconswarm.geometry import norm2, pairs_within
+from reconswarm.geometry import Edges, pairs_and_distances
 from reconswarm.scenario import Scenario
 from simworld import unicycle
 from simworld.sensing import ContourField
@@ -69,42 +69,71 @@ class Engine:
         self.true_d = np.zeros((self.n, self.field.n_obstacles))
         self.reach_m = max(self.cfg.link_range_m + HYSTERESIS_M, 2 * self.rmax + self.cfg.d_max_m)
         self.near = np.zeros((0, 2), dtype=np.int64)
+        self.near_d = np.zeros(0)  # (E,) norm2 distance of each pair in self.near
         # True distances matter up to the sensing range and the repulsion reach; beyond, a bound will do.
         self.exact_within_m = max(self.cfg.sensing_range_m, self.rmax + self.cfg.d_max_m)
+        self.ob_reach = self.r + self.cfg.d_max_m  # (N,) obstacle repulsion reach of each agent
+        self.center = np.broadcast_to(self.target, (self.n, 2))  # (N, 2)
+        self._edges_key: tuple[int, ...] = ()
+        self._edges: tuple[list[Array], Edges] | None = None
 
     def plan(self, k: int) -> Array:
         """Steps 1-3 for tick k: returns u (N, 2); leaves true distances in self.true_d."""
         c, p = self.cfg, self.p
-        self.true_d = self.field.true_distances(p, self.exact_within_m)
+        self.true_d = self.field.distances_for_engine(p, self.exact_within_m, self.r)
         qa, qs = self.field.scan(p, c.sensing_range_m, self.true_d)
-        self.near = pairs_within(p, self.reach_m)  # (E, 2) superset of every pair any step needs
-        d_near = norm2(p[self.near[:, 0]] - p[self.near[:, 1]])
-        prev = self.know.bits.copy()
-        self.know.add(qa, qs)
-        self.know.share(prev, self.near[d_near <= c.link_range_m])
+        # (E, 2) superset of every pair any step needs, and their distances
+        self.near, self.near_d = pairs_and_distances(p, self.reach_m)
+        self.know.update(qa, qs, self.near[self.near_d <= c.link_range_m])
 
         nb = neighbour_table(p, self.r, self.near, c.d_max_m)
-        entries = []  # (agent, column, hull); columns keep obstacle-id order, empty ones are left out
-        for m in range(self.field.n_obstacles):
-            near = np.flatnonzero(self.true_d[:, m] <= self.r + c.d_max_m)
-            if near.size:
-                knows = self.know.knows(m)
-                col = len({e[1] for e in entries})
-                entries += [(int(i), col, self.know.hull(int(i), m)) for i in near if knows[i]]
-        ob = obstacle_view(p, self.n, len({e[1] for e in entries}), entries)
+        ob = self.obstacle_view()
 
         if self.leader is not None:
-            hulls = [h for h in (self.know.union_hull(m, prev) for m in range(self.field.n_obstacles))
+            hulls = [h for h in (self.know.union_hull_before(m) for m in range(self.field.n_obstacles))
                      if h is not None]
             v, vel = self.leader.step(k, hulls)
             center = np.broadcast_to(v, (self.n, 2))
             lead_vel: Array | None = np.broadcast_to(vel, (self.n, 2))
         else:
-            center, lead_vel = np.broadcast_to(self.target, (self.n, 2)), None
+            center, lead_vel = self.center, None
         e_track = errors(p, center, self.offsets)
         pert = stall_step(self.stall, k, p, e_track, c.perturbation_mps, c.k_att, c.target_radius_m,
                           c.converge_tol_m, self.s.meta.dt_s)
         return command(c, p, self.r, self.offsets, center, nb, ob, pert, lead_vel)
+
+    def obstacle_view(self) -> ObstacleView:
+        """The planner's obstacle table: each agent's known hull of every obstacle within its reach.
+
+        Columns keep obstacle-id order; obstacles that no agent both reaches and knows are left out.
+        """
+        n = self.n
+        if self.field.n_obstacles == 0:
+            return ObstacleView.empty(n)
+        reach = self.true_d <= self.ob_reach[:, None]  # (N, M)
+        cols = np.flatnonzero(reach.any(axis=0))
+        if cols.size == 0:
+            return ObstacleView.empty(n)
+        rows_l: list[int] = []
+        cols_l: list[int] = []
+        hulls: list[Array] = []
+        col = 0
+        for m in cols.tolist():
+            near = np.flatnonzero(reach[:, m])
+            near = near[self.know.knows_rows(m, near)]
+            if near.size:
+                for i in near.tolist():
+                    rows_l.append(i)
+                    cols_l.append(col)
+                    hulls.append(self.know.hull(i, m))
+                col += 1
+        if not hulls:
+            return ObstacleView.empty(n)
+        key = tuple(map(id, hulls))
+        if self._edges is None or key != self._edges_key:  # the hulls (held alive here) are unchanged
+            self._edges_key, self._edges = key, (hulls, Edges.of(hulls))
+        return view_of_edges(self.p, n, col, np.array(rows_l, dtype=np.int64), np.array(cols_l, dtype=np.int64),
+                             self._edges[1])
 
     def advance(self, u: Array) -> None:
         w = self.s.world

@@ -264,21 +264,31 @@ def pairs_within(points: Array, radius: float) -> NDArray[np.int64]:
 
     Dense for small N, a k-d tree for large N; both filter with norm2 so the set is the same.
     """
+    return pairs_and_distances(points, radius)[0]
+
+
+def pairs_and_distances(points: Array, radius: float) -> tuple[NDArray[np.int64], Array]:
+    """pairs_within, and the norm2 distance of each pair: (N, 2) -> pairs (E, 2), d (E,)."""
     n = points.shape[0]
     if n < 2:
-        return np.zeros((0, 2), dtype=np.int64)
+        return np.zeros((0, 2), dtype=np.int64), np.zeros(0)
     if n <= 96:
         cand = _triu(n)
         d = norm2(points[cand[:, 0]] - points[cand[:, 1]])
-        return cand[d <= radius]  # already sorted
-    else:
-        from scipy.spatial import cKDTree
+        keep = d <= radius
+        return cand[keep], d[keep]  # already sorted
+    from scipy.spatial import cKDTree
 
-        cand = cKDTree(points).query_pairs(radius * (1 + 1e-9) + 1e-9, output_type="ndarray")
-        if cand.shape[0] == 0:
-            return np.zeros((0, 2), dtype=np.int64)
-        cand = np.sort(cand.astype(np.int64), axis=1)
-    d = norm2(points[cand[:, 0]] - points[cand[:, 1]])
-    out = cand[d <= radius]
-    order = np.lexsort((out[:, 1], out[:, 0]))
-    return out[order]
+    cand = cKDTree(points, balanced_tree=False, compact_nodes=False).query_pairs(
+        radius * (1 + 1e-9) + 1e-9, output_type="ndarray")
+    if cand.shape[0] == 0:
+        return np.zeros((0, 2), dtype=np.int64), np.zeros(0)
+    # Sort by the key i * n + j (i < j): the same order as sorting by (i, j), without a row-wise sort.
+    a = cand[:, 0].astype(np.int64)
+    b = cand[:, 1].astype(np.int64)
+    keys = np.minimum(a, b) * n + np.maximum(a, b)  # (E,)
+    keys.sort()
+    i, j = np.divmod(keys, n)
+    d = norm2(points[i] - points[j])
+    keep = d <= radius
+    return np.stack([i[keep], j[keep]], axis=1), d[keep]

@@ -68,26 +68,65 @@ class ContourField:
         d, _, _ = signed_distance(p[:, 0:1], p[:, 1:2], tiled)
         return d
 
+    def distances_for_engine(self, p: Array, exact_within_m: float, radii: Array) -> Array:
+        """true_distances(p, exact_within_m) with the exact values computed only where they can matter.
+
+        p (N, 2), radii (N,) -> d (N, M). Identical to true_distances wherever the bound is within
+        exact_within_m (so wherever d <= exact_within_m), and gives the same minimum of d - radii: a pair
+        is left at its lower bound only if that bound cannot hold the minimum. Everything else stays
+        above exact_within_m, as in true_distances.
+        """
+        n, m = p.shape[0], self.n_obstacles
+        if m == 0:
+            return np.zeros((n, 0))
+        bound = norm2(p[:, None, :] - self.centre[None, :, :]) - self.reach  # (N, M)
+        close = bound <= exact_within_m
+        if not close.any():
+            return bound
+        out = bound.copy()
+        rows, cols = np.nonzero(close)
+        out[rows, cols] = self._exact(p, rows, cols)
+        gap = out - radii[:, None]  # exact where close, a lower bound elsewhere
+        rows, cols = np.nonzero(~close & (gap < gap[close].min()))
+        if rows.size:
+            out[rows, cols] = self._exact(p, rows, cols)
+        return out
+
+    def _exact(self, p: Array, rows: NDArray[np.int64], cols: NDArray[np.int64]) -> Array:
+        """Signed distance of head point rows[q] to obstacle cols[q]: (Q,), (Q,) -> (Q,).
+
+        The same edges (padded alike) and element-wise arithmetic as the tiled call in true_distances.
+        """
+        e = self.edges
+        sub = Edges(e.ax[cols], e.ay[cols], e.abx[cols], e.aby[cols], e.inv_den[cols], e.pad[cols],
+                    e.invalid[cols], e.closed[cols])
+        d, _, _ = signed_distance(p[rows, 0], p[rows, 1], sub)
+        return d
+
     def scan(self, p: Array, sensing_range_m: float, true_d: Array) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """Contour points within R_v of each head point.
 
         p (N, 2), true_d (N, M) from true_distances -> (agent index (Q,), sample index (Q,)), sorted by
         agent then sample.
         """
+        empty = np.zeros(0, dtype=np.int64)
+        if self.n_obstacles == 0:
+            return empty, empty
+        hit = true_d <= sensing_range_m  # (N, M)
+        seen = np.flatnonzero(hit.any(axis=0))
+        if seen.size == 0:
+            return empty, empty
         agents, samples = [], []
-        for m in range(self.n_obstacles):
-            near = np.flatnonzero(true_d[:, m] <= sensing_range_m)
-            if near.size == 0:
-                continue
+        for m in seen.tolist():
+            near = np.flatnonzero(hit[:, m])
             s0, sc = int(self.start[m]), int(self.count[m])
             block = self.samples[s0:s0 + sc]  # (S_l, 2)
             d = norm2(p[near, None, :] - block[None, :, :])  # (n, S_l)
             a, s = np.nonzero(d <= sensing_range_m)
             agents.append(near[a])
             samples.append(s + s0)
-        if not agents:
-            empty = np.zeros(0, dtype=np.int64)
-            return empty, empty
+        if len(agents) == 1:  # np.nonzero is row-major: already sorted by agent then sample
+            return agents[0].astype(np.int64), samples[0].astype(np.int64)
         a_all = np.concatenate(agents).astype(np.int64)
         s_all = np.concatenate(samples).astype(np.int64)
         order = np.lexsort((s_all, a_all))
