@@ -23,6 +23,7 @@ from agent.planner import ObstacleView
 from reconswarm.geometry import Edges, convex_hull, merge_hull, signed_distance
 
 Array = NDArray[np.float64]
+_NONE = np.zeros(0, dtype=np.int64)
 
 
 @dataclass
@@ -107,21 +108,27 @@ class SwarmKnowledge:
         self.union = np.zeros(self.bits.shape[1], dtype=np.uint8)
         self.union_prev = self.union.copy()  # the union before the last update (B,)
         self._link_keys: NDArray[np.int64] | None = None  # sorted i * N + j of the last update's links
-        self._dirty = np.zeros(0, dtype=np.int64)  # byte columns that changed during the last update
+        self._dirty = _NONE  # byte columns that changed during the last update (sorted)
+        self._any_known = False  # whether union has any bit
+        self.col_owner = np.repeat(np.arange(count.size), nbytes).astype(np.int64)  # (B,) obstacle of a byte
+        self.known = np.zeros((n_agents, count.size), dtype=bool)  # (N, M) knows(l) for every l
+        self._hull_at = np.full((n_agents, count.size), None, dtype=object)  # (N, M) hull(i, l), None: stale
 
     def add(self, agents: NDArray[np.int64], samples: NDArray[np.int64]) -> None:
         """Mark sensed samples: agent index (Q,), global sample index (Q,)."""
         if agents.size:
             np.bitwise_or.at(self.bits, (agents, self.byte_of[samples]), self.mask_of[samples])
+            self.union = self.union.copy()
             np.bitwise_or.at(self.union, self.byte_of[samples], self.mask_of[samples])
-        self._link_keys = None
+            self._any_known = True
+        self._reset()
 
     def share(self, prev: NDArray[np.uint8], pairs: NDArray[np.int64]) -> None:
         """OR into each agent what its linked neighbours knew at the previous tick.
 
         prev (N, B) the bits at k-1; pairs (E, 2) the linked pairs (i < j) at tick k.
         """
-        self._link_keys = None
+        self._reset()
         if pairs.shape[0] == 0 or self.bits.shape[1] == 0 or not prev.any():
             return
         dst = np.concatenate([pairs[:, 0], pairs[:, 1]])
@@ -133,6 +140,13 @@ class SwarmKnowledge:
         rows = dst[firsts]
         self.bits[rows] |= reduced
 
+    def _reset(self) -> None:
+        """After add or share: every incremental shortcut starts over."""
+        self._link_keys = None
+        self._hull_at[:] = None
+        for l in range(self.count.size):
+            self.known[:, l] = self.knows(l)
+
     def update(self, agents: NDArray[np.int64], samples: NDArray[np.int64], links: NDArray[np.int64]) -> None:
         """`add(agents, samples)` then `share(prev, links)` with prev the bits before this call.
 
@@ -141,44 +155,63 @@ class SwarmKnowledge:
         only those are shared again; a new link shares every column anyone knew. links (E, 2), i < j.
         """
         n = self.bits.shape[0]
-        self.union_prev = self.union.copy()
+        self.union_prev = self.union  # replaced, never modified in place, when sensing adds to it
         if self.bits.shape[1] == 0:
             return
-        keys = links[:, 0] * n + links[:, 1]  # (E,)
+        if not self._any_known:  # nothing to share: only sensing, and every link counts as new next time
+            self._link_keys = None
+            self._dirty = self._sense(agents, samples)
+            self._any_known = bool(self.union.any())
+            return
+        keys = links[:, 0] * n + links[:, 1]  # (E,) increasing
         last = self._link_keys
-        if last is None or last.size == 0:
+        if last is not None and last.shape == keys.shape and np.array_equal(last, keys):
+            new = None  # the same links as last time (the common case)
+        elif last is None or last.size == 0:
             new = np.ones(keys.shape[0], dtype=bool)
         else:
             at = np.minimum(np.searchsorted(last, keys), last.size - 1)
             new = last[at] != keys
-        self._link_keys = np.sort(keys)
+        self._link_keys = keys if new is None or np.all(keys[1:] >= keys[:-1]) else np.sort(keys)
         dirty = self._dirty
-        known = np.flatnonzero(self.union_prev)  # columns anyone knew: the only ones sharing can bring
-        fresh_links = links[new]  # (E', 2)
-        # What share needs from the bits before add: dirty columns over every link, the rest over new ones.
-        dst = src = None
-        if links.shape[0] and dirty.size:
-            dst = np.concatenate([links[:, 0], links[:, 1]])
+        # What share needs from the bits before sensing: dirty columns over every link, all over new ones.
+        share_dirty = bool(links.shape[0] and dirty.size)
+        if share_dirty:
+            dst = np.concatenate([links[:, 0], links[:, 1]])  # (2E,)
             src = np.concatenate([links[:, 1], links[:, 0]])
             vals_dirty = self.bits[:, dirty][src]  # (2E, C)
-        if fresh_links.shape[0] and known.size:
-            dst_new = np.concatenate([fresh_links[:, 0], fresh_links[:, 1]])
+        share_new = new is not None and bool(new.any())
+        if share_new:
+            known = np.flatnonzero(self.union_prev)  # columns anyone knew: the only ones sharing can bring
+            fresh_links = links[new]  # (E', 2)
+            dst_new = np.concatenate([fresh_links[:, 0], fresh_links[:, 1]])  # (2E',)
             src_new = np.concatenate([fresh_links[:, 1], fresh_links[:, 0]])
             vals_new = self.bits[src_new][:, known]  # (2E', K)
-        changed = []
-        if agents.size:
-            byte, mask = self.byte_of[samples], self.mask_of[samples]  # (Q,)
-            fresh = (self.bits[agents, byte] & mask) == 0
-            if fresh.any():
-                byte, mask = byte[fresh], mask[fresh]
-                np.bitwise_or.at(self.bits, (agents[fresh], byte), mask)
-                np.bitwise_or.at(self.union, byte, mask)
-                changed.append(byte)
-        if dst is not None:
+        changed = [self._sense(agents, samples)]
+        if share_dirty:
             changed.append(self._or_in(dirty, dst, vals_dirty))
-        if fresh_links.shape[0] and known.size:
+        if share_new:
             changed.append(self._or_in(known, dst_new, vals_new))
-        self._dirty = np.unique(np.concatenate(changed)) if changed else np.zeros(0, dtype=np.int64)
+        changed = [c for c in changed if c.size]
+        if not changed:
+            self._dirty = _NONE
+        else:
+            self._dirty = changed[0] if len(changed) == 1 else np.unique(np.concatenate(changed))
+
+    def _sense(self, agents: NDArray[np.int64], samples: NDArray[np.int64]) -> NDArray[np.int64]:
+        """add() for the incremental path; returns the byte columns that changed (sorted, unique)."""
+        if agents.size == 0:
+            return _NONE
+        byte, mask = self.byte_of[samples], self.mask_of[samples]  # (Q,)
+        fresh = (self.bits[agents, byte] & mask) == 0
+        if not fresh.any():
+            return _NONE
+        byte, mask, rows = byte[fresh], mask[fresh], agents[fresh]
+        np.bitwise_or.at(self.bits, (rows, byte), mask)
+        self._touched(rows, byte)
+        self.union = self.union.copy()
+        np.bitwise_or.at(self.union, byte, mask)
+        return np.unique(byte)
 
     def _or_in(self, cols: NDArray[np.int64], dst: NDArray[np.int64], vals: NDArray[np.uint8]) -> NDArray[np.int64]:
         """bits[dst, cols] |= vals row by row (dst may repeat); returns the columns that changed.
@@ -196,11 +229,20 @@ class SwarmKnowledge:
             np.bitwise_or.at(acc, dst, packed.view(np.uint64))
         add = acc.view(np.uint8)[:, :c]  # (N, C)
         before = self.bits[:, cols]
-        gained = (add & ~before).any(axis=0)
+        gain = add & ~before  # (N, C)
+        gained = gain.any(axis=0)
         if not gained.any():
-            return np.zeros(0, dtype=np.int64)
+            return _NONE
         self.bits[:, cols] = before | add
+        rows, at = np.nonzero(gain)
+        self._touched(rows, cols[at])
         return cols[gained]
+
+    def _touched(self, rows: NDArray[np.int64], cols: NDArray[np.int64]) -> None:
+        """Bytes (rows[q], cols[q]) gained bits: those agents know those obstacles, their hulls are stale."""
+        obs = self.col_owner[cols]
+        self.known[rows, obs] = True
+        self._hull_at[rows, obs] = None
 
     def knows(self, l: int) -> NDArray[np.bool_]:
         """(N,) whether each agent knows any of obstacle l."""
@@ -224,6 +266,15 @@ class SwarmKnowledge:
 
     def hull(self, i: int, l: int) -> Array:
         return self.hull_of_bits(l, self.bits[i, self.b0[l]:self.b1[l]])
+
+    def hulls(self, rows: NDArray[np.int64], l: int) -> list[Array]:
+        """[hull(i, l) for i in rows], reusing each agent's hull while its knowledge of l is unchanged."""
+        got = self._hull_at[rows, l].tolist()
+        for q, h in enumerate(got):
+            if h is None:
+                i = int(rows[q])
+                got[q] = self._hull_at[i, l] = self.hull(i, l)
+        return got
 
     def union_hull(self, l: int, bits: NDArray[np.uint8]) -> Array | None:
         """Hull of what any agent knew of obstacle l (bits (N, B)); None if nobody knows it."""

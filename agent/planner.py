@@ -36,11 +36,8 @@ def attraction(p: Array, center: Array, offset: Array, k_att: float, r_c: float)
     inside = dist <= r_c
     e = rel - offset
     safe = np.where(dist > 0.0, dist, 1.0)
-    out_x = -r_c * k_att * rel[:, 0] / safe
-    out_y = -r_c * k_att * rel[:, 1] / safe
-    ux = np.where(inside, -k_att * e[:, 0], out_x)
-    uy = np.where(inside, -k_att * e[:, 1], out_y)
-    return np.stack([ux, uy], axis=1)
+    out = -r_c * k_att * rel / safe[:, None]  # both columns at once, element by element as before
+    return np.where(inside[:, None], -k_att * e, out)
 
 
 def repulsion_speed(d: Array, d_min: Array, d_max: Array, psi: float) -> Array:
@@ -54,8 +51,11 @@ def repulsion_speed(d: Array, d_min: Array, d_max: Array, psi: float) -> Array:
 def _accumulate(terms: Array, valid: Mask) -> Array:
     """Sum (N, K, 2) terms over K in column order, skipping invalid entries. -> (N, 2)"""
     acc = np.zeros((terms.shape[0], 2))
+    if terms.shape[1] == 0:
+        return acc
+    masked = np.where(valid[:, :, None], terms, 0.0)  # (N, K, 2)
     for c in range(terms.shape[1]):
-        acc = acc + np.where(valid[:, c, None], terms[:, c, :], 0.0)
+        acc = acc + masked[:, c, :]
     return acc
 
 
@@ -66,18 +66,23 @@ def agent_repulsion(p: Array, r: Array, nb_p: Array, nb_r: Array, nb_valid: Mask
     p (N, 2), r (N,), nb_p (N, K, 2), nb_r (N, K), nb_valid (N, K) -> (N, 2).
     A table entry beyond d_max,ij contributes nothing, so tables may hold more than N_i(t).
     """
+    if nb_p.shape[1] == 0:  # no neighbour: the sum over no column
+        return np.zeros((p.shape[0], 2))
     rel = p[:, None, :] - nb_p  # (N, K, 2)
     d = norm2(rel)  # (N, K)
     rr = r[:, None] + nb_r
     dmin = rr + d_safe
     dmax = rr + d_max
     mag = repulsion_speed(d, dmin, dmax, psi)
-    safe = np.where(d > 0.0, d, 1.0)
+    pos = d > 0.0
+    safe = np.where(pos, d, 1.0)
     # Coincident centres have no direction: push along +x (a measure-zero case, but never NaN).
-    ux = np.where(d > 0.0, rel[..., 0] / safe, 1.0)
-    uy = np.where(d > 0.0, rel[..., 1] / safe, 0.0)
-    terms = np.stack([mag * ux, mag * uy], axis=-1)
+    unit = np.where(pos[..., None], rel / safe[..., None], _PLUS_X)  # (N, K, 2)
+    terms = mag[..., None] * unit
     return _accumulate(terms, nb_valid & (d <= dmax))
+
+
+_PLUS_X = np.array([1.0, 0.0])
 
 
 def obstacle_repulsion(r: Array, ob_d: Array, ob_n: Array, ob_valid: Mask,
@@ -87,6 +92,8 @@ def obstacle_repulsion(r: Array, ob_d: Array, ob_n: Array, ob_valid: Mask,
     r (N,), ob_d (N, M) signed distance from p_i to the known hull, ob_n (N, M, 2) outward unit normal
     at the nearest point, ob_valid (N, M) -> (N, 2). d_min = r_i + d_safe, d_max = r_i + d_max.
     """
+    if ob_d.shape[1] == 0:  # no obstacle: the sum over no column
+        return np.zeros((ob_d.shape[0], 2))
     dmin = r[:, None] + d_safe
     dmax = r[:, None] + d_max
     mag = repulsion_speed(ob_d, dmin, dmax, psi)
@@ -158,28 +165,36 @@ def neighbour_table(p: Array, r: Array, pairs: NDArray[np.int64], d_max: float) 
     p (N, 2), r (N,), pairs (E, 2) -> Neighbours with rows for all N agents, neighbours j sorted by
     index (the swarm is indexed in increasing id). Pairs beyond d_max,ij are dropped here.
     """
+    if pairs.shape[0] == 0:
+        return Neighbours.empty(p.shape[0])
+    return neighbour_table_d(p, r, pairs, norm2(p[pairs[:, 0]] - p[pairs[:, 1]]), d_max)
+
+
+def neighbour_table_d(p: Array, r: Array, pairs: NDArray[np.int64], d: Array, d_max: float) -> Neighbours:
+    """neighbour_table given the pairs' distances d (E,) = norm2(p[i] - p[j])."""
     n = p.shape[0]
     if pairs.shape[0] == 0:
         return Neighbours.empty(n)
     i, j = pairs[:, 0], pairs[:, 1]
-    d = norm2(p[i] - p[j])
     keep = d <= r[i] + r[j] + d_max
+    if not keep.any():
+        return Neighbours.empty(n)
     i, j = i[keep], j[keep]
-    src = np.concatenate([i, j])
+    src = np.concatenate([i, j])  # (2E',) each pair in both directions
     dst = np.concatenate([j, i])
     order = np.lexsort((dst, src))
     src, dst = src[order], dst[order]
-    counts = np.bincount(src, minlength=n)
-    k = int(counts.max()) if counts.size else 0
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    col = np.arange(src.shape[0]) - starts[src]
-    nb_p = np.zeros((n, k, 2))
-    nb_r = np.zeros((n, k))
-    valid = np.zeros((n, k), dtype=bool)
-    nb_p[src, col] = p[dst]
-    nb_r[src, col] = r[dst]
-    valid[src, col] = True
-    return Neighbours(nb_p, nb_r, valid)
+    counts = np.bincount(src, minlength=n)  # (N,)
+    k = int(counts.max())
+    starts = np.cumsum(counts) - counts
+    flat = src * k + (np.arange(src.shape[0]) - starts[src])  # row-major slot of each entry in (N, K)
+    nb_p = np.zeros((n * k, 2))
+    nb_r = np.zeros(n * k)
+    valid = np.zeros(n * k, dtype=bool)
+    nb_p[flat] = p[dst]
+    nb_r[flat] = r[dst]
+    valid[flat] = True
+    return Neighbours(nb_p.reshape(n, k, 2), nb_r.reshape(n, k), valid.reshape(n, k))
 
 
 def errors(p: Array, target: Array, offset: Array) -> Array:

@@ -27,16 +27,18 @@ class Episode:
     gap_m: float
 
 
-def agent_gaps(p: Array, r: Array, reach_m: float,
-               cand: NDArray[np.int64] | None = None) -> tuple[NDArray[np.int64], Array]:
+def agent_gaps(p: Array, r: Array, reach_m: float, cand: NDArray[np.int64] | None = None,
+               cand_d: Array | None = None) -> tuple[NDArray[np.int64], Array]:
     """Surface gaps of candidate pairs (default: every pair within 2 r_max + reach_m).
 
-    -> pairs (E, 2), gaps (E,)
+    cand_d (E,): optionally the candidates' norm2 distances. -> pairs (E, 2), gaps (E,)
     """
     if cand is None:
         cand = pairs_within(p, 2 * float(r.max()) + reach_m) if p.shape[0] > 1 else np.zeros((0, 2), np.int64)
+        cand_d = None
     pairs = cand
-    gaps = norm2(p[pairs[:, 0]] - p[pairs[:, 1]]) - r[pairs[:, 0]] - r[pairs[:, 1]]
+    d = norm2(p[pairs[:, 0]] - p[pairs[:, 1]]) if cand_d is None else cand_d
+    gaps = d - r[pairs[:, 0]] - r[pairs[:, 1]]
     return pairs, gaps
 
 
@@ -61,16 +63,16 @@ class SafetyMonitor:
     min_agent_gap_m: float = float("inf")
     min_obstacle_gap_m: float = float("inf")
 
-    def step(self, t: float, p: Array, ob_d: Array,
-             cand: NDArray[np.int64] | None = None) -> tuple[float, float, list[Episode], list[tuple[str, str, str]]]:
+    def step(self, t: float, p: Array, ob_d: Array, cand: NDArray[np.int64] | None = None,
+             cand_d: Array | None = None) -> tuple[float, float, list[Episode], list[tuple[str, str, str]]]:
         """p (N, 2), ob_d (N, M) signed distances to the true obstacles; cand optional candidate pairs
-        (a superset of those within 2 r_max + reach_m).
+        (a superset of those within 2 r_max + reach_m), cand_d optionally their norm2 distances (E,).
 
         Returns (min agent gap, min obstacle gap) at this tick, the episodes that start now and the keys
         (kind, a, b) of those that ended.
         """
         reach = max(self.reach_m, self.d_safe_m)
-        pairs, gaps = agent_gaps(p, self.radii, reach, cand)
+        pairs, gaps = agent_gaps(p, self.radii, reach, cand, cand_d)
         # Pairs outside the candidates have a gap of at least `reach`: the minimum is exact below it.
         tick_agent = float(gaps.min()) if gaps.size else float("inf")
         if tick_agent > reach and p.shape[0] > 1:
@@ -80,17 +82,21 @@ class SafetyMonitor:
         self.min_agent_gap_m = min(self.min_agent_gap_m, tick_agent)
         self.min_obstacle_gap_m = min(self.min_obstacle_gap_m, tick_ob)
         now: dict[tuple[str, str, str], float] = {}
-        for (i, j), g in zip(pairs[gaps < self.d_safe_m], gaps[gaps < self.d_safe_m], strict=True):
-            a, b = f"agent:{self.ids[i]}", f"agent:{self.ids[j]}"
-            now[("safety", a, b)] = float(g)
-            if g < 0:
-                now[("collision", a, b)] = float(g)
-        for i, m in zip(*np.nonzero(ob_gap < self.d_safe_m), strict=True):
-            g = float(ob_gap[i, m])
-            a, b = f"agent:{self.ids[i]}", f"obstacle:{self.obstacle_ids[m]}"
-            now[("safety", a, b)] = g
-            if g < 0:
-                now[("collision", a, b)] = g
+        if tick_agent < self.d_safe_m:  # some candidate pair is below d_safe
+            close = gaps < self.d_safe_m  # (E,)
+            for (i, j), g in zip(pairs[close].tolist(), gaps[close].tolist(), strict=True):
+                a, b = f"agent:{self.ids[i]}", f"agent:{self.ids[j]}"
+                now[("safety", a, b)] = g
+                if g < 0:
+                    now[("collision", a, b)] = g
+        if tick_ob < self.d_safe_m:
+            below = ob_gap < self.d_safe_m  # (N, M)
+            for i, m in zip(*np.nonzero(below), strict=True):
+                g = float(ob_gap[i, m])
+                a, b = f"agent:{self.ids[i]}", f"obstacle:{self.obstacle_ids[m]}"
+                now[("safety", a, b)] = g
+                if g < 0:
+                    now[("collision", a, b)] = g
         started = [Episode(k[0], k[1], k[2], t, g) for k, g in now.items() if k not in self.open]
         ended = [k for k in self.open if k not in now]
         for k in ended:

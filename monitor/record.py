@@ -9,6 +9,7 @@ so a run killed midway keeps a readable record that lacks at most that much.
 from __future__ import annotations
 
 import json
+import math
 import sqlite3
 import time
 from dataclasses import dataclass
@@ -43,6 +44,9 @@ Array = NDArray[np.float64]
 
 def _blob(a: NDArray[Any], dtype: str) -> bytes:
     return np.ascontiguousarray(a, dtype=dtype).tobytes()
+
+
+_F8 = np.dtype("<f8")
 
 
 class RunWriter:
@@ -81,9 +85,15 @@ class RunWriter:
     def tick(self, k: int, t: float, p: Array, theta: Array, alive: NDArray[np.bool_], max_error_m: float,
              min_agent_gap_m: float, min_obstacle_gap_m: float, groups: int) -> None:
         """p (N, 2), theta (N,), alive (N,) in agent-id order; NaN where a state is unknown."""
+        if p.dtype == _F8:
+            pt = p.T.copy()  # (2, N): both columns contiguous in one copy
+            px, py = pt[0].tobytes(), pt[1].tobytes()
+        else:
+            px, py = _blob(p[:, 0], "<f8"), _blob(p[:, 1], "<f8")
+        th = theta.tobytes() if theta.dtype == _F8 and theta.flags.c_contiguous else _blob(theta, "<f8")
         self.db.execute(
             "INSERT OR REPLACE INTO ticks VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            (k, t, _blob(p[:, 0], "<f8"), _blob(p[:, 1], "<f8"), _blob(theta, "<f8"), _blob(alive, "u1"),
+            (k, t, px, py, th, _blob(alive, "u1"),
              _finite(max_error_m), _finite(min_agent_gap_m), _finite(min_obstacle_gap_m), groups))
         self.maybe_commit()
 
@@ -126,7 +136,7 @@ class RunWriter:
 
 
 def _finite(v: float) -> float | None:
-    return float(v) if np.isfinite(v) else None
+    return float(v) if math.isfinite(v) else None
 
 
 @dataclass

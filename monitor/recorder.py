@@ -36,17 +36,27 @@ class Recorder:
                                     self.reach_m - 2 * float(s.radii.max()))
 
     def tick(self, k: int, t: float, p: Array, theta: Array, alive: NDArray[np.bool_],
-             true_d: Array | None = None, cand: NDArray[np.int64] | None = None) -> list[dict[str, Any]]:
+             true_d: Array | None = None, cand: NDArray[np.int64] | None = None, *,
+             cand_d: Array | None = None, err: Array | None = None) -> list[dict[str, Any]]:
         """Record the truth at tick k; returns the topology events confirmed now.
 
-        true_d (N, M) and cand (pairs within `self.reach_m`) may be passed when already computed.
+        true_d (N, M) and cand (pairs within `self.reach_m`) may be passed when already computed, and with
+        cand the pairs' norm2 distances cand_d (E,); err (N,) likewise norm2(p - slots).
         """
         if true_d is None:
             true_d = self.field.true_distances(p)
-        err = np.sqrt(np.sum((p - self.slots) ** 2, axis=1))
-        self.max_error_m = float(err[alive].max()) if alive.any() else float("inf")
-        gap_a, gap_o, started, ended = self.safety.step(t, p, true_d, cand)
-        events = self.topology.step(t, p, alive, cand)
+        if cand is None:
+            cand_d = None
+        if err is None:
+            rel = p - self.slots  # (N, 2)
+            x, y = rel[:, 0], rel[:, 1]
+            err = np.sqrt(x * x + y * y)  # the sum over the two columns, written out
+        if alive.all():
+            self.max_error_m = float(err.max())
+        else:
+            self.max_error_m = float(err[alive].max()) if alive.any() else float("inf")
+        gap_a, gap_o, started, ended = self.safety.step(t, p, true_d, cand, cand_d)
+        events = self.topology.step_pairs(t, p, alive, cand, cand_d)
         self.events += events
         if self.writer is not None:
             w = self.writer

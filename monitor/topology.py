@@ -27,24 +27,32 @@ Groups = tuple[frozenset[int], ...]
 
 
 def graph_edges(p: Array, active: NDArray[np.bool_], prev: NDArray[np.int64], link_m: float,
-                hysteresis_m: float = HYSTERESIS_M, cand: NDArray[np.int64] | None = None) -> NDArray[np.int64]:
+                hysteresis_m: float = HYSTERESIS_M, cand: NDArray[np.int64] | None = None,
+                cand_d: Array | None = None, prev_keys: NDArray[np.int64] | None = None) -> NDArray[np.int64]:
     """Edges (E, 2) (i < j, agent indices) of the swarm graph at this tick.
 
     p (N, 2), active (N,), prev (E', 2) the edges of the previous tick; cand (C, 2) optional candidate
-    pairs that include every pair within link_m + hysteresis_m.
+    pairs that include every pair within link_m + hysteresis_m, and cand_d (C,) optionally their norm2
+    distances; prev_keys (E',) optionally prev's i * N + j, sorted.
     """
     n = p.shape[0]
     if cand is None:
         cand = pairs_within(p, link_m + hysteresis_m)
+        cand_d = None
     if cand.shape[0] == 0:
         return cand
-    cand = cand[active[cand[:, 0]] & active[cand[:, 1]]]
-    d = norm2(p[cand[:, 0]] - p[cand[:, 1]])
-    keep = d <= link_m
-    band = np.flatnonzero(~keep & (d <= link_m + hysteresis_m))
+    if cand_d is None:
+        cand_d = norm2(p[cand[:, 0]] - p[cand[:, 1]])
+    if not active.all():
+        live = active[cand[:, 0]] & active[cand[:, 1]]
+        cand, cand_d = cand[live], cand_d[live]
+    keep = cand_d <= link_m
+    band = np.flatnonzero(~keep & (cand_d <= link_m + hysteresis_m))
     if band.size and prev.shape[0]:
         keys = cand[band, 0] * n + cand[band, 1]
-        keep[band] = np.isin(keys, prev[:, 0] * n + prev[:, 1])
+        old = prev_keys if prev_keys is not None else np.unique(prev[:, 0] * n + prev[:, 1])
+        at = np.minimum(np.searchsorted(old, keys), old.size - 1)
+        keep[band] = old[at] == keys  # np.isin(keys, old)
     return cand[keep]
 
 
@@ -150,16 +158,30 @@ class TopologyTracker:
     pending_since: float = 0.0
     current: Groups = ()
     _labels: NDArray[np.int64] | None = None
+    _keys: NDArray[np.int64] | None = None  # i * N + j of self.edges (sorted), for the next tick
+    _keys_n: int = 0
 
     def step(self, t: float, p: Array, active: NDArray[np.bool_],
              cand: NDArray[np.int64] | None = None) -> list[dict[str, Any]]:
         """Feed the positions at time t (cand: optional superset of the pairs within link + hysteresis);
         returns the events confirmed at this tick."""
+        return self.step_pairs(t, p, active, cand)
+
+    def step_pairs(self, t: float, p: Array, active: NDArray[np.bool_], cand: NDArray[np.int64] | None = None,
+                   cand_d: Array | None = None) -> list[dict[str, Any]]:
+        """step, with the candidates' norm2 distances (C,) when the caller has them."""
         prev_edges = self.edges
-        self.edges = graph_edges(p, active, prev_edges, self.link_m, self.hysteresis_m, cand)
-        same_graph = (self._labels is not None and np.array_equal(self.edges, prev_edges)
-                      and np.array_equal(active, self._labels >= 0))
+        n = p.shape[0]
+        if self._keys is None or self._keys_n != n:
+            keys = prev_edges[:, 0] * n + prev_edges[:, 1]
+            self._keys = keys if np.all(keys[1:] > keys[:-1]) else np.unique(keys)
+            self._keys_n = n
+        edges = graph_edges(p, active, prev_edges, self.link_m, self.hysteresis_m, cand, cand_d, self._keys)
+        self.edges = edges
+        same_graph = (self._labels is not None and edges.shape == prev_edges.shape
+                      and bool((edges == prev_edges).all()) and np.array_equal(active, self._labels >= 0))
         if not same_graph:
+            self._keys = None
             lab = labels(p.shape[0], self.edges, active)
             if self._labels is None or not np.array_equal(lab, self._labels):
                 self.current = groups_of(lab, self.ids)

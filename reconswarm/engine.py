@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from agent.deadlock import StallState, generator, stall_step, window_ticks
 from agent.knowledge import SwarmKnowledge, view_of_edges
 from agent.leader import VirtualLeader
-from agent.planner import ObstacleView, command, errors, neighbour_table
+from agent.planner import ObstacleView, command, errors, neighbour_table_d
 from monitor.record import RunRecord, RunWriter
 from monitor.recorder import Recorder
 from monitor.summary import summarize
@@ -70,6 +70,7 @@ class Engine:
         self.reach_m = max(self.cfg.link_range_m + HYSTERESIS_M, 2 * self.rmax + self.cfg.d_max_m)
         self.near = np.zeros((0, 2), dtype=np.int64)
         self.near_d = np.zeros(0)  # (E,) norm2 distance of each pair in self.near
+        self.slot_error: Array | None = None
         # True distances matter up to the sensing range and the repulsion reach; beyond, a bound will do.
         self.exact_within_m = max(self.cfg.sensing_range_m, self.rmax + self.cfg.d_max_m)
         self.ob_reach = self.r + self.cfg.d_max_m  # (N,) obstacle repulsion reach of each agent
@@ -86,7 +87,7 @@ class Engine:
         self.near, self.near_d = pairs_and_distances(p, self.reach_m)
         self.know.update(qa, qs, self.near[self.near_d <= c.link_range_m])
 
-        nb = neighbour_table(p, self.r, self.near, c.d_max_m)
+        nb = neighbour_table_d(p, self.r, self.near, self.near_d, c.d_max_m)
         ob = self.obstacle_view()
 
         if self.leader is not None:
@@ -98,6 +99,8 @@ class Engine:
         else:
             center, lead_vel = self.center, None
         e_track = errors(p, center, self.offsets)
+        # (N,) |p_i - (p* + Δ_i)|, the recorder's tracking error, when the centre is p* itself
+        self.slot_error = e_track if self.leader is None else None
         pert = stall_step(self.stall, k, p, e_track, c.perturbation_mps, c.k_att, c.target_radius_m,
                           c.converge_tol_m, self.s.meta.dt_s)
         return command(c, p, self.r, self.offsets, center, nb, ob, pert, lead_vel)
@@ -114,26 +117,26 @@ class Engine:
         cols = np.flatnonzero(reach.any(axis=0))
         if cols.size == 0:
             return ObstacleView.empty(n)
-        rows_l: list[int] = []
-        cols_l: list[int] = []
+        rows_l: list[NDArray[np.int64]] = []
+        cols_l: list[NDArray[np.int64]] = []
         hulls: list[Array] = []
         col = 0
         for m in cols.tolist():
             near = np.flatnonzero(reach[:, m])
-            near = near[self.know.knows_rows(m, near)]
+            near = near[self.know.known[near, m]]
             if near.size:
-                for i in near.tolist():
-                    rows_l.append(i)
-                    cols_l.append(col)
-                    hulls.append(self.know.hull(i, m))
+                rows_l.append(near)
+                cols_l.append(np.full(near.size, col, dtype=np.int64))
+                hulls += self.know.hulls(near, m)
                 col += 1
         if not hulls:
             return ObstacleView.empty(n)
         key = tuple(map(id, hulls))
         if self._edges is None or key != self._edges_key:  # the hulls (held alive here) are unchanged
             self._edges_key, self._edges = key, (hulls, Edges.of(hulls))
-        return view_of_edges(self.p, n, col, np.array(rows_l, dtype=np.int64), np.array(cols_l, dtype=np.int64),
-                             self._edges[1])
+        rows = rows_l[0] if len(rows_l) == 1 else np.concatenate(rows_l)
+        cols_q = cols_l[0] if len(cols_l) == 1 else np.concatenate(cols_l)
+        return view_of_edges(self.p, n, col, rows, cols_q, self._edges[1])
 
     def advance(self, u: Array) -> None:
         w = self.s.world
@@ -156,7 +159,7 @@ def run(cfg: SimConfig) -> dict[str, Any]:
     for k in range(n_ticks + 1):
         t = k * s.meta.dt_s
         u = eng.plan(k)
-        rec.tick(k, t, eng.p, eng.theta, alive, eng.true_d, eng.near)
+        rec.tick(k, t, eng.p, eng.theta, alive, eng.true_d, eng.near, cand_d=eng.near_d, err=eng.slot_error)
         if progress is not None and k % 20 == 0:
             progress(k, rec.max_error_m)
         if rec.converged() or k == n_ticks:

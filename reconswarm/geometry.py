@@ -61,21 +61,36 @@ def convex_hull(points: Array) -> Array:
     pts = pts[keep]
     if len(pts) <= 2:
         return pts.copy()
-    tup = [(float(x), float(y)) for x, y in pts]
-    lower: list[tuple[float, float]] = []
-    for q in tup:
-        while len(lower) >= 2 and not _turns_left(lower[-2], lower[-1], q):
-            lower.pop()
-        lower.append(q)
-    upper: list[tuple[float, float]] = []
-    for q in reversed(tup):
-        while len(upper) >= 2 and not _turns_left(upper[-2], upper[-1], q):
-            upper.pop()
-        upper.append(q)
+    xs: list[float] = pts[:, 0].tolist()
+    ys: list[float] = pts[:, 1].tolist()
+    lower = _chain(xs, ys, range(len(xs)))
+    upper = _chain(xs, ys, range(len(xs) - 1, -1, -1))
     hull = lower[:-1] + upper[:-1]
     if len(hull) < 2:  # all points collinear: the hull is the segment between the extremes
-        hull = [tup[0], tup[-1]]
-    return np.array(hull, dtype=np.float64)
+        hull = [0, len(xs) - 1]
+    return pts[hull]
+
+
+def _chain(xs: list[float], ys: list[float], order: range) -> list[int]:
+    """One monotone chain of Andrew's algorithm over points in `order`: indices of its vertices.
+
+    `_turns_left` written inline (the same operations in the same order): this loop is the hull's cost.
+    """
+    out: list[int] = []
+    tol = COLLINEAR_TOL
+    sqrt = math.sqrt
+    for q in order:
+        qx, qy = xs[q], ys[q]
+        while len(out) >= 2:
+            o, a = out[-2], out[-1]
+            ox, oy = xs[o], ys[o]
+            ax, ay = xs[a] - ox, ys[a] - oy
+            bx, by = qx - ox, qy - oy
+            if (ax * by - ay * bx) > tol * sqrt((ax * ax + ay * ay) * (bx * bx + by * by)):
+                break
+            out.pop()
+        out.append(q)
+    return out
 
 
 def points_inside_hull(points: Array, hull: Array) -> NDArray[np.bool_]:
@@ -237,6 +252,23 @@ def signed_distance(px: Array, py: Array, e: Edges) -> tuple[Array, Array, Array
     out = shape[:-1]
     return (np.where(inside, -dist, dist).reshape(out), (flip * vx / dist_safe).reshape(out),
             (flip * vy / dist_safe).reshape(out))
+
+
+def signed_distance_only(px: Array, py: Array, e: Edges) -> Array:
+    """The d of signed_distance(px, py, e), without the normals: the same operations for d."""
+    apx = px[..., None] - e.ax
+    apy = py[..., None] - e.ay
+    shape = apx.shape
+    same = e.abx.shape == shape
+    abx = e.abx if same else np.broadcast_to(e.abx, shape)
+    aby = e.aby if same else np.broadcast_to(e.aby, shape)
+    t = np.clip((apx * abx + apy * aby) * e.inv_den, 0.0, 1.0)
+    dx = apx - t * abx
+    dy = apy - t * aby
+    dist = np.sqrt((dx * dx + dy * dy + e.pad).min(axis=-1))  # the minimum d2 is the one at its argmin
+    cross = abx * apy - aby * apx
+    inside = np.all((cross >= 0.0) | e.invalid, axis=-1) & e.closed
+    return np.where(inside, -dist, dist)
 
 
 def distance_to_polygon(points: Array, polygon: Array) -> tuple[Array, Array]:

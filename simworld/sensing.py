@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import Edges, norm2, sample_boundary, signed_distance, tile_edges
+from reconswarm.geometry import Edges, norm2, sample_boundary, signed_distance_only, tile_edges
 from reconswarm.scenario import Scenario
 
 Array = NDArray[np.float64]
@@ -31,6 +31,7 @@ class ContourField:
     centre: Array  # (M, 2) centre of each polygon's bounding circle
     reach: Array  # (M,) its radius
     _tiled: dict[int, Edges] = field(default_factory=dict, compare=False, repr=False)
+    _idx: dict[bytes, tuple[NDArray[np.int64], Array, Array]] = field(default_factory=dict, compare=False, repr=False)
 
     @staticmethod
     def from_scenario(s: Scenario, spacing_m: float = SAMPLE_SPACING_M) -> ContourField:
@@ -62,11 +63,15 @@ class ContourField:
             bound = norm2(p[:, None, :] - self.centre[None, :, :]) - self.reach  # (N, M)
             if not np.any(bound <= exact_within_m):
                 return bound
+        return self._exact_all(p)
+
+    def _exact_all(self, p: Array) -> Array:
+        """Exact signed distance from every head point to every obstacle: (N, 2) -> (N, M)."""
+        n = p.shape[0]
         tiled = self._tiled.get(n)
         if tiled is None:
             tiled = self._tiled[n] = tile_edges(self.edges, n)
-        d, _, _ = signed_distance(p[:, 0:1], p[:, 1:2], tiled)
-        return d
+        return signed_distance_only(p[:, 0:1], p[:, 1:2], tiled)
 
     def distances_for_engine(self, p: Array, exact_within_m: float, radii: Array) -> Array:
         """true_distances(p, exact_within_m) with the exact values computed only where they can matter.
@@ -83,6 +88,8 @@ class ContourField:
         close = bound <= exact_within_m
         if not close.any():
             return bound
+        if n * m <= 256:  # small: exact everywhere, as true_distances, is cheaper than picking
+            return self._exact_all(p)
         out = bound.copy()
         rows, cols = np.nonzero(close)
         out[rows, cols] = self._exact(p, rows, cols)
@@ -100,8 +107,7 @@ class ContourField:
         e = self.edges
         sub = Edges(e.ax[cols], e.ay[cols], e.abx[cols], e.aby[cols], e.inv_den[cols], e.pad[cols],
                     e.invalid[cols], e.closed[cols])
-        d, _, _ = signed_distance(p[rows, 0], p[rows, 1], sub)
-        return d
+        return signed_distance_only(p[rows, 0], p[rows, 1], sub)
 
     def scan(self, p: Array, sensing_range_m: float, true_d: Array) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """Contour points within R_v of each head point.
@@ -116,6 +122,22 @@ class ContourField:
         seen = np.flatnonzero(hit.any(axis=0))
         if seen.size == 0:
             return empty, empty
+        near = np.flatnonzero(hit[:, seen].any(axis=1))  # (n,) agents near any of them
+        idx, sx, sy = self._sample_index(seen)  # (S',) increasing, and the samples' coordinates
+        if seen.size > 1 and near.size * idx.size > 4096:
+            return self._scan_each(p, sensing_range_m, hit, seen)
+        # norm2(p[near, None] - samples[idx][None]), on contiguous coordinate planes: (n, S')
+        dx = p[near, 0:1] - sx
+        dy = p[near, 1:2] - sy
+        ok = np.sqrt(dx * dx + dy * dy) <= sensing_range_m
+        if seen.size > 1:  # an obstacle's samples count only for agents within range of that obstacle
+            ok &= hit[near][:, self.owner[idx]]
+        a, s = np.nonzero(ok)  # row-major: sorted by agent, then sample
+        return near[a], idx[s]
+
+    def _scan_each(self, p: Array, sensing_range_m: float, hit: NDArray[np.bool_],
+                   seen: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """scan, obstacle by obstacle (many agents near several obstacles)."""
         agents, samples = [], []
         for m in seen.tolist():
             near = np.flatnonzero(hit[:, m])
@@ -125,9 +147,19 @@ class ContourField:
             a, s = np.nonzero(d <= sensing_range_m)
             agents.append(near[a])
             samples.append(s + s0)
-        if len(agents) == 1:  # np.nonzero is row-major: already sorted by agent then sample
-            return agents[0].astype(np.int64), samples[0].astype(np.int64)
         a_all = np.concatenate(agents).astype(np.int64)
         s_all = np.concatenate(samples).astype(np.int64)
         order = np.lexsort((s_all, a_all))
         return a_all[order], s_all[order]
+
+    def _sample_index(self, seen: NDArray[np.int64]) -> tuple[NDArray[np.int64], Array, Array]:
+        """Global indices (increasing) and x, y of the samples of obstacles `seen`. (K,) -> 3 x (S',)"""
+        key = seen.tobytes()
+        got = self._idx.get(key)
+        if got is None:
+            idx = np.concatenate([np.arange(self.start[m], self.start[m] + self.count[m]) for m in seen.tolist()])
+            idx = idx.astype(np.int64)
+            if len(self._idx) > 4096:
+                self._idx.clear()
+            got = self._idx[key] = (idx, self.samples[idx, 0].copy(), self.samples[idx, 1].copy())
+        return got
