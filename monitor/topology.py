@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.sparse import coo_matrix
+from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from reconswarm.geometry import norm2, pairs_within
@@ -75,8 +75,14 @@ def labels(n: int, edges: NDArray[np.int64], active: NDArray[np.bool_]) -> NDArr
                 parent[max(ra, rb)] = min(ra, rb)  # the root is always the smallest index
         roots = np.array([find(x) for x in range(n)], dtype=np.int64)
         return np.where(active, roots, -1)
-    g = coo_matrix((np.ones(edges.shape[0]), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    _, comp = connected_components(g, directed=False)
+    if edges.shape[0] and bool(np.all(edges[1:, 0] >= edges[:-1, 0])):  # grouped by i: CSR as it stands
+        indptr = np.zeros(n + 1, dtype=np.int32)
+        np.cumsum(np.bincount(edges[:, 0], minlength=n), out=indptr[1:])
+        g: Any = csr_matrix((np.ones(edges.shape[0]), edges[:, 1].astype(np.int32), indptr), shape=(n, n))
+    else:
+        g = coo_matrix((np.ones(edges.shape[0]), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    # The weak components of the directed graph i -> j are its undirected ones, without symmetrizing.
+    _, comp = connected_components(g, directed=True, connection="weak")
     first = np.full(comp.max() + 1, n, dtype=np.int64)
     np.minimum.at(first, comp, np.arange(n))
     out = first[comp]

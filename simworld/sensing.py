@@ -141,16 +141,17 @@ class ContourField:
         agents, samples = [], []
         for m in seen.tolist():
             near = np.flatnonzero(hit[:, m])
-            s0, sc = int(self.start[m]), int(self.count[m])
-            block = self.samples[s0:s0 + sc]  # (S_l, 2)
-            d = norm2(p[near, None, :] - block[None, :, :])  # (n, S_l)
-            a, s = np.nonzero(d <= sensing_range_m)
+            idx, sx, sy = self._sample_index(seen[seen == m])  # obstacle m's samples (S_l,)
+            dx = p[near, 0:1] - sx  # (n, S_l), norm2 on contiguous coordinate planes
+            dy = p[near, 1:2] - sy
+            a, s = np.nonzero(np.sqrt(dx * dx + dy * dy) <= sensing_range_m)
             agents.append(near[a])
-            samples.append(s + s0)
-        a_all = np.concatenate(agents).astype(np.int64)
-        s_all = np.concatenate(samples).astype(np.int64)
-        order = np.lexsort((s_all, a_all))
-        return a_all[order], s_all[order]
+            samples.append(idx[s])
+        total = self.samples.shape[0]
+        keys = np.concatenate(agents).astype(np.int64) * total + np.concatenate(samples)  # (Q,) distinct
+        keys.sort()  # by agent, then sample
+        a_all, s_all = np.divmod(keys, total)
+        return a_all, s_all
 
     def _sample_index(self, seen: NDArray[np.int64]) -> tuple[NDArray[np.int64], Array, Array]:
         """Global indices (increasing) and x, y of the samples of obstacles `seen`. (K,) -> 3 x (S',)"""
