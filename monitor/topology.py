@@ -60,7 +60,7 @@ def labels(n: int, edges: NDArray[np.int64], active: NDArray[np.bool_]) -> NDArr
     """Component label per agent: the smallest agent index of its group; -1 if inactive. -> (N,)"""
     if n == 0:
         return np.zeros(0, dtype=np.int64)
-    if edges.shape[0] <= 4 * n and n <= 256:  # small graphs: union-find beats scipy's overhead
+    if edges.shape[0] + n <= 160:  # small graphs: union-find beats scipy's overhead
         parent = list(range(n))
 
         def find(x: int) -> int:
@@ -150,6 +150,45 @@ def diff(old: Groups, new: Groups) -> list[tuple[str, list[list[int]], list[list
     return out
 
 
+def _sorted_keys(edges: NDArray[np.int64], n: int) -> NDArray[np.int64]:
+    """i * n + j of edges (E, 2), sorted. -> (E,)"""
+    keys = edges[:, 0] * n + edges[:, 1]
+    return keys if bool(np.all(keys[1:] > keys[:-1])) else np.unique(keys)
+
+
+def _member(keys: NDArray[np.int64], sorted_keys: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """np.isin(keys, sorted_keys) for a sorted right-hand side."""
+    if sorted_keys.size == 0:
+        return np.zeros(keys.shape[0], dtype=bool)
+    at = np.minimum(np.searchsorted(sorted_keys, keys), sorted_keys.size - 1)
+    return sorted_keys[at] == keys
+
+
+MAX_CERTIFIED = 16  # removed edges checked one by one before a full recomputation is cheaper
+
+
+def _same_components(lab: NDArray[np.int64], edges: NDArray[np.int64], keys: NDArray[np.int64],
+                     old_keys: NDArray[np.int64], n: int) -> bool:
+    """True when the graph `edges` (keys sorted) provably has the components `lab` of the old graph.
+
+    Sufficient: every added edge joins two agents of one old group (no merge), and the two ends of every
+    removed edge still share a neighbour (no split). False means: recompute.
+    """
+    added = keys[~_member(keys, old_keys)]
+    if added.size and not bool(np.all(lab[added // n] == lab[added % n])):
+        return False
+    removed = old_keys[~_member(old_keys, keys)]
+    if removed.size > MAX_CERTIFIED:
+        return False
+    for key in removed.tolist():
+        a, b = divmod(key, n)
+        na = np.concatenate([edges[edges[:, 0] == a, 1], edges[edges[:, 1] == a, 0]])
+        nb = np.concatenate([edges[edges[:, 0] == b, 1], edges[edges[:, 1] == b, 0]])
+        if not np.intersect1d(na, nb).size:
+            return False
+    return True
+
+
 @dataclass
 class TopologyTracker:
     """Follows the swarm graph tick by tick and emits confirmed split / merge events."""
@@ -179,15 +218,17 @@ class TopologyTracker:
         prev_edges = self.edges
         n = p.shape[0]
         if self._keys is None or self._keys_n != n:
-            keys = prev_edges[:, 0] * n + prev_edges[:, 1]
-            self._keys = keys if np.all(keys[1:] > keys[:-1]) else np.unique(keys)
-            self._keys_n = n
-        edges = graph_edges(p, active, prev_edges, self.link_m, self.hysteresis_m, cand, cand_d, self._keys)
+            self._keys, self._keys_n = _sorted_keys(prev_edges, n), n
+        old_keys = self._keys
+        edges = graph_edges(p, active, prev_edges, self.link_m, self.hysteresis_m, cand, cand_d, old_keys)
         self.edges = edges
-        same_graph = (self._labels is not None and edges.shape == prev_edges.shape
-                      and bool((edges == prev_edges).all()) and np.array_equal(active, self._labels >= 0))
-        if not same_graph:
-            self._keys = None
+        self._keys = keys = _sorted_keys(edges, n)
+        same_active = self._labels is not None and np.array_equal(active, self._labels >= 0)
+        if same_active and keys.shape == old_keys.shape and bool((keys == old_keys).all()):
+            pass  # the same graph: the same groups
+        elif same_active and self._labels is not None and _same_components(self._labels, edges, keys, old_keys, n):
+            pass
+        else:
             lab = labels(p.shape[0], self.edges, active)
             if self._labels is None or not np.array_equal(lab, self._labels):
                 self.current = groups_of(lab, self.ids)
