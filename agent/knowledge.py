@@ -165,14 +165,14 @@ class SwarmKnowledge:
             return
         keys = links[:, 0] * n + links[:, 1]  # (E,) increasing
         last = self._link_keys
-        if last is not None and last.shape == keys.shape and np.array_equal(last, keys):
+        if last is not None and last.shape == keys.shape and last.tobytes() == keys.tobytes():
             new = None  # the same links as last time (the common case)
         elif last is None or last.size == 0:
             new = np.ones(keys.shape[0], dtype=bool)
         else:
             at = np.minimum(np.searchsorted(last, keys), last.size - 1)
             new = last[at] != keys
-        self._link_keys = keys if new is None or np.all(keys[1:] >= keys[:-1]) else np.sort(keys)
+        self._link_keys = keys if new is None or bool((keys[1:] >= keys[:-1]).all()) else np.sort(keys)
         dirty = self._dirty
         # What share needs from the bits before sensing: dirty columns over every link, all over new ones.
         share_dirty = bool(links.shape[0] and dirty.size)
@@ -182,7 +182,7 @@ class SwarmKnowledge:
             vals_dirty = self.bits[:, dirty][src]  # (2E, C)
         share_new = new is not None and bool(new.any())
         if share_new:
-            known = np.flatnonzero(self.union_prev)  # columns anyone knew: the only ones sharing can bring
+            known = self.union_prev.nonzero()[0]  # columns anyone knew: the only ones sharing can bring
             fresh_links = links[new]  # (E', 2)
             dst_new = np.concatenate([fresh_links[:, 0], fresh_links[:, 1]])  # (2E',)
             src_new = np.concatenate([fresh_links[:, 1], fresh_links[:, 0]])

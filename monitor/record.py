@@ -52,6 +52,8 @@ _F8 = np.dtype("<f8")
 class RunWriter:
     """Appends to run.db. Not thread-safe: one writer per process, called from its main loop."""
 
+    MAX_PENDING_ROWS = 256
+
     def __init__(self, path: str | Path, scenario: Scenario, mode: str, *, append: bool = False,
                  commit_interval_s: float = 0.5) -> None:
         self.path = Path(path)
@@ -64,6 +66,7 @@ class RunWriter:
         self.db.execute("PRAGMA synchronous=NORMAL")
         self.db.executescript(DDL)
         self.commit_interval_s = commit_interval_s
+        self._rows: list[tuple[Any, ...]] = []  # tick rows not yet inserted (flushed at every commit)
         self._last_commit = time.monotonic()
         self.db.execute("BEGIN")
         existing = dict(self.db.execute("SELECT key, value FROM meta").fetchall())
@@ -79,6 +82,7 @@ class RunWriter:
                             [(k, v if isinstance(v, str) else json.dumps(v)) for k, v in kv.items()])
 
     def last_tick(self) -> tuple[int, float] | None:
+        self._flush()
         row = self.db.execute("SELECT k, t FROM ticks ORDER BY k DESC LIMIT 1").fetchone()
         return (int(row[0]), float(row[1])) if row else None
 
@@ -91,11 +95,17 @@ class RunWriter:
         else:
             px, py = _blob(p[:, 0], "<f8"), _blob(p[:, 1], "<f8")
         th = theta.tobytes() if theta.dtype == _F8 and theta.flags.c_contiguous else _blob(theta, "<f8")
-        self.db.execute(
-            "INSERT OR REPLACE INTO ticks VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            (k, t, px, py, th, _blob(alive, "u1"),
-             _finite(max_error_m), _finite(min_agent_gap_m), _finite(min_obstacle_gap_m), groups))
+        # Rows wait in memory until the next commit (they would not be readable before it anyway).
+        self._rows.append((k, t, px, py, th, _blob(alive, "u1"), _finite(max_error_m), _finite(min_agent_gap_m),
+                           _finite(min_obstacle_gap_m), groups))
+        if len(self._rows) >= self.MAX_PENDING_ROWS:
+            self._flush()
         self.maybe_commit()
+
+    def _flush(self) -> None:
+        if self._rows:
+            self.db.executemany("INSERT OR REPLACE INTO ticks VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", self._rows)
+            self._rows = []
 
     def beacon(self, k: int, t: float, p: Array) -> None:
         self.db.execute("INSERT OR REPLACE INTO beacons VALUES (?, ?, ?, ?)",
@@ -123,12 +133,14 @@ class RunWriter:
             self.commit()
 
     def commit(self) -> None:
+        self._flush()
         if self.db.in_transaction:
             self.db.execute("COMMIT")
         self._last_commit = time.monotonic()
         self.db.execute("BEGIN")
 
     def close(self, **final_meta: Any) -> None:
+        self._flush()
         self.set_meta(**final_meta)
         if self.db.in_transaction:
             self.db.execute("COMMIT")

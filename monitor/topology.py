@@ -47,7 +47,7 @@ def graph_edges(p: Array, active: NDArray[np.bool_], prev: NDArray[np.int64], li
         live = active[cand[:, 0]] & active[cand[:, 1]]
         cand, cand_d = cand[live], cand_d[live]
     keep = cand_d <= link_m
-    band = np.flatnonzero(~keep & (cand_d <= link_m + hysteresis_m))
+    band = (~keep & (cand_d <= link_m + hysteresis_m)).nonzero()[0]
     if band.size and prev.shape[0]:
         keys = cand[band, 0] * n + cand[band, 1]
         old = prev_keys if prev_keys is not None else np.unique(prev[:, 0] * n + prev[:, 1])
@@ -75,7 +75,7 @@ def labels(n: int, edges: NDArray[np.int64], active: NDArray[np.bool_]) -> NDArr
                 parent[max(ra, rb)] = min(ra, rb)  # the root is always the smallest index
         roots = np.array([find(x) for x in range(n)], dtype=np.int64)
         return np.where(active, roots, -1)
-    if edges.shape[0] and bool(np.all(edges[1:, 0] >= edges[:-1, 0])):  # grouped by i: CSR as it stands
+    if edges.shape[0] and bool((edges[1:, 0] >= edges[:-1, 0]).all()):  # grouped by i: CSR as it stands
         indptr = np.zeros(n + 1, dtype=np.int32)
         np.cumsum(np.bincount(edges[:, 0], minlength=n), out=indptr[1:])
         g: Any = csr_matrix((np.ones(edges.shape[0]), edges[:, 1].astype(np.int32), indptr), shape=(n, n))
@@ -153,7 +153,7 @@ def diff(old: Groups, new: Groups) -> list[tuple[str, list[list[int]], list[list
 def _sorted_keys(edges: NDArray[np.int64], n: int) -> NDArray[np.int64]:
     """i * n + j of edges (E, 2), sorted. -> (E,)"""
     keys = edges[:, 0] * n + edges[:, 1]
-    return keys if bool(np.all(keys[1:] > keys[:-1])) else np.unique(keys)
+    return keys if bool((keys[1:] > keys[:-1]).all()) else np.unique(keys)
 
 
 def _member(keys: NDArray[np.int64], sorted_keys: NDArray[np.int64]) -> NDArray[np.bool_]:
@@ -175,7 +175,7 @@ def _same_components(lab: NDArray[np.int64], edges: NDArray[np.int64], keys: NDA
     removed edge still share a neighbour (no split). False means: recompute.
     """
     added = keys[~_member(keys, old_keys)]
-    if added.size and not bool(np.all(lab[added // n] == lab[added % n])):
+    if added.size and not bool((lab[added // n] == lab[added % n]).all()):
         return False
     removed = old_keys[~_member(old_keys, keys)]
     if removed.size > MAX_CERTIFIED:
@@ -205,6 +205,7 @@ class TopologyTracker:
     _labels: NDArray[np.int64] | None = None
     _keys: NDArray[np.int64] | None = None  # i * N + j of self.edges (sorted), for the next tick
     _keys_n: int = 0
+    _active_bytes: bytes = b""
 
     def step(self, t: float, p: Array, active: NDArray[np.bool_],
              cand: NDArray[np.int64] | None = None) -> list[dict[str, Any]]:
@@ -223,7 +224,7 @@ class TopologyTracker:
         edges = graph_edges(p, active, prev_edges, self.link_m, self.hysteresis_m, cand, cand_d, old_keys)
         self.edges = edges
         self._keys = keys = _sorted_keys(edges, n)
-        same_active = self._labels is not None and np.array_equal(active, self._labels >= 0)
+        same_active = self._labels is not None and active.tobytes() == self._active_bytes
         if same_active and keys.shape == old_keys.shape and bool((keys == old_keys).all()):
             pass  # the same graph: the same groups
         elif same_active and self._labels is not None and _same_components(self._labels, edges, keys, old_keys, n):
@@ -233,6 +234,7 @@ class TopologyTracker:
             if self._labels is None or not np.array_equal(lab, self._labels):
                 self.current = groups_of(lab, self.ids)
             self._labels = lab
+            self._active_bytes = (lab >= 0).tobytes()  # which agents the labels cover
         if self.confirmed is None:
             self.confirmed = self.current
             return []

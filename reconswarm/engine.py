@@ -114,7 +114,7 @@ class Engine:
         if self.field.n_obstacles == 0:
             return ObstacleView.empty(n)
         reach = self.true_d <= self.ob_reach[:, None]  # (N, M)
-        cols = np.flatnonzero(reach.any(axis=0))
+        cols = reach.any(axis=0).nonzero()[0]
         if cols.size == 0:
             return ObstacleView.empty(n)
         rows_l: list[NDArray[np.int64]] = []
@@ -122,7 +122,7 @@ class Engine:
         hulls: list[Array] = []
         col = 0
         for m in cols.tolist():
-            near = np.flatnonzero(reach[:, m])
+            near = reach[:, m].nonzero()[0]
             near = near[self.know.known[near, m]]
             if near.size:
                 rows_l.append(near)

@@ -234,10 +234,10 @@ def signed_distance(px: Array, py: Array, e: Edges) -> tuple[Array, Array, Array
     vx = dx[rows, k]
     vy = dy[rows, k]
     cross = abx * apy - aby * apx
-    inside = np.all((cross >= 0.0) | full(e.invalid), axis=1)
+    inside = ((cross >= 0.0) | full(e.invalid)).all(axis=1)
     inside &= (e.closed if same else np.broadcast_to(e.closed, shape[:-1])).reshape(-1)
     on_edge = dist == 0.0
-    if np.any(on_edge):  # on the boundary: the edge's outward normal (right-hand side of a CCW edge)
+    if on_edge.any():  # on the boundary: the edge's outward normal (right-hand side of a CCW edge)
         ex, ey = abx[rows, k], aby[rows, k]
         elen = np.sqrt(ex * ex + ey * ey)
         ok = elen > 0.0
@@ -267,7 +267,7 @@ def signed_distance_only(px: Array, py: Array, e: Edges) -> Array:
     dy = apy - t * aby
     dist = np.sqrt((dx * dx + dy * dy + e.pad).min(axis=-1))  # the minimum d2 is the one at its argmin
     cross = abx * apy - aby * apx
-    inside = np.all((cross >= 0.0) | e.invalid, axis=-1) & e.closed
+    inside = ((cross >= 0.0) | e.invalid).all(axis=-1) & e.closed
     return np.where(inside, -dist, dist)
 
 
@@ -323,4 +323,7 @@ def pairs_and_distances(points: Array, radius: float) -> tuple[NDArray[np.int64]
     i, j = np.divmod(keys, n)
     d = norm2(points[i] - points[j])
     keep = d <= radius
-    return np.stack([i[keep], j[keep]], axis=1), d[keep]
+    out = np.empty((int(keep.sum()), 2), dtype=np.int64)  # (E, 2)
+    out[:, 0] = i[keep]
+    out[:, 1] = j[keep]
+    return out, d[keep]

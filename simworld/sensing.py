@@ -61,7 +61,7 @@ class ContourField:
             return np.zeros((n, 0))
         if not np.isinf(exact_within_m):
             bound = norm2(p[:, None, :] - self.centre[None, :, :]) - self.reach  # (N, M)
-            if not np.any(bound <= exact_within_m):
+            if not (bound <= exact_within_m).any():
                 return bound
         return self._exact_all(p)
 
@@ -119,10 +119,10 @@ class ContourField:
         if self.n_obstacles == 0:
             return empty, empty
         hit = true_d <= sensing_range_m  # (N, M)
-        seen = np.flatnonzero(hit.any(axis=0))
+        seen = hit.any(axis=0).nonzero()[0]
         if seen.size == 0:
             return empty, empty
-        near = np.flatnonzero(hit[:, seen].any(axis=1))  # (n,) agents near any of them
+        near = hit[:, seen].any(axis=1).nonzero()[0]  # (n,) agents near any of them
         idx, sx, sy = self._sample_index(seen)  # (S',) increasing, and the samples' coordinates
         if seen.size > 1 and near.size * idx.size > 4096:
             return self._scan_each(p, sensing_range_m, hit, seen)
@@ -140,7 +140,7 @@ class ContourField:
         """scan, obstacle by obstacle (many agents near several obstacles)."""
         agents, samples = [], []
         for m in seen.tolist():
-            near = np.flatnonzero(hit[:, m])
+            near = hit[:, m].nonzero()[0]
             idx, sx, sy = self._sample_index(seen[seen == m])  # obstacle m's samples (S_l,)
             dx = p[near, 0:1] - sx  # (n, S_l), norm2 on contiguous coordinate planes
             dy = p[near, 1:2] - sy

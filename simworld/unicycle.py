@@ -57,8 +57,9 @@ def _heading_exact(theta: Array, u: Array, l: Array, dt: float) -> Array:
     speed = norm2(u)
     phi = np.arctan2(u[:, 1], u[:, 0])
     psi0 = wrap(theta - phi)
-    decay = np.exp(-speed * dt / l)
-    psi = 2.0 * np.arctan2(np.sin(psi0 / 2) * decay, np.cos(psi0 / 2))
+    decay = np.exp(speed * -dt / l)  # (-speed) * dt, the same product
+    half = psi0 / 2
+    psi = 2.0 * np.arctan2(np.sin(half) * decay, np.cos(half))
     return np.where(speed > 0.0, wrap(phi + psi), theta)
 
 
