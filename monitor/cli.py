@@ -148,7 +148,9 @@ def record_cmd(
 
     try:
         from monitor.process import MonitorConfig, run
-        from reconswarm.session import ZenohOptions
+        from reconswarm.session import ZenohOptions, setup_logging
+
+        setup_logging()
 
         code = run(MonitorConfig(scenario, db, ZenohOptions.build(connect, listen, mode, zenoh_config), run_id,
                                  live if live is not None else sys.stderr.isatty()))

@@ -1,0 +1,125 @@
+"""One agent's planning state and its tick, with no transport: what an agent process runs.
+
+It calls the same pure functions as the in-process engine (agent.planner, agent.knowledge,
+agent.deadlock, agent.leader) with N = 1 and its neighbours, in the engine's order, so a lockstep run
+reproduces `reconswarm sim` (see reconswarm/engine.py for the tick order).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agent.deadlock import StallState, generator, stall_step, window_ticks
+from agent.knowledge import KnownObstacles, obstacle_view, view_of_edges
+from agent.leader import VirtualLeader
+from agent.planner import Neighbours, command, errors
+from reconswarm.geometry import Edges, norm2
+from reconswarm.scenario import Scenario
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Peer:
+    """What an agent knows of another: its last announced head point and radius."""
+
+    id: int
+    px: float
+    py: float
+    radius: float
+
+
+class AgentBrain:
+    def __init__(self, s: Scenario, agent_id: int) -> None:
+        self.s = s
+        self.cfg = s.planner
+        self.id = agent_id
+        idx = s.agent_index(agent_id)
+        spec = s.agents[idx]
+        self.r = np.array([spec.radius_m])
+        self.offset = np.array([spec.offset_m], dtype=np.float64)
+        self.target = np.asarray(s.target_m, dtype=np.float64)
+        self.known = KnownObstacles()
+        self.rev = 0  # revision of self.known, bumped when it grows
+        self.union = KnownObstacles()  # virtual leader: everything the swarm knew at the previous tick
+        self._union_rev = 0  # own revision last merged into the union
+        self._edges: Edges | None = None  # edges of the known hulls, in obstacle-id order
+        self._edges_rev = 0
+        self._seen: set[tuple[float, float]] = set()  # contour points already merged (merging again is a no-op)
+        w = window_ticks(self.cfg.stall_window_s, s.meta.dt_s)
+        self.stall = StallState.create(1, w, [generator(s.meta.seed, agent_id)])
+        self.leader = VirtualLeader(s) if self.cfg.kind == "virtual-leader" else None
+
+    def linked(self, p: Array, peers: list[Peer]) -> list[int]:
+        """Ids of peers within link range of head point p (2,): whose obstacle sets we merge."""
+        if not peers:
+            return []
+        q = np.array([[x.px, x.py] for x in peers])
+        d = norm2(p[None, :] - q)
+        return [peers[k].id for k in np.flatnonzero(d <= self.cfg.link_range_m)]
+
+    def tick(self, k: int, p: Array, scan: dict[str, Array], peers: list[Peer],
+             shared: list[dict[str, Array]], swarm_sets: list[dict[str, Array]] | None = None) -> tuple[Array, bool]:
+        """Plan tick k. Returns (u (2,), whether the obstacle set grew).
+
+        p (2,) own head point at k; scan: obstacle id -> contour points (P, 2) sensed at k; peers: every
+        other agent's last announcement (at k when fresh); shared: the obstacle sets at k-1 of the peers
+        within link range; swarm_sets (virtual leader only): every agent's set at k-1, own excluded.
+        """
+        c = self.cfg
+        pos = p.reshape(1, 2)
+        if self.leader is not None:
+            for sets in swarm_sets or []:
+                self.union.merge_all(sets)
+            if self._union_rev != self.rev:
+                self.union.merge_all(self.known.hulls)
+                self._union_rev = self.rev
+            v, vel = self.leader.step(k, [h for _, h in self.union.sorted_items()])
+            center, lead_vel = v, vel
+        else:
+            center, lead_vel = self.target.reshape(1, 2), None
+        grew = self.known.merge_all(self._new_points(scan))
+        for sets in shared:
+            grew |= self.known.merge_all(sets)
+        if grew:
+            self.rev += 1
+
+        near = sorted((x for x in peers), key=lambda x: x.id)
+        if near:
+            q = np.array([[x.px, x.py] for x in near])
+            rr = np.array([x.radius for x in near])
+            d = norm2(pos - q)
+            keep = d <= self.r[0] + rr + c.d_max_m
+            q, rr = q[keep], rr[keep]
+        else:
+            q, rr = np.zeros((0, 2)), np.zeros(0)
+        nb = Neighbours(q.reshape(1, -1, 2), rr.reshape(1, -1), np.ones((1, q.shape[0]), dtype=bool))
+        if self._edges_rev != self.rev:  # the hulls' edges change only when the set grows
+            items = self.known.sorted_items()
+            self._edges = Edges.of([h for _, h in items]) if items else None
+            self._edges_rev = self.rev
+        m = 0 if self._edges is None else self._edges.ax.shape[0]
+        if self._edges is None:
+            ob = obstacle_view(pos, 1, 0, [])
+        else:
+            ob = view_of_edges(pos, 1, m, np.zeros(m, dtype=np.int64), np.arange(m), self._edges)
+        e = errors(pos, center.reshape(-1, 2)[0], self.offset)
+        pert = stall_step(self.stall, k, pos, e, c.perturbation_mps, c.k_att, c.target_radius_m, c.converge_tol_m,
+                          self.s.meta.dt_s)
+        u = command(c, pos, self.r, self.offset, center, nb, ob, pert, lead_vel)
+        return u[0], grew
+
+    def _new_points(self, scan: dict[str, Array]) -> dict[str, Array]:
+        out = {}
+        for oid, pts in scan.items():
+            fresh = [(x, y) for x, y in pts.tolist() if (x, y) not in self._seen]
+            if fresh:
+                self._seen.update(fresh)
+                out[oid] = np.array(fresh, dtype=np.float64)
+        return out
+
+    def obstacle_sets(self) -> dict[str, Array]:
+        return dict(self.known.hulls)

@@ -1,0 +1,288 @@
+"""`reconswarm agent --id I`: one agent as its own process, the AgentBrain behind a zenoh adapter.
+
+Subscribes to its state and scan, the clock, every agent's beacon and obstacle set (an advanced
+subscriber: a late or restarted agent receives each publisher's current set), and liveliness.
+Publishes its beacon, obstacle set (advanced publisher, cached) and command; declares its token.
+
+Lockstep (the clock says so): at tick k the agent waits for its state (and scan), announces its beacon
+(with the revision of its obstacle set at k-1), waits for the beacons of every live agent and the
+obstacle sets of those within link range (all of them for the virtual leader), then plans and
+commands. Realtime: it acts shortly after each new state on whatever it has (latest beacons, sets).
+A peer whose beacon is missing is kept where it was last seen (a static obstacle).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from agent.brain import AgentBrain, Peer
+from reconswarm import wire
+from reconswarm.errors import BadInput
+from reconswarm.scenario import Scenario, load
+from reconswarm.session import Inbox, Rejections, Stopper, ZenohOptions, open_session, usage
+
+log = logging.getLogger("reconswarm.agent")
+WORLD_SILENCE_S = 30.0  # exit 3 if the world says nothing for this long after the mission began
+
+
+@dataclass(frozen=True)
+class AgentConfig:
+    agent_id: int
+    scenario: Path
+    zenoh: ZenohOptions
+    run_id: str | None = None
+    wait_timeout_s: float = 3.0  # lockstep: longest wait for a peer's beacon or obstacle set
+
+
+class AgentNode:
+    def __init__(self, cfg: AgentConfig, s: Scenario, session: object) -> None:
+        import zenoh
+        from zenoh import ext
+
+        self.cfg, self.s, self.z = cfg, s, session
+        self.id = cfg.agent_id
+        self.keys = wire.Keys(cfg.run_id or s.meta.name)
+        self.brain = AgentBrain(s, self.id)
+        self.radius = float(self.brain.r[0])
+        self.rej = Rejections(f"agent {self.id}")
+        self.inbox = Inbox()
+        self.states: dict[int, wire.State] = {}
+        self.scans: dict[int, wire.Scan] = {}
+        self.clocks: dict[int, wire.Clock] = {}
+        self.beacons: dict[int, dict[int, wire.Beacon]] = {}
+        self.last_seen: dict[int, wire.Beacon] = {}
+        self.sets: dict[int, dict[int, dict[str, np.ndarray]]] = {}  # peer -> rev -> obstacle sets
+        # Revisions already merged (into the brain's own set / the leader's union): merging a set again
+        # cannot change a hull, so it is skipped.
+        self.merged: dict[int, int] = {}
+        self.merged_union: dict[int, int] = {}
+        self.alive: set[int] = set()
+        self.k = -1  # last tick commanded
+        self.beacon_sent = -1
+        self.wait_since: float | None = None
+        self.mode = "lockstep"
+        self.period_s = 0.0
+        self.act_at: float | None = None
+        self.last_clock = time.monotonic()
+        self.ended = False
+        block = zenoh.CongestionControl.BLOCK
+        k = self.keys
+        z = session
+        self.pub_beacon = z.declare_publisher(k.beacon(self.id), congestion_control=block)  # type: ignore[attr-defined]
+        self.pub_cmd = z.declare_publisher(k.cmd(self.id), congestion_control=block, express=True)  # type: ignore[attr-defined]
+        self.pub_obs = ext.declare_advanced_publisher(z, k.obstacles(self.id), cache=ext.CacheConfig(max_samples=1))
+        cb = self.inbox.callback
+        self.subs = [
+            z.declare_subscriber(k.state(self.id), cb),  # type: ignore[attr-defined]
+            z.declare_subscriber(k.scan(self.id), cb),  # type: ignore[attr-defined]
+            z.declare_subscriber(k.clock, cb),  # type: ignore[attr-defined]
+            z.declare_subscriber(k.all_agents("beacon"), cb),  # type: ignore[attr-defined]
+            ext.declare_advanced_subscriber(z, k.all_agents("obstacles"), cb,
+                                            history=ext.HistoryConfig(detect_late_publishers=True)),
+            z.liveliness().declare_subscriber(k.alive_all, cb, history=True),  # type: ignore[attr-defined]
+        ]
+        # Declared last: the token tells the world this agent is ready to receive.
+        self.token = z.liveliness().declare_token(k.alive_agent(self.id))  # type: ignore[attr-defined]
+
+    # ------------------------------------------------------------------------------------------ input
+
+    def handle(self, key: str, payload: bytes, kind: str) -> None:
+        try:
+            what, aid, leaf = self.keys.parse(key)
+            if what == "alive":
+                if leaf == "agent" and aid is not None:
+                    if kind == "DELETE":
+                        self.alive.discard(aid)
+                    else:
+                        if aid not in self.alive and aid != self.id:
+                            for store in (self.sets, self.merged, self.merged_union):
+                                store.pop(aid, None)  # a new incarnation starts its revisions again
+                        self.alive.add(aid)
+                return
+            if what == "clock":
+                c = wire.clock_from_wire(payload)
+                self.clocks[c.k] = c
+                self.last_clock = time.monotonic()
+                self.mode = c.mode
+                self.period_s = self.s.meta.dt_s / c.speed if c.speed > 0 else 0.0
+                if c.end:
+                    self.ended = True
+                return
+            if what != "agent" or aid is None:
+                return
+            if leaf == "state" and aid == self.id:
+                st = wire.state_from_wire(payload, aid)
+                self.states[st.k] = st
+                if self.mode == "realtime":
+                    self.act_at = time.monotonic() + 0.25 * self.period_s
+            elif leaf == "scan" and aid == self.id:
+                sc = wire.scan_from_wire(payload, aid)
+                self.scans[sc.k] = sc
+            elif leaf == "beacon" and aid != self.id:
+                b = wire.beacon_from_wire(payload, aid)
+                self.beacons.setdefault(b.k, {})[aid] = b
+                if aid not in self.last_seen or b.k >= self.last_seen[aid].k:
+                    self.last_seen[aid] = b
+            elif leaf == "obstacles" and aid != self.id:
+                o = wire.obstacles_from_wire(payload, aid)
+                self.sets.setdefault(aid, {})[o.rev] = {oid: np.array(v, dtype=np.float64)
+                                                         for oid, v in o.obstacles.items()}
+        except wire.WireError as exc:
+            self.rej.reject(key, str(exc))
+
+    # --------------------------------------------------------------------------------------- planning
+
+    def _scan_sets(self, k_from: int, k_to: int) -> dict[str, np.ndarray]:
+        pts: dict[str, list[tuple[float, float]]] = {}
+        for kk in range(k_from, k_to + 1):
+            sc = self.scans.pop(kk, None)
+            if sc is not None:
+                for x, y, oid in sc.points:
+                    pts.setdefault(oid, []).append((x, y))
+        return {oid: np.array(v, dtype=np.float64) for oid, v in pts.items()}
+
+    def _peers(self, k: int) -> list[wire.Beacon]:
+        fresh = self.beacons.get(k, {})
+        return [fresh.get(a, b) for a, b in self.last_seen.items()]
+
+    def _ready_lockstep(self, k: int) -> bool:
+        """True once everything tick k needs is in (or the wait timed out)."""
+        st, clock = self.states.get(k), self.clocks.get(k)
+        if st is None or clock is None or (st.scan_n > 0 and k not in self.scans):
+            return False
+        if self.beacon_sent < k:
+            self.pub_beacon.put(wire.beacon_to_wire(wire.Beacon(
+                self.id, k, st.t, st.px, st.py, self.radius, self.brain.rev, self.rej.count)))
+            self.beacon_sent = k
+            self.wait_since = time.monotonic()
+        if self.wait_since is not None and time.monotonic() - self.wait_since > self.cfg.wait_timeout_s:
+            log.warning("agent %d: tick %d: gave up waiting for peers' data", self.id, k)
+            return True
+        fresh = self.beacons.get(k, {})
+        expected = [a for a in clock.alive if a != self.id and a in self.alive]
+        if any(a not in fresh for a in expected):
+            return False
+        need = self._set_sources(k, np.array([st.px, st.py]))
+        return all(rev == 0 or rev in self.sets.get(a, {}) for a, rev in need)
+
+    def _set_sources(self, k: int, p: np.ndarray) -> list[tuple[int, int]]:
+        """(peer, revision) of the obstacle sets tick k merges: linked peers (all, for the leader)."""
+        fresh = self.beacons.get(k, {})
+        peers = [Peer(a, b.px, b.py, b.radius) for a, b in fresh.items()]
+        ids = [b.id for b in peers] if self.brain.leader is not None else self.brain.linked(p, peers)
+        return [(a, fresh[a].rev) for a in ids]
+
+    def _unmerged(self, wanted: dict[int, int], merged: dict[int, int]) -> list[dict[str, np.ndarray]]:
+        """The sets at the wanted revisions that are not merged yet (and mark them merged)."""
+        out = []
+        for a in sorted(wanted):
+            rev = wanted[a]
+            if rev == 0 or merged.get(a, 0) >= rev:
+                continue
+            out.append(self._latest_set(a, rev))
+            merged[a] = rev
+        return out
+
+    def _latest_set(self, peer: int, rev: int | None) -> dict[str, np.ndarray]:
+        revs = self.sets.get(peer, {})
+        if rev is not None and rev in revs:
+            return revs[rev]
+        usable = [r for r in revs if rev is None or r <= rev]
+        return revs[max(usable)] if usable else {}
+
+    def act(self, k: int) -> None:
+        st = self.states[k]
+        p = np.array([st.px, st.py])
+        peers = [Peer(b.id, b.px, b.py, b.radius) for b in self._peers(k)]
+        if self.mode == "lockstep":  # exactly the peers' sets at k-1, as their beacons at k announce
+            fresh = self.beacons.get(k, {})
+            fresh_peers = [Peer(a, b.px, b.py, b.radius) for a, b in fresh.items()]
+            linked = {a: fresh[a].rev for a in self.brain.linked(p, fresh_peers)}
+            every = {a: b.rev for a, b in fresh.items()}
+        else:  # realtime: whatever is latest
+            linked = {a: max(self.sets.get(a, {0: None})) for a in self.brain.linked(p, peers)}
+            every = {a: max(revs) for a, revs in self.sets.items() if revs}
+        shared = self._unmerged(linked, self.merged)
+        swarm = self._unmerged(every, self.merged_union) if self.brain.leader is not None else None
+        scan = self._scan_sets(self.k + 1 if self.k >= 0 else k, k)
+        u, grew = self.brain.tick(k, p, scan, peers, shared, swarm)
+        if grew:
+            sets = {oid: tuple(map(tuple, h.tolist())) for oid, h in self.brain.obstacle_sets().items()}
+            self.pub_obs.put(wire.obstacles_to_wire(wire.ObstacleSet(self.id, k, self.brain.rev, sets)))
+        self.pub_cmd.put(wire.cmd_to_wire(wire.Cmd(self.id, k, float(u[0]), float(u[1]))))
+        self.k = k
+        self.wait_since = None
+        self._prune(k)
+
+    def _prune(self, k: int) -> None:
+        for store in (self.states, self.clocks, self.beacons, self.scans):
+            for kk in [x for x in store if x < k - 2]:
+                del store[kk]
+        for a, revs in self.sets.items():  # keep the newest merged revision and everything after it
+            done = min(self.merged.get(a, 0), self.merged_union.get(a, 0) if self.brain.leader else 2**62)
+            for r in [r for r in revs if r < done]:
+                del revs[r]
+
+    def step(self) -> None:
+        """Advance as far as the data allows."""
+        if self.mode == "realtime":
+            if self.act_at is not None and time.monotonic() >= self.act_at and self.states:
+                self.act_at = None
+                k = max(self.states)
+                if k > self.k:
+                    st = self.states[k]
+                    self.pub_beacon.put(wire.beacon_to_wire(wire.Beacon(
+                        self.id, k, st.t, st.px, st.py, self.radius, self.brain.rev, self.rej.count)))
+                    self.act(k)
+            return
+        while True:
+            if not self.states:
+                return
+            newest = max(self.states)
+            k = self.k + 1 if self.k >= 0 and (self.k + 1) in self.states else newest
+            if k <= self.k or not self._ready_lockstep(k):
+                return
+            self.act(k)
+
+    def run(self, stop: Stopper) -> int:
+        started = False
+        while not stop.stopped and not self.ended:
+            item = self.inbox.get(timeout=0.05 if self.act_at is None else max(0.0, self.act_at - time.monotonic()))
+            if item is not None:
+                self.handle(*item)
+                for more in self.inbox.drain():
+                    self.handle(*more)
+            self.step()
+            started |= bool(self.clocks)
+            if started and time.monotonic() - self.last_clock > WORLD_SILENCE_S:
+                log.error("agent %d: no clock from the world for %.0f s", self.id, WORLD_SILENCE_S)
+                return 3
+        return 0
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):
+            self.token.undeclare()
+
+
+def run(cfg: AgentConfig) -> int:
+    s = load(cfg.scenario)
+    if cfg.agent_id not in {a.id for a in s.agents}:
+        raise BadInput(f"--id: agent {cfg.agent_id} is not in {cfg.scenario}")
+    stop = Stopper()
+    session = open_session(cfg.zenoh, f"agent {cfg.agent_id}")
+    try:
+        node = AgentNode(cfg, s, session)
+        log.info("agent %d up (run %s)", cfg.agent_id, node.keys.run)
+        code = node.run(stop)
+        node.close()
+        log.info("agent %d done: last tick %d, %d messages rejected", cfg.agent_id, node.k, node.rej.count)
+        return code
+    finally:
+        session.close()
+        log.info("usage: %s", usage())

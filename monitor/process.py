@@ -1,0 +1,242 @@
+"""`reconswarm monitor record`: the monitor process.
+
+Records the truth (every robot's state, from simworld) and what agents announce (beacons), computes
+safety metrics and topology events live with the same Recorder as the in-process engine, publishes the
+events on `swarm/<run>/event`, and writes run.db as it goes (same schema, so every monitor command
+works on it). Membership comes from liveliness tokens: a token that disappears is `agent_lost`, one
+that comes back `agent_joined`. Restarted on an existing run.db it appends, and notes the gap.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from monitor.record import RunWriter
+from monitor.recorder import Recorder
+from reconswarm import wire
+from reconswarm.scenario import Scenario, load
+from reconswarm.session import Inbox, Rejections, Stopper, ZenohOptions, open_session, usage
+
+log = logging.getLogger("reconswarm.monitor")
+END_GRACE_S = 3.0  # after the world's last clock, how long to wait for the last states
+
+
+@dataclass(frozen=True)
+class MonitorConfig:
+    scenario: Path
+    db: Path
+    zenoh: ZenohOptions
+    run_id: str | None = None
+    live: bool = False
+
+
+class MonitorNode:
+    def __init__(self, cfg: MonitorConfig, s: Scenario, session: Any) -> None:
+        import zenoh
+
+        self.cfg, self.s = cfg, s
+        self.keys = wire.Keys(cfg.run_id or s.meta.name)
+        self.ids = [a.id for a in s.agents]
+        self.index = {a: k for k, a in enumerate(self.ids)}
+        n = len(self.ids)
+        append = cfg.db.exists()
+        self.writer = RunWriter(cfg.db, s, "lockstep", append=append)
+        self.resume_from = self.writer.last_tick() if append else None
+        self.rec = Recorder(s, self.writer)
+        self.rej = Rejections("monitor")
+        self.counts: dict[str, int] = {}
+        self.inbox = Inbox()
+        self.p = s.starts.copy()
+        self.theta = s.headings.copy()
+        self.pending: dict[int, dict[int, wire.State]] = {}
+        self.beacons: dict[int, dict[int, wire.Beacon]] = {}
+        self.written = self.resume_from[0] if self.resume_from else -1
+        self.t = self.resume_from[1] if self.resume_from else 0.0
+        self.alive = np.zeros(n, dtype=bool)
+        self.seen = np.zeros(n, dtype=bool)
+        self.end: wire.Clock | None = None
+        self.end_at = 0.0
+        self.mode: str | None = None
+        self.wall0: float | None = None
+        self.min_gap = float("inf")
+        z = session
+        k = self.keys
+        self.pub_event = z.declare_publisher(k.event, congestion_control=zenoh.CongestionControl.BLOCK)
+        cb = self.inbox.callback
+        self.subs = [z.declare_subscriber(k.all_agents("state"), cb), z.declare_subscriber(k.all_agents("beacon"), cb),
+                     z.declare_subscriber(k.clock, cb), z.liveliness().declare_subscriber(k.alive_all, cb, history=True)]
+        self.token = z.liveliness().declare_token(k.alive_monitor)
+
+    def emit(self, ev: dict[str, Any]) -> None:
+        self.writer.event(ev)
+        self.pub_event.put(wire.event_to_wire(wire.Event(
+            float(ev["t"]), ev["kind"], tuple(tuple(g) for g in ev.get("before", [])),
+            tuple(tuple(g) for g in ev.get("after", [])), ev.get("agent"))))
+
+    def membership(self, aid: int, up: bool) -> None:
+        i = self.index[aid]
+        before = [int(a) for a in np.array(self.ids)[self.alive]]
+        was = bool(self.alive[i])
+        self.alive[i] = up
+        after = [int(a) for a in np.array(self.ids)[self.alive]]
+        if up and not was and self.seen[i]:
+            self.emit({"t": round(self.t, 9), "kind": "agent_joined", "agent": aid, "before": [before], "after": [after]})
+            log.info("agent %d joined at t=%.2f", aid, self.t)
+        elif not up and was:
+            self.emit({"t": round(self.t, 9), "kind": "agent_lost", "agent": aid, "before": [before], "after": [after]})
+            log.warning("agent %d lost at t=%.2f", aid, self.t)
+        self.seen[i] |= up
+
+    def handle(self, key: str, payload: bytes, kind: str) -> None:
+        try:
+            what, aid, leaf = self.keys.parse(key)
+            if what == "alive":
+                # Agents leave when the mission ends: that is not a loss.
+                if leaf == "agent" and aid in self.index and self.end is None:
+                    self.membership(aid, kind != "DELETE")
+                return
+            if what == "clock":
+                c = wire.clock_from_wire(payload)
+                self.t = max(self.t, c.t)
+                if self.mode != c.mode:
+                    self.writer.set_meta(mode=c.mode)
+                self.mode = c.mode
+                self.counts["simworld"] = c.rejected
+                if self.wall0 is None:
+                    self.wall0 = time.monotonic()
+                if c.end:
+                    self.end, self.end_at = c, time.monotonic()
+                return
+            if what != "agent" or aid is None:
+                return
+            if aid not in self.index:
+                raise wire.WireError(f"agent {aid} is not in the scenario")
+            if leaf == "state":
+                st = wire.state_from_wire(payload, aid)
+                if st.k > self.written:
+                    self.pending.setdefault(st.k, {})[aid] = st
+            elif leaf == "beacon":
+                b = wire.beacon_from_wire(payload, aid)
+                self.counts[f"agent {aid}"] = b.rejected
+                if b.k > self.written:
+                    self.beacons.setdefault(b.k, {})[aid] = b
+        except wire.WireError as exc:
+            self.rej.reject(key, str(exc))
+
+    def flush(self, force: bool = False) -> None:
+        """Write every complete tick in order (or, forced, whatever has arrived)."""
+        while self.pending:
+            k = min(self.pending)
+            got = self.pending[k]
+            newer = any(kk > k for kk in self.pending)
+            if len(got) < len(self.ids) and not (force or newer):
+                return
+            del self.pending[k]
+            for aid, st in got.items():
+                i = self.index[aid]
+                self.p[i] = (st.px, st.py)
+                self.theta[i] = st.theta
+            t = k * self.s.meta.dt_s
+            if self.resume_from is not None and self.written == self.resume_from[0]:
+                self.writer.note_gap(self.resume_from[1], t, "monitor restarted: ticks in between not recorded")
+                self.rec.topology.confirmed = None  # a fresh start: no events across the gap
+            self.rec.tick(k, t, self.p, self.theta, self.alive.copy())
+            b = self.beacons.pop(k, {})
+            if b:
+                bp = np.full((len(self.ids), 2), np.nan)
+                for aid, x in b.items():
+                    bp[self.index[aid]] = (x.px, x.py)
+                self.writer.beacon(k, t, bp)
+            for kk in [x for x in self.beacons if x < k]:
+                del self.beacons[kk]
+            self.written, self.t = k, t
+            self.min_gap = min(self.min_gap, self.rec.safety.min_agent_gap_m)
+
+    def finish(self) -> None:
+        self.counts["monitor"] = self.rej.count
+        self.writer.counters(self.counts)
+        extra: dict[str, Any] = {}
+        if self.end is not None:
+            extra = {f"world_{k}" if not k.startswith(("latency", "missed", "deadlines")) else k: v
+                     for k, v in self.end.stats.items()}
+            extra["end_reason"] = self.end.reason
+        wall = time.monotonic() - self.wall0 if self.wall0 is not None else 0.0
+        meta: dict[str, Any] = {"extra": extra, "finished": "1" if self.end is not None else "0"}
+        if self.resume_from is None:
+            meta["wall_time_s"] = f"{wall:.6f}"
+        if self.mode:
+            meta["mode"] = self.mode
+        self.writer.close(**meta)
+
+    def live_view(self) -> Any:
+        from rich.table import Table
+
+        table = Table(title=f"reconswarm monitor — run {self.keys.run}")
+        for col in ("t (s)", "groups", "smallest gap (m)", "agents alive", "max |e| (m)", "rejected"):
+            table.add_column(col)
+        table.add_row(f"{self.t:.2f}", str(self.rec.topology.n_groups), f"{self.min_gap:.2f}",
+                      f"{int(self.alive.sum())}/{len(self.ids)}", f"{self.rec.max_error_m:.2f}",
+                      str(sum(self.counts.values()) + self.rej.count))
+        return table
+
+    def run(self, stop: Stopper) -> int:
+        live = None
+        if self.cfg.live:
+            from rich.live import Live
+
+            live = Live(self.live_view(), refresh_per_second=4, transient=False)
+            live.start()
+        last_counts = time.monotonic()
+        try:
+            while not stop.stopped:
+                item = self.inbox.get(0.05)
+                if item is not None:
+                    self.handle(*item)
+                    for more in self.inbox.drain():
+                        self.handle(*more)
+                self.flush()
+                if self.end is not None:
+                    done = self.written >= self.end.k
+                    if done or time.monotonic() - self.end_at > END_GRACE_S:
+                        self.flush(force=True)
+                        break
+                if time.monotonic() - last_counts > 0.5:
+                    self.counts["monitor"] = self.rej.count
+                    self.writer.counters(self.counts)
+                    self.writer.maybe_commit()
+                    last_counts = time.monotonic()
+                    if live is not None:
+                        live.update(self.live_view())
+        finally:
+            if live is not None:
+                live.update(self.live_view())
+                live.stop()
+            self.finish()
+        return 0
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):
+            self.token.undeclare()
+
+
+def run(cfg: MonitorConfig) -> int:
+    s = load(cfg.scenario)
+    stop = Stopper()
+    session = open_session(cfg.zenoh, "monitor")
+    try:
+        node = MonitorNode(cfg, s, session)
+        log.info("monitor up (run %s): recording to %s", node.keys.run, cfg.db)
+        code = node.run(stop)
+        node.close()
+        log.info("monitor done: %d ticks recorded, %d messages rejected", node.written + 1, node.rej.count)
+        return code
+    finally:
+        session.close()
+        log.info("usage: %s", usage())

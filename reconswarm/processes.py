@@ -1,0 +1,110 @@
+"""The distributed commands: `reconswarm agent`, `reconswarm simworld`, `reconswarm router`.
+
+Each parses its options into a frozen config and calls its module's run(config); all share the zenoh
+options of INTERFACES.md (`--connect`, `--listen`, `--mode`, `--zenoh-config`).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from reconswarm.errors import ReconswarmError
+from reconswarm.session import ZenohOptions, open_session, setup_logging, usage
+
+log = logging.getLogger("reconswarm.router")
+
+Connect = Annotated[list[str] | None, typer.Option("--connect", help="Zenoh endpoint to connect to (repeatable).")]
+Listen = Annotated[list[str] | None, typer.Option("--listen", help="Zenoh endpoint to listen on (repeatable).")]
+Mode = Annotated[str, typer.Option("--mode", help="Zenoh mode: peer | client | router.")]
+ZConfig = Annotated[Path | None, typer.Option("--zenoh-config", help="Zenoh JSON5 configuration file.")]
+RunId = Annotated[str | None, typer.Option("--run", help="Run name in key expressions (default: scenario name).")]
+
+
+def _guard(fn, *args):  # type: ignore[no-untyped-def]
+    from reconswarm.cli import fail
+
+    setup_logging()
+    prof_dir = os.environ.get("RECONSWARM_PROFILE")  # a directory: dump cProfile stats per process
+    prof = None
+    if prof_dir:
+        import cProfile
+
+        prof = cProfile.Profile()
+        prof.enable()
+    try:
+        code = fn(*args)
+    except ReconswarmError as exc:
+        fail(exc)
+        return
+    finally:
+        if prof is not None:
+            prof.disable()
+            prof.dump_stats(os.path.join(prof_dir, f"{fn.__module__}-{os.getpid()}.prof"))
+    raise typer.Exit(code)
+
+
+def agent_cmd(
+    agent_id: Annotated[int, typer.Option("--id", help="This agent's id (from the scenario).")],
+    scenario: Annotated[Path, typer.Option("--scenario", help="Scenario TOML file.")],
+    connect: Connect = None, listen: Listen = None, mode: Mode = "client", zenoh_config: ZConfig = None,
+    run_id: RunId = None,
+) -> None:
+    """One agent process: plans its own commands from its state, scan and neighbours' announcements."""
+    from agent.process import AgentConfig, run
+
+    def go() -> int:
+        return run(AgentConfig(agent_id, scenario, ZenohOptions.build(connect, listen, mode, zenoh_config), run_id))
+
+    _guard(go)
+
+
+def simworld_cmd(
+    scenario: Annotated[Path, typer.Option("--scenario", help="Scenario TOML file.")],
+    clock: Annotated[str, typer.Option("--clock", help="lockstep | realtime")] = "lockstep",
+    speed: Annotated[float, typer.Option("--speed", help="Realtime: simulated seconds per wall second.")] = 10.0,
+    start_timeout: Annotated[float, typer.Option("--start-timeout", help="Seconds to wait for everyone.")] = 60.0,
+    connect: Connect = None, listen: Listen = None, mode: Mode = "client", zenoh_config: ZConfig = None,
+    run_id: RunId = None,
+) -> None:
+    """The world process: unicycle kinematics, range-limited sensing and the clock."""
+    from simworld.process import WorldConfig, run
+
+    def go() -> int:
+        return run(WorldConfig(scenario, ZenohOptions.build(connect, listen, mode, zenoh_config), clock, speed, run_id,
+                               start_timeout))
+
+    _guard(go)
+
+
+def router_cmd(
+    listen: Listen = None, connect: Connect = None, zenoh_config: ZConfig = None,
+) -> None:
+    """A zenoh router (Python-hosted) for local and multi-host runs; default tcp/127.0.0.1:7447."""
+    from reconswarm.session import DEFAULT_ROUTER, Stopper
+
+    def go() -> int:
+        opts = ZenohOptions.build(connect, listen or ([] if zenoh_config else [DEFAULT_ROUTER]), "router", zenoh_config)
+        stop = Stopper()
+        session = open_session(opts, "router", timeout_s=5.0)
+        try:
+            log.info("router up: listening on %s", ", ".join(opts.listen) or "(config file)")
+            while not stop.stopped:
+                time.sleep(0.1)
+        finally:
+            session.close()
+            log.info("usage: %s", usage())
+        return 0
+
+    _guard(go)
+
+
+def register(app: typer.Typer) -> None:
+    app.command("agent")(agent_cmd)
+    app.command("simworld")(simworld_cmd)
+    app.command("router")(router_cmd)

@@ -1,0 +1,169 @@
+"""The zenoh side shared by every process: options, session, signals, inbox and rejection counting.
+
+Every process takes the same options (`--connect EP`, `--listen EP`, `--mode peer|client|router`,
+`--zenoh-config FILE.json5`); multicast scouting is off unless a config file turns it on; clients wait
+for their router (and reconnect by themselves when it restarts). Samples are handed from zenoh's
+callbacks to the process's own loop through a queue: nothing blocks or calls zenoh inside a callback.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import signal
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from reconswarm.errors import BadInput, ProcessFailure
+
+log = logging.getLogger("reconswarm")
+MODES = ("peer", "client", "router")
+DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+LEASE_MS = 2000  # a frozen process is declared gone after this (the default 10 s is too slow for robots)
+
+
+@dataclass(frozen=True)
+class ZenohOptions:
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    mode: str = "client"
+    config_file: Path | None = None
+
+    @staticmethod
+    def build(connect: list[str] | None, listen: list[str] | None, mode: str,
+              config_file: Path | None) -> ZenohOptions:
+        if mode not in MODES:
+            raise BadInput(f"--mode: expected one of {', '.join(MODES)}, got {mode!r}")
+        for ep in [*(connect or []), *(listen or [])]:
+            if "/" not in ep:
+                raise BadInput(f"--connect/--listen: endpoint {ep!r} is not of the form proto/address (tcp/host:port)")
+        if config_file is not None and not config_file.is_file():
+            raise BadInput(f"{config_file}: zenoh config file not found")
+        if config_file is None and mode == "client" and not connect:
+            connect = [DEFAULT_ROUTER]
+        return ZenohOptions(tuple(connect or ()), tuple(listen or ()), mode, config_file)
+
+    def config(self) -> Any:
+        import zenoh
+
+        if self.config_file is not None:
+            try:
+                conf = zenoh.Config.from_file(str(self.config_file))
+            except Exception as exc:
+                raise BadInput(f"{self.config_file}: invalid zenoh config: {exc}") from None
+        else:
+            conf = zenoh.Config()
+            conf.insert_json5("mode", json.dumps(self.mode))
+            conf.insert_json5("scouting/multicast/enabled", "false")
+            conf.insert_json5("transport/link/tx/lease", str(LEASE_MS))
+            conf.insert_json5("connect/timeout_ms", '{"router": -1, "peer": -1, "client": 15000}')
+        # Advanced publishers (late joiners' obstacle sets) need timestamps.
+        conf.insert_json5("timestamping/enabled", "true")
+        if self.connect:
+            conf.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
+        if self.listen:
+            conf.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
+        return conf
+
+
+def open_session(opts: ZenohOptions, what: str, timeout_s: float = 20.0) -> Any:
+    """Open a session, retrying until the router answers or the timeout passes (then ProcessFailure)."""
+    import zenoh
+
+    deadline = time.monotonic() + timeout_s
+    last: Exception | None = None
+    while time.monotonic() < deadline:
+        try:
+            return zenoh.open(opts.config())
+        except BadInput:
+            raise
+        except Exception as exc:  # zenoh.ZError: router not up yet, port in use, ...
+            last = exc
+            time.sleep(0.2)
+    raise ProcessFailure(f"{what}: cannot open a zenoh session ({', '.join(opts.connect or opts.listen)}): {last}")
+
+
+class Stopper:
+    """SIGINT / SIGTERM set a flag the main loop polls; the session is closed in the loop's finally."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.signal: int | None = None
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._handle)
+
+    def _handle(self, signum: int, _frame: Any) -> None:
+        self.signal = signum
+        self.event.set()
+
+    @property
+    def stopped(self) -> bool:
+        return self.event.is_set()
+
+
+class Inbox:
+    """Samples from zenoh callbacks, queued as (key, payload bytes, kind) for the main loop."""
+
+    def __init__(self) -> None:
+        self.q: queue.SimpleQueue[tuple[str, bytes, str]] = queue.SimpleQueue()
+
+    def callback(self, sample: Any) -> None:
+        try:
+            kind = "DELETE" if str(sample.kind).endswith("DELETE") else "PUT"
+            self.q.put((str(sample.key_expr), sample.payload.to_bytes(), kind))
+        except Exception as exc:  # never raise into zenoh
+            log.error("inbox: cannot queue a sample: %s", exc)
+
+    def get(self, timeout: float | None) -> tuple[str, bytes, str] | None:
+        try:
+            return self.q.get(timeout=timeout) if timeout is None or timeout > 0 else self.q.get_nowait()
+        except queue.Empty:
+            return None
+
+    def drain(self, limit: int = 100_000) -> list[tuple[str, bytes, str]]:
+        out = []
+        for _ in range(limit):
+            try:
+                out.append(self.q.get_nowait())
+            except queue.Empty:
+                break
+        return out
+
+
+class Rejections:
+    """Counts dropped messages and logs them at most once a second (with how many were suppressed)."""
+
+    def __init__(self, who: str) -> None:
+        self.who = who
+        self.count = 0
+        self._last_log = 0.0
+        self._suppressed = 0
+
+    def reject(self, key: str, reason: str) -> None:
+        self.count += 1
+        now = time.monotonic()
+        if now - self._last_log >= 1.0:
+            extra = f" (+{self._suppressed} more since the last report)" if self._suppressed else ""
+            log.warning("%s: dropped a message on %s: %s%s [total %d]", self.who, key, reason, extra, self.count)
+            self._last_log = now
+            self._suppressed = 0
+        else:
+            self._suppressed += 1
+
+
+def usage() -> dict[str, float]:
+    """CPU seconds and peak resident memory of this process (for logs and benchmarks)."""
+    import resource
+
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    return {"cpu_user_s": round(ru.ru_utime, 3), "cpu_sys_s": round(ru.ru_stime, 3),
+            "max_rss_mb": round(ru.ru_maxrss / 1024.0, 1)}
+
+
+def setup_logging(debug: bool = False) -> None:
+    logging.basicConfig(level=logging.DEBUG if debug else logging.INFO,
+                        format="%(asctime)s %(levelname)s %(message)s", datefmt="%H:%M:%S")

@@ -1,0 +1,378 @@
+"""The wire protocol, in one place: key expressions and msgpack schemas (INTERFACES.md).
+
+Every message is a frozen dataclass with a paired `<name>_to_wire` / `<name>_from_wire`. Decoding
+validates everything a hostile or broken peer could get wrong (size, msgpack, schema version, types,
+finite numbers, the agent id in the payload matching the key) and raises `WireError`; the receiver
+counts and drops, it never dies.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import msgpack
+
+VERSION = 1
+MAX_PAYLOAD_BYTES = 1 << 20  # 1 MiB: larger payloads are rejected before decoding
+MAX_POINTS = 50_000  # contour points in a scan
+MAX_OBSTACLES = 4_096  # obstacle ids in one obstacle set
+MAX_VERTICES = 4_096  # vertices of one shared hull
+MAX_IDS = 100_000  # agent ids in a clock's alive list
+MAX_STR = 128
+
+
+class WireError(ValueError):
+    """A payload that must be dropped (and counted)."""
+
+
+# ---------------------------------------------------------------------------------------- key expressions
+
+
+@dataclass(frozen=True)
+class Keys:
+    """All key expressions of one run (`swarm/<run>/...`)."""
+
+    run: str
+
+    @property
+    def prefix(self) -> str:
+        return f"swarm/{self.run}"
+
+    def agent(self, agent_id: int, leaf: str) -> str:
+        return f"{self.prefix}/agent/{agent_id}/{leaf}"
+
+    def state(self, agent_id: int) -> str:
+        return self.agent(agent_id, "state")
+
+    def scan(self, agent_id: int) -> str:
+        return self.agent(agent_id, "scan")
+
+    def cmd(self, agent_id: int) -> str:
+        return self.agent(agent_id, "cmd")
+
+    def beacon(self, agent_id: int) -> str:
+        return self.agent(agent_id, "beacon")
+
+    def obstacles(self, agent_id: int) -> str:
+        return self.agent(agent_id, "obstacles")
+
+    def all_agents(self, leaf: str) -> str:
+        return f"{self.prefix}/agent/*/{leaf}"
+
+    @property
+    def clock(self) -> str:
+        return f"{self.prefix}/clock"
+
+    @property
+    def event(self) -> str:
+        return f"{self.prefix}/event"
+
+    @property
+    def alive_all(self) -> str:
+        return f"{self.prefix}/alive/**"
+
+    def alive_agent(self, agent_id: int) -> str:
+        return f"{self.prefix}/alive/agent/{agent_id}"
+
+    @property
+    def alive_simworld(self) -> str:
+        return f"{self.prefix}/alive/simworld"
+
+    @property
+    def alive_monitor(self) -> str:
+        return f"{self.prefix}/alive/monitor"
+
+    def parse(self, key: str) -> tuple[str, int | None, str]:
+        """Classify a key: ("agent", id, leaf) | ("clock", None, "") | ("event", None, "") |
+        ("alive", id or None, "agent" | "simworld" | "monitor"). Raises WireError for anything else."""
+        pre = self.prefix + "/"
+        if not key.startswith(pre):
+            raise WireError(f"key {key!r} outside {self.prefix}")
+        parts = key[len(pre):].split("/")
+        if parts == ["clock"]:
+            return "clock", None, ""
+        if parts == ["event"]:
+            return "event", None, ""
+        if len(parts) == 3 and parts[0] == "agent":
+            return "agent", _key_id(parts[1], key), parts[2]
+        if len(parts) == 3 and parts[:2] == ["alive", "agent"]:
+            return "alive", _key_id(parts[2], key), "agent"
+        if len(parts) == 2 and parts[0] == "alive" and parts[1] in ("simworld", "monitor"):
+            return "alive", None, parts[1]
+        raise WireError(f"unexpected key {key!r}")
+
+
+def _key_id(text: str, key: str) -> int:
+    if not text.isdigit() or len(text) > 10:
+        raise WireError(f"bad agent id in key {key!r}")
+    return int(text)
+
+
+# ---------------------------------------------------------------------------------------------- messages
+
+
+@dataclass(frozen=True)
+class State:
+    id: int
+    k: int
+    t: float
+    x: float  # body centre s
+    y: float
+    theta: float
+    px: float  # head point p
+    py: float
+    scan_n: int = 0  # contour points in this tick's scan (0: no scan message follows)
+
+
+@dataclass(frozen=True)
+class Scan:
+    id: int
+    k: int
+    t: float
+    points: tuple[tuple[float, float, str], ...]
+
+
+@dataclass(frozen=True)
+class Cmd:
+    id: int
+    k: int
+    ux: float
+    uy: float
+
+
+@dataclass(frozen=True)
+class Beacon:
+    id: int
+    k: int
+    t: float
+    px: float
+    py: float
+    radius: float
+    rev: int = 0  # revision of the sender's obstacle set at tick k-1
+    rejected: int = 0  # messages this agent has rejected so far
+
+
+@dataclass(frozen=True)
+class ObstacleSet:
+    id: int
+    k: int
+    rev: int
+    obstacles: dict[str, tuple[tuple[float, float], ...]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Clock:
+    k: int
+    t: float
+    alive: tuple[int, ...]
+    mode: str = "lockstep"  # lockstep | realtime
+    speed: float = 0.0  # realtime: simulated seconds per wall second
+    end: bool = False
+    reason: str = ""
+    rejected: int = 0  # messages simworld has rejected so far
+    stats: dict[str, float] = field(default_factory=dict)  # final realtime statistics
+
+
+@dataclass(frozen=True)
+class Event:
+    t: float
+    kind: str
+    before: tuple[tuple[int, ...], ...] = ()
+    after: tuple[tuple[int, ...], ...] = ()
+    agent: int | None = None
+
+
+# ------------------------------------------------------------------------------------------- encode
+
+
+def _pack(obj: dict[str, Any]) -> bytes:
+    return msgpack.packb({"v": VERSION, **obj}, use_bin_type=True)
+
+
+def state_to_wire(m: State) -> bytes:
+    return _pack({"id": m.id, "k": m.k, "t": m.t, "x": m.x, "y": m.y, "theta": m.theta, "px": m.px, "py": m.py,
+                  "scan_n": m.scan_n})
+
+
+def scan_to_wire(m: Scan) -> bytes:
+    return _pack({"id": m.id, "k": m.k, "t": m.t, "points": [[x, y, o] for x, y, o in m.points]})
+
+
+def cmd_to_wire(m: Cmd) -> bytes:
+    return _pack({"id": m.id, "k": m.k, "ux": m.ux, "uy": m.uy})
+
+
+def beacon_to_wire(m: Beacon) -> bytes:
+    return _pack({"id": m.id, "k": m.k, "t": m.t, "px": m.px, "py": m.py, "radius": m.radius, "rev": m.rev,
+                  "rejected": m.rejected})
+
+
+def obstacles_to_wire(m: ObstacleSet) -> bytes:
+    return _pack({"id": m.id, "k": m.k, "rev": m.rev,
+                  "obstacles": {oid: [[x, y] for x, y in pts] for oid, pts in m.obstacles.items()}})
+
+
+def clock_to_wire(m: Clock) -> bytes:
+    return _pack({"k": m.k, "t": m.t, "alive": list(m.alive), "mode": m.mode, "speed": m.speed, "end": m.end,
+                  "reason": m.reason, "rejected": m.rejected, "stats": m.stats})
+
+
+def event_to_wire(m: Event) -> bytes:
+    body: dict[str, Any] = {"t": m.t, "kind": m.kind, "before": [list(g) for g in m.before],
+                            "after": [list(g) for g in m.after]}
+    if m.agent is not None:
+        body["agent"] = m.agent
+    return _pack(body)
+
+
+# ------------------------------------------------------------------------------------------- decode
+
+
+def _unpack(payload: bytes) -> dict[str, Any]:
+    if len(payload) > MAX_PAYLOAD_BYTES:
+        raise WireError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD_BYTES}")
+    try:
+        obj = msgpack.unpackb(payload, raw=False, strict_map_key=True,
+                              max_array_len=MAX_POINTS * 3, max_map_len=MAX_OBSTACLES + 16,
+                              max_str_len=MAX_STR * 4, max_bin_len=0, max_ext_len=0)
+    except Exception as exc:  # msgpack raises several unrelated exception types
+        raise WireError(f"undecodable payload: {type(exc).__name__}") from None
+    if not isinstance(obj, dict):
+        raise WireError("payload is not a map")
+    if obj.get("v") != VERSION:
+        raise WireError(f"schema version {obj.get('v')!r}, expected {VERSION}")
+    return obj
+
+
+def _int(obj: dict[str, Any], key: str, lo: int = 0, hi: int = 2**53, default: int | None = None) -> int:
+    v = obj.get(key, default)
+    if type(v) is not int:  # excludes bool, a subclass of int
+        raise WireError(f"field {key!r}: expected an integer")
+    if not lo <= v <= hi:
+        raise WireError(f"field {key!r}: {v} out of range")
+    return v
+
+
+def _num(v: Any, what: str) -> float:
+    t = type(v)
+    if t is float:
+        if v - v == 0.0:  # false for NaN and ±inf
+            return v  # type: ignore[no-any-return]
+        raise WireError(f"{what}: not finite")
+    if t is int:
+        return float(v)
+    raise WireError(f"{what}: expected a number")
+
+
+def _float(obj: dict[str, Any], key: str) -> float:
+    v = obj.get(key)
+    if type(v) is float and v - v == 0.0:  # the common case, checked inline
+        return v  # type: ignore[no-any-return]
+    if v is None:
+        raise WireError(f"field {key!r} missing")
+    return _num(v, f"field {key!r}")
+
+
+def _str(v: Any, what: str) -> str:
+    if not isinstance(v, str) or not v or len(v) > MAX_STR:
+        raise WireError(f"{what}: expected a short string")
+    return v
+
+
+def _agent_id(obj: dict[str, Any], key_id: int | None) -> int:
+    aid = _int(obj, "id", 0, 2**31)
+    if key_id is not None and aid != key_id:
+        raise WireError(f"payload claims agent {aid} on agent {key_id}'s key")
+    return aid
+
+
+def state_from_wire(payload: bytes, key_id: int | None = None) -> State:
+    o = _unpack(payload)
+    return State(_agent_id(o, key_id), _int(o, "k"), _float(o, "t"), _float(o, "x"), _float(o, "y"),
+                 _float(o, "theta"), _float(o, "px"), _float(o, "py"), _int(o, "scan_n", 0, MAX_POINTS, 0))
+
+
+def scan_from_wire(payload: bytes, key_id: int | None = None) -> Scan:
+    o = _unpack(payload)
+    pts = o.get("points")
+    if not isinstance(pts, list) or len(pts) > MAX_POINTS:
+        raise WireError("field 'points': expected a list of at most %d points" % MAX_POINTS)
+    out = []
+    for p in pts:
+        if not isinstance(p, list) or len(p) != 3:
+            raise WireError("field 'points': each point is [x, y, obstacle_id]")
+        out.append((_num(p[0], "point x"), _num(p[1], "point y"), _str(p[2], "point obstacle_id")))
+    return Scan(_agent_id(o, key_id), _int(o, "k"), _float(o, "t"), tuple(out))
+
+
+def cmd_from_wire(payload: bytes, key_id: int | None = None) -> Cmd:
+    o = _unpack(payload)
+    return Cmd(_agent_id(o, key_id), _int(o, "k"), _float(o, "ux"), _float(o, "uy"))
+
+
+def beacon_from_wire(payload: bytes, key_id: int | None = None) -> Beacon:
+    o = _unpack(payload)
+    radius = _float(o, "radius")
+    if radius <= 0:
+        raise WireError("field 'radius': must be > 0")
+    return Beacon(_agent_id(o, key_id), _int(o, "k"), _float(o, "t"), _float(o, "px"), _float(o, "py"), radius,
+                  _int(o, "rev", 0, 2**53, 0), _int(o, "rejected", 0, 2**53, 0))
+
+
+def obstacles_from_wire(payload: bytes, key_id: int | None = None) -> ObstacleSet:
+    o = _unpack(payload)
+    sets = o.get("obstacles")
+    if not isinstance(sets, dict) or len(sets) > MAX_OBSTACLES:
+        raise WireError("field 'obstacles': expected a map of obstacle id to vertices")
+    out: dict[str, tuple[tuple[float, float], ...]] = {}
+    for oid, pts in sets.items():
+        name = _str(oid, "obstacle id")
+        if not isinstance(pts, list) or not pts or len(pts) > MAX_VERTICES:
+            raise WireError(f"obstacle {name!r}: expected 1..{MAX_VERTICES} vertices")
+        verts = []
+        for p in pts:
+            if not isinstance(p, list) or len(p) != 2:
+                raise WireError(f"obstacle {name!r}: each vertex is [x, y]")
+            verts.append((_num(p[0], "vertex x"), _num(p[1], "vertex y")))
+        out[name] = tuple(verts)
+    return ObstacleSet(_agent_id(o, key_id), _int(o, "k"), _int(o, "rev"), out)
+
+
+def clock_from_wire(payload: bytes) -> Clock:
+    o = _unpack(payload)
+    alive = o.get("alive")
+    if not isinstance(alive, list) or len(alive) > MAX_IDS:
+        raise WireError("field 'alive': expected a list of agent ids")
+    ids = tuple(_int({"id": a}, "id", 0, 2**31) for a in alive)
+    mode = o.get("mode", "lockstep")
+    if mode not in ("lockstep", "realtime"):
+        raise WireError(f"field 'mode': unknown clock mode {mode!r}")
+    end = o.get("end", False)
+    if not isinstance(end, bool):
+        raise WireError("field 'end': expected a boolean")
+    reason = o.get("reason", "")
+    if not isinstance(reason, str) or len(reason) > 256:
+        raise WireError("field 'reason': expected a short string")
+    stats_raw = o.get("stats", {})
+    if not isinstance(stats_raw, dict) or len(stats_raw) > 64:
+        raise WireError("field 'stats': expected a small map")
+    stats = {_str(k, "stats key"): _num(v, f"stats {k!r}") for k, v in stats_raw.items()}
+    speed = _num(o.get("speed", 0.0), "field 'speed'")
+    if speed < 0:
+        raise WireError("field 'speed': must be >= 0")
+    return Clock(_int(o, "k"), _float(o, "t"), ids, mode, speed, end, reason, _int(o, "rejected", 0, 2**53, 0), stats)
+
+
+def event_from_wire(payload: bytes) -> Event:
+    o = _unpack(payload)
+    kind = _str(o.get("kind"), "field 'kind'")
+
+    def groups(key: str) -> tuple[tuple[int, ...], ...]:
+        g = o.get(key, [])
+        if not isinstance(g, list) or not all(isinstance(x, list) for x in g):
+            raise WireError(f"field {key!r}: expected a list of groups")
+        return tuple(tuple(_int({"id": a}, "id", 0, 2**31) for a in grp) for grp in g)
+
+    agent = _int(o, "agent", 0, 2**31) if "agent" in o else None
+    return Event(_float(o, "t"), kind, groups("before"), groups("after"), agent)
