@@ -1,0 +1,178 @@
+"""The in-process engine (reconswarm/engine.py): Lyapunov decrease (Thm 4.1), determinism, and the claim that
+one agent's command computed alone equals its row in the vectorized engine."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from shapely.geometry import Point, Polygon
+
+from agent.knowledge import obstacle_view
+from agent.planner import Neighbours, command
+from monitor.record import RunRecord
+from reconswarm.engine import Engine, SimConfig, run
+from reconswarm.generate import generate
+from reconswarm.scenario import load, parse, to_toml, warnings
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
+
+
+def lyapunov_run(s, max_ticks: int | None = None):
+    """Step the engine; return V_k = Σ ½‖e_i‖² per tick, the final max error and the tick count."""
+    eng = Engine(s)
+    slots = np.asarray(s.target_m) + s.offsets
+    n_ticks = round(s.meta.duration_s / s.meta.dt_s) if max_ticks is None else max_ticks
+    v = []
+    err = np.inf
+    for k in range(n_ticks + 1):
+        e = eng.p - slots
+        v.append(0.5 * float(np.sum(e * e)))
+        err = float(np.max(np.hypot(e[:, 0], e[:, 1])))
+        if err <= s.planner.converge_tol_m:
+            break
+        eng.advance(eng.plan(k))
+    return np.array(v), err, k
+
+
+@pytest.mark.parametrize(("n", "seed"), [(1, 0), (10, 0), (10, 1)])
+def test_lyapunov_decreases_and_converges_without_obstacles(n, seed):
+    """Thm 4.1 with Assumption 4.1 (checked) and no obstacles: V never increases and every agent converges."""
+    s = generate(n, 0, seed)
+    s = replace(s, planner=replace(s.planner, perturbation_mps=0.0))  # the theorem's law, without Remark 1
+    s = parse(to_toml(s))
+    assert warnings(s) == []  # Assumption 4.1 holds
+    v, err, ticks = lyapunov_run(s)
+    dv = np.diff(v)
+    assert np.all(dv <= 1e-12 * v[:-1]), f"V increased at tick {int(np.argmax(dv / v[:-1]))}"
+    assert err <= s.planner.converge_tol_m  # converged ...
+    assert ticks * s.meta.dt_s < s.meta.duration_s  # ... within the scenario's time
+    assert v[-1] < 1e-6 * v[0]
+
+
+def test_lyapunov_rigid_formation_inside_the_disk_decays_geometrically():
+    """A formation translated inside B(p*, R_c): no repulsion (Assumption 4.1), e_i(k+1) = (1 - k_att dt) e_i(k)."""
+    base = load(PAPER)
+    shift = np.array([-20.0, 15.0])
+    agents = tuple(replace(a, start_m=(base.target_m[0] + a.offset_m[0] + shift[0],
+                                       base.target_m[1] + a.offset_m[1] + shift[1])) for a in base.agents)
+    s = parse(to_toml(replace(base, agents=agents, obstacles=())))
+    v, err, ticks = lyapunov_run(s)
+    ratio = v[1:] / v[:-1]
+    q = (1 - s.planner.k_att * s.meta.dt_s) ** 2
+    np.testing.assert_allclose(ratio, q, rtol=1e-9)
+    assert err <= 0.5
+    # Converges when ‖shift‖ (1 - k dt)^k <= tol: the predicted tick, exactly.
+    want = math.ceil(math.log(0.5 / float(np.hypot(*shift))) / math.log(1 - s.planner.k_att * s.meta.dt_s))
+    assert ticks == want
+
+
+def test_engine_is_deterministic_with_stalls_and_seeds_only_act_through_them():
+    s = generate(10, 3, 3)  # perturbation on; this scenario stalls against its obstacles
+    ticks = 2600
+
+    def trajectory(scen):
+        eng = Engine(scen)
+        out = []
+        for k in range(ticks):
+            u = eng.plan(k)
+            out.append((eng.p.copy(), eng.theta.copy(), u.copy()))
+            eng.advance(u)
+        return out, int(eng.stall.stalls.sum()), eng
+
+    a, stalls_a, _ = trajectory(s)
+    b, _, _ = trajectory(s)
+    for (pa, ta, ua), (pb, tb, ub) in zip(a, b, strict=True):
+        assert np.array_equal(pa, pb) and np.array_equal(ta, tb) and np.array_equal(ua, ub)
+    c, stalls_c, _ = trajectory(s.with_seed(s.meta.seed + 1))
+    # Until the first stall perturbation the seed plays no part: identical bits.
+    first = next((k for k in range(ticks) if not np.array_equal(a[k][2], c[k][2])), None)
+    if stalls_a == 0 and stalls_c == 0:
+        assert first is None
+    else:
+        assert first is not None and first >= 100  # a stall needs a full window (5 s) of history
+
+
+def test_agent_row_computed_alone_equals_the_engine_row():
+    """What an agent process computes from its neighbours and its own hulls (N = 1) is bit-identical to the
+    engine's row, on the paper scenario while the swarm meets the diamond."""
+    s = load(PAPER)
+    eng = Engine(s)
+    c = s.planner
+    checked = 0
+    for k in range(1000):
+        p = eng.p.copy()
+        u = eng.plan(k)
+        if k in (0, 700, 800, 900, 999):
+            for i in range(eng.n):
+                d = np.hypot(*(p - p[i]).T)
+                js = [j for j in range(eng.n) if j != i and d[j] <= eng.r[i] + eng.r[j] + c.d_max_m]
+                nb = Neighbours(p[js].reshape(1, -1, 2), eng.r[js].reshape(1, -1), np.ones((1, len(js)), bool))
+                known = [m for m in range(eng.field.n_obstacles) if eng.know.knows(m)[i]]
+                ob = obstacle_view(p[i:i + 1], 1, len(known),
+                                   [(0, col, eng.know.hull(i, m)) for col, m in enumerate(known)])
+                mine = command(c, p[i:i + 1], eng.r[i:i + 1], eng.offsets[i:i + 1], eng.target[None], nb, ob,
+                               np.zeros((1, 2)))
+                assert np.array_equal(mine[0], u[i]), (k, i, mine[0], u[i])
+                checked += 1
+        eng.advance(u)
+    assert checked == 50
+    # The check did cover obstacle repulsion: by tick 999 agents know the diamond and are close to it.
+    assert eng.know.knows(0).any()
+    assert np.min(eng.field.true_distances(eng.p)[:, 0] - eng.r) < c.d_max_m
+
+
+def test_knowledge_is_only_sensed_or_shared():
+    """Every agent's known hull of an obstacle lies inside that obstacle, and appears only once someone saw it."""
+    s = load(PAPER)
+    eng = Engine(s)
+    first_seen = {}
+    for k in range(1200):
+        eng.advance(eng.plan(k))
+        for m in range(eng.field.n_obstacles):
+            knows = eng.know.knows(m)
+            if knows.any() and m not in first_seen:
+                first_seen[m] = k
+                # At the first tick anyone knows it, someone is within R_v of it (sensed, not shared).
+                assert np.min(eng.true_d[:, m]) <= s.planner.sensing_range_m
+    assert 0 in first_seen  # the diamond is met (around t = 40 s per the notes)
+    assert 400 <= first_seen[0] <= 1000
+    for m in first_seen:
+        poly = Polygon(eng.field.polygons[m]).buffer(1e-9)
+        for i in np.flatnonzero(eng.know.knows(m)):
+            h = eng.know.hull(int(i), m)
+            assert all(poly.covers(Point(*q)) for q in h)
+
+
+@pytest.mark.xfail(strict=True, reason="BUG (minor): run summary min_obstacle_gap_m is a lower bound, not the surface "
+                   "gap, when no agent ever comes within exact_within_m (= max(R_v, r_max + d_max)) of any obstacle: "
+                   "Engine.plan uses ContourField.true_distances(p, exact_within_m), which then returns "
+                   "‖p - centre‖ - reach for every pair, and the Recorder takes the gaps from it")
+def test_min_obstacle_gap_is_exact_when_obstacles_stay_far(tmp_path):
+    base = load(PAPER)
+    far = ((300.0, 300.0), (700.0, 300.0), (700.0, 310.0), (300.0, 310.0))  # a long wall ~250 m off the path
+    s = parse(to_toml(replace(base, meta=replace(base.meta, duration_s=20.0),
+                              obstacles=(replace(base.obstacles[0], vertices_m=far),))))
+    summary = run(SimConfig(s, tmp_path))
+    rec = RunRecord(tmp_path / "run.db")
+    tk = rec.ticks()
+    rec.close()
+    square = Polygon(far)
+    true_min = min(square.distance(Point(x, y)) - r
+                   for row in range(tk.t.size)
+                   for x, y, r in zip(tk.px[row], tk.py[row], s.radii, strict=True))
+    assert summary["min_obstacle_gap_m"] == pytest.approx(true_min, abs=1e-3)
+
+
+@pytest.mark.xfail(strict=True, reason="BUG (planner/generator): generate(10, 3, seed=0) is not solved within its own "
+                   "duration_s: agent 9 stays pinned ~223 m from its slot against the flat face of obs001 near "
+                   "(318, -3.9) despite ~20 stall perturbations of 1 m/s (Remark 1's remedy is too weak against the "
+                   "attraction R_c k_att = 6.4 m/s), so `reconswarm sim` / run_local.sh -n 10 exit 1")
+def test_generated_scenario_with_obstacles_converges():
+    s = generate(10, 3, 0)
+    out = run(SimConfig(s, Path("/nonexistent-not-written"), record=False))
+    assert out["converged"]

@@ -1,0 +1,279 @@
+"""Scenario files: strict validation (through the CLI, as a user meets it), the TOML writer, the generator."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from shapely.geometry import Point, Polygon
+
+from reconswarm.errors import BadInput
+from reconswarm.generate import D_MAX_M, D_SAFE_M, R_MAX_M, generate
+from reconswarm.geometry import is_strictly_convex, polygon_area
+from reconswarm.scenario import check, load, parse, to_toml, warnings
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
+PAPER_TEXT = PAPER.read_text()
+_SCRIPT = Path(sys.executable).parent / "reconswarm"
+CLI = [str(_SCRIPT)] if _SCRIPT.exists() else [sys.executable, "-m", "reconswarm.cli"]
+
+
+def cli(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([*CLI, *args], capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+
+
+def sub(old: str, new: str, text: str = PAPER_TEXT) -> str:
+    assert text.count(old) >= 1, old
+    return text.replace(old, new, 1)
+
+
+def without_line(line: str) -> str:
+    assert f"\n{line}\n" in PAPER_TEXT
+    return PAPER_TEXT.replace(f"\n{line}\n", "\n", 1)
+
+
+DIAMOND = "vertices_m = [[345.0, 0.0], [300.0, 45.0], [255.0, 0.0], [300.0, -45.0]]"
+
+# (case id, mutated text, field path the one-line error must name)
+BAD = [
+    ("unknown-key", sub("k_att = 0.08", "k_att = 0.08\nk_rep = 1.0"), "planner.k_rep"),
+    ("unknown-top-table", PAPER_TEXT + "\n[extras]\nx = 1\n", "extras"),
+    ("unknown-agent-key", sub("head_offset_m = 0.5", "head_offset_m = 0.5\ncolour = 'red'"), "agents[0].colour"),
+    ("missing-key", without_line("k_att = 0.08"), "planner.k_att"),
+    ("missing-agent-key", sub("radius_m = 4.58\n", ""), "agents[1].radius_m"),
+    ("missing-table", sub("[target]\ncenter_m = [800.0, 0.0]\n", ""), "target"),
+    ("wrong-type", sub("dt_s = 0.05", 'dt_s = "0.05"'), "scenario.dt_s"),
+    ("wrong-type-bool", sub("d_safe_m = 2.0", "d_safe_m = true"), "planner.d_safe_m"),
+    ("wrong-type-point", sub("start_m = [41.3, 50.5]", 'start_m = [41.3, "50.5"]'), "agents[0].start_m[1]"),
+    ("wrong-type-id", sub('id = "hexagon"', "id = 2"), "obstacles[1].id"),
+    ("nan", sub("psi_mps = -65.0", "psi_mps = nan"), "planner.psi_mps"),
+    ("inf", sub("duration_s = 300.0", "duration_s = inf"), "scenario.duration_s"),
+    ("nan-vertex", sub(DIAMOND, DIAMOND.replace("[300.0, 45.0]", "[300.0, nan]")),
+     "obstacles[0].vertices_m[1][1]"),
+    ("-inf-start", sub("start_m = [19.2, 9.7]", "start_m = [19.2, -inf]"), "agents[1].start_m[1]"),
+    ("duplicate-agent-id", sub("id = 2\n", "id = 1\n"), "agents[1].id"),
+    ("duplicate-obstacle-id", sub('id = "hexagon"', 'id = "diamond"'), "obstacles[1].id"),
+    ("non-convex", sub(DIAMOND, "vertices_m = [[345.0, 0.0], [300.0, 45.0], [310.0, 0.0], [300.0, -45.0]]"),
+     "obstacles[0].vertices_m"),
+    ("collinear-vertex", sub(DIAMOND, "vertices_m = [[345.0, 0.0], [322.5, 22.5], [300.0, 45.0], [255.0, 0.0], "
+                                      "[300.0, -45.0]]"), "obstacles[0].vertices_m"),
+    ("degenerate-collinear", sub(DIAMOND, "vertices_m = [[250.0, 0.0], [300.0, 0.0], [350.0, 0.0]]"),
+     "obstacles[0].vertices_m"),
+    ("degenerate-repeated-vertex", sub(DIAMOND, "vertices_m = [[345.0, 0.0], [300.0, 45.0], [300.0, 45.0], "
+                                                "[255.0, 0.0], [300.0, -45.0]]"), "obstacles[0].vertices_m[2]"),
+    ("too-few-vertices", sub(DIAMOND, "vertices_m = [[345.0, 0.0], [300.0, 45.0]]"), "obstacles[0].vertices_m"),
+    ("agents-overlapping", sub("start_m = [19.2, 9.7]", "start_m = [43.0, 50.5]"), "agents[1].start_m"),
+    ("agent-inside-obstacle", sub("start_m = [41.3, 50.5]", "start_m = [300.0, 0.0]"), "agents[0].start_m"),
+    ("agent-touching-obstacle", sub("start_m = [41.3, 50.5]", "start_m = [346.0, 0.0]"), "agents[0].start_m"),
+    ("psi-positive", sub("psi_mps = -65.0", "psi_mps = 65.0"), "planner.psi_mps"),
+    ("psi-zero", sub("psi_mps = -65.0", "psi_mps = 0.0"), "planner.psi_mps"),
+    ("d_max-below-d_safe", sub("d_max_m = 10.0", "d_max_m = 1.5"), "planner.d_max_m"),
+    ("d_max-equals-d_safe", sub("d_max_m = 10.0", "d_max_m = 2.0"), "planner.d_max_m"),
+    ("bad-planner-kind", sub('kind = "reconfigurable"', 'kind = "apf"'), "planner.kind"),
+    ("negative-radius", sub("radius_m = 2.60", "radius_m = -2.60"), "agents[0].radius_m"),
+    ("zero-dt", sub("dt_s = 0.05", "dt_s = 0.0"), "scenario.dt_s"),
+    ("bad-name", sub('name = "paper"', 'name = "my paper"'), "scenario.name"),
+]
+
+
+@pytest.fixture(scope="module")
+def bad_files(tmp_path_factory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("bad")
+    out = {}
+    for name, text, _ in BAD:
+        f = d / f"{name}.toml"
+        f.write_text(text)
+        out[name] = f
+    return out
+
+
+@pytest.mark.parametrize(("name", "text", "field"), BAD, ids=[b[0] for b in BAD])
+def test_parse_refuses_with_file_and_field(name, text, field):
+    with pytest.raises(BadInput) as exc:
+        parse(text, f"/x/{name}.toml")
+    msg = str(exc.value)
+    assert "\n" not in msg
+    assert msg.startswith(f"/x/{name}.toml: {field}: "), msg
+    assert exc.value.exit_code == 2
+
+
+# One case of every kind the issue lists, each through a real process (the rest in process, below).
+CHECK_IN_SUBPROCESS = ["unknown-key", "missing-key", "wrong-type", "nan", "inf", "duplicate-agent-id",
+                       "duplicate-obstacle-id", "non-convex", "degenerate-collinear", "degenerate-repeated-vertex",
+                       "agents-overlapping", "agent-inside-obstacle", "psi-positive", "d_max-below-d_safe",
+                       "bad-planner-kind"]
+
+
+@pytest.mark.parametrize("name", CHECK_IN_SUBPROCESS)
+def test_scenario_check_cli_refuses(bad_files, name):
+    field = dict((b[0], b[2]) for b in BAD)[name]
+    f = bad_files[name]
+    r = cli("scenario", "check", str(f))
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1, r.stderr  # exactly one line ...
+    assert "Traceback" not in r.stderr  # ... and no traceback
+    assert str(f) in lines[0] and f": {field}: " in lines[0], lines[0]  # naming the file and the field
+    assert r.stdout == ""
+
+
+@pytest.mark.parametrize("command", ["check", "sim"])
+@pytest.mark.parametrize(("name", "field"), [(b[0], b[2]) for b in BAD], ids=[b[0] for b in BAD])
+def test_cli_refuses_every_bad_file(bad_files, tmp_path, name, field, command):
+    """The full table through the CLI in process (typer's runner: one import for every case)."""
+    from typer.testing import CliRunner
+
+    from reconswarm.cli import app
+
+    out = tmp_path / "run"
+    args = ["scenario", "check", str(bad_files[name])] if command == "check" else [
+        "sim", str(bad_files[name]), "-o", str(out), "--json"]
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 2, r.output
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1, r.stderr
+    assert str(bad_files[name]) in lines[0] and f": {field}: " in lines[0]
+    assert r.stdout == ""
+    assert not (out / "run.db").exists()  # refused before anything ran
+
+
+@pytest.mark.parametrize("name", ["unknown-key", "nan", "non-convex", "agents-overlapping", "bad-planner-kind"])
+def test_sim_cli_refuses_without_traceback(bad_files, tmp_path, name):
+    """As a user meets it: a separate process, exit 2, one line, no traceback."""
+    field = dict((b[0], b[2]) for b in BAD)[name]
+    out = tmp_path / "run"
+    r = cli("sim", str(bad_files[name]), "-o", str(out), "--json")
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert str(bad_files[name]) in lines[0] and f": {field}: " in lines[0]
+    assert r.stdout == ""
+    assert not (out / "run.db").exists()
+
+
+def test_check_accepts_the_paper_scenario_without_warnings():
+    r = cli("scenario", "check", str(PAPER))
+    assert r.returncode == 0 and r.stderr == ""
+    assert "10 agents, 3 obstacles" in r.stdout
+    s, warns = check(PAPER)
+    assert warns == []
+    assert [a.id for a in s.agents] == list(range(1, 11))
+    assert [o.id for o in s.obstacles] == ["diamond", "hexagon", "triangle"]
+
+
+def test_assumption_4_1_violation_is_a_warning_not_an_error(tmp_path):
+    # Offsets of agents 1 and 2 15.9 m apart, below d_max,12 = 2.60 + 4.58 + 10 = 17.18 m (all others clear).
+    f = tmp_path / "close-slots.toml"
+    f.write_text(sub("offset_m = [-12.0, 20.78]", "offset_m = [-12.0, 52.0]"))
+    r = cli("scenario", "check", str(f))
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr
+    warn = [ln for ln in r.stderr.splitlines() if "Assumption 4.1" in ln]
+    assert len(warn) == 1 and str(f) in warn[0] and "agents 1 and 2" in warn[0] and "17.18" in warn[0]
+    assert "ok" in r.stdout
+
+
+@pytest.mark.xfail(strict=True, reason="BUG: reconswarm/scenario.py _build accepts scenario.seed < 0 (scenario check "
+                   "exits 0), then reconswarm sim crashes with a 50-line numpy ValueError traceback and exit 1 "
+                   "(np.random.SeedSequence([seed, id, 0]) in agent/deadlock.py generator); expected exit 2 with "
+                   "one line naming scenario.seed")
+def test_sim_with_negative_seed_in_file(tmp_path):
+    f = tmp_path / "neg-seed.toml"
+    f.write_text(sub("duration_s = 300.0", "duration_s = 1.0", sub("seed = 0", "seed = -1")))
+    r = cli("sim", str(f), "-o", str(tmp_path / "run"), "--json")
+    assert "Traceback" not in r.stderr
+    assert r.returncode in (0, 1, 2)
+    if r.returncode == 2:
+        assert len(r.stderr.splitlines()) == 1 and "scenario.seed" in r.stderr
+
+
+def test_clockwise_obstacle_is_normalised_to_ccw():
+    s = parse(sub(DIAMOND, "vertices_m = [[300.0, -45.0], [255.0, 0.0], [300.0, 45.0], [345.0, 0.0]]"))
+    assert polygon_area(s.polygon(0)) > 0
+    assert s.polygon(0).tolist() == [[345.0, 0.0], [300.0, 45.0], [255.0, 0.0], [300.0, -45.0]]
+
+
+def test_load_errors_name_the_file(tmp_path):
+    with pytest.raises(BadInput, match=r"^/nonexistent/x\.toml: file not found$"):
+        load("/nonexistent/x.toml")
+    bad = tmp_path / "broken.toml"
+    bad.write_text("[scenario\nname = 1\n")
+    with pytest.raises(BadInput, match=rf"^{bad}: not valid TOML"):
+        load(bad)
+
+
+# ------------------------------------------------------------------------------------------ round trip
+
+
+def test_to_toml_round_trip_paper():
+    s = load(PAPER)
+    text = to_toml(s)
+    again = parse(text)
+    assert again == s
+    assert to_toml(again) == text
+    # Optional fields written out and every float exactly preserved (repr).
+    s2 = replace(s, meta=replace(s.meta, dt_s=0.1 + 0.2, seed=12345))
+    assert parse(to_toml(s2)) == s2
+
+
+# ------------------------------------------------------------------------------------------ generator
+
+
+def assumption_4_1_holds(s) -> bool:
+    off, r = s.offsets, s.radii
+    d = np.sqrt(((off[:, None, :] - off[None, :, :]) ** 2).sum(-1))
+    need = r[:, None] + r[None, :] + s.planner.d_max_m
+    np.fill_diagonal(d, np.inf)
+    return bool(np.all(d >= need))
+
+
+@pytest.mark.parametrize(("n", "m", "seed"), [(1, 0, 0), (1, 3, 5), (10, 3, 0), (10, 0, 1), (10, 6, 2), (200, 3, 1),
+                                              (200, 12, 7), (2000, 3, 3)])
+def test_generated_scenarios_are_valid(n, m, seed):
+    s = generate(n, m, seed)
+    assert len(s.agents) == n and len(s.obstacles) == m
+    text = to_toml(s)
+    again = parse(text, "<gen>")
+    assert again == s  # passes validation and round-trips
+    assert to_toml(again) == text
+    assert warnings(again) == []  # Assumptions 4.1 and 4.2 hold
+    assert assumption_4_1_holds(s)
+    slots = np.asarray(s.target_m) + s.offsets
+    # Every slot lies well inside the target disk.
+    assert np.all(np.hypot(*(slots - s.target_m).T) + s.radii <= s.planner.target_radius_m)
+    polys = [Polygon(s.polygon(k)) for k in range(m)]
+    for k, poly in enumerate(polys):
+        assert is_strictly_convex(s.polygon(k)) and polygon_area(s.polygon(k)) > 0
+        # Obstacles apart from each other by more than a robot and its safety band on both sides ...
+        for j in range(k):
+            assert poly.distance(polys[j]) > 2 * R_MAX_M + 2 * D_SAFE_M
+        # ... and out of reach of every slot (Assumption 4.2).
+        assert min(poly.distance(Point(*q)) - r for q, r in zip(slots, s.radii, strict=True)) >= D_MAX_M
+    # Deterministic in the seed; different seeds differ.
+    assert generate(n, m, seed) == s
+    if n > 1:
+        assert generate(n, m, seed + 1) != s
+
+
+def test_generate_cli_output_passes_check(tmp_path):
+    r = cli("scenario", "generate", "--agents", "25", "--obstacles", "4", "--seed", "9")
+    assert r.returncode == 0 and r.stderr == ""
+    f = tmp_path / "gen.toml"
+    f.write_text(r.stdout)
+    c = cli("scenario", "check", str(f))
+    assert c.returncode == 0 and c.stderr == "", c.stderr
+    assert parse(r.stdout) == generate(25, 4, 9)
+
+
+def test_generate_rejects_bad_sizes():
+    with pytest.raises(ValueError):
+        generate(0)
+    with pytest.raises(ValueError):
+        generate(3, -1)
+    assert math.isfinite(generate(3, 0, 0).meta.duration_s)
