@@ -180,11 +180,20 @@ def _same_components(lab: NDArray[np.int64], edges: NDArray[np.int64], keys: NDA
     removed = old_keys[~_member(old_keys, keys)]
     if removed.size > MAX_CERTIFIED:
         return False
-    for key in removed.tolist():
-        a, b = divmod(key, n)
-        na = np.concatenate([edges[edges[:, 0] == a, 1], edges[edges[:, 1] == a, 0]])
-        nb = np.concatenate([edges[edges[:, 0] == b, 1], edges[edges[:, 1] == b, 0]])
-        if not np.intersect1d(na, nb).size:
+    if removed.size:
+        a, b = np.divmod(removed, n)  # (R,) the ends of each removed edge
+        x, y = edges[:, 0], edges[:, 1]  # (E,)
+
+        def adjacent(v: NDArray[np.int64]) -> NDArray[np.bool_]:
+            """(R, N): whether agent c is a neighbour of v[r] in the new graph."""
+            adj = np.zeros((v.size, n), dtype=bool)
+            r, e = (x[None, :] == v[:, None]).nonzero()
+            adj[r, y[e]] = True
+            r, e = (y[None, :] == v[:, None]).nonzero()
+            adj[r, x[e]] = True
+            return adj
+
+        if not bool((adjacent(a) & adjacent(b)).any(axis=1).all()):
             return False
     return True
 
