@@ -17,7 +17,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -114,7 +114,7 @@ class Engine:
         if self.field.n_obstacles == 0:
             return ObstacleView.empty(n)
         reach = self.true_d <= self.ob_reach[:, None]  # (N, M)
-        cols = reach.any(axis=0).nonzero()[0]
+        cols = cast(NDArray[np.bool_], reach.any(axis=0)).nonzero()[0]
         if cols.size == 0:
             return ObstacleView.empty(n)
         rows_l: list[NDArray[np.int64]] = []

@@ -8,6 +8,7 @@ crosses of the paper's Fig. 1). No occlusion is modelled.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -119,10 +120,10 @@ class ContourField:
         if self.n_obstacles == 0:
             return empty, empty
         hit = true_d <= sensing_range_m  # (N, M)
-        seen = hit.any(axis=0).nonzero()[0]
+        seen = cast(NDArray[np.bool_], hit.any(axis=0)).nonzero()[0]
         if seen.size == 0:
             return empty, empty
-        near = hit[:, seen].any(axis=1).nonzero()[0]  # (n,) agents near any of them
+        near = cast(NDArray[np.bool_], hit[:, seen].any(axis=1)).nonzero()[0]  # (n,) agents near any of them
         idx, sx, sy = self._sample_index(seen)  # (S',) increasing, and the samples' coordinates
         if seen.size > 1 and near.size * idx.size > 4096:
             return self._scan_each(p, sensing_range_m, hit, seen)
