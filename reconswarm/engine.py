@@ -38,6 +38,9 @@ from simworld.sensing import ContourField
 Array = NDArray[np.float64]
 
 
+_NO_INDEX = np.zeros(0, dtype=np.int64)
+
+
 @dataclass(frozen=True)
 class SimConfig:
     scenario: Scenario
@@ -75,6 +78,7 @@ class Engine:
         self.exact_within_m = max(self.cfg.sensing_range_m, self.rmax + self.cfg.d_max_m)
         self.ob_reach = self.r + self.cfg.d_max_m  # (N,) obstacle repulsion reach of each agent
         self.center = np.broadcast_to(self.target, (self.n, 2))  # (N, 2)
+        self._no_obstacle = ObstacleView.empty(self.n)  # read-only, shared by every far tick
         self._edges_key: tuple[int, ...] = ()
         self._edges: tuple[list[Array], Edges] | None = None
 
@@ -82,13 +86,16 @@ class Engine:
         """Steps 1-3 for tick k: returns u (N, 2); leaves true distances in self.true_d."""
         c, p = self.cfg, self.p
         self.true_d = self.field.distances_for_engine(p, self.exact_within_m, self.r)
-        qa, qs = self.field.scan(p, c.sensing_range_m, self.true_d)
+        # Sensing and obstacle repulsion reach no farther than exact_within_m: far from every obstacle
+        # (the common case) both are empty.
+        near_any = self.true_d.size > 0 and float(self.true_d.min()) <= self.exact_within_m
+        qa, qs = self.field.scan(p, c.sensing_range_m, self.true_d) if near_any else (_NO_INDEX, _NO_INDEX)
         # (E, 2) superset of every pair any step needs, and their distances
         self.near, self.near_d = pairs_and_distances(p, self.reach_m)
         self.know.update(qa, qs, self.near[self.near_d <= c.link_range_m])
 
         nb = neighbour_table_d(p, self.r, self.near, self.near_d, c.d_max_m)
-        ob = self.obstacle_view()
+        ob = self.obstacle_view() if near_any else self._no_obstacle
 
         if self.leader is not None:
             hulls = [h for h in (self.know.union_hull_before(m) for m in range(self.field.n_obstacles))
@@ -116,7 +123,7 @@ class Engine:
         reach = self.true_d <= self.ob_reach[:, None]  # (N, M)
         cols = cast(NDArray[np.bool_], reach.any(axis=0)).nonzero()[0]
         if cols.size == 0:
-            return ObstacleView.empty(n)
+            return self._no_obstacle
         rows_l: list[NDArray[np.int64]] = []
         cols_l: list[NDArray[np.int64]] = []
         hulls: list[Array] = []
@@ -130,7 +137,7 @@ class Engine:
                 hulls += self.know.hulls(near, m)
                 col += 1
         if not hulls:
-            return ObstacleView.empty(n)
+            return self._no_obstacle
         key = tuple(map(id, hulls))
         if self._edges is None or key != self._edges_key:  # the hulls (held alive here) are unchanged
             self._edges_key, self._edges = key, (hulls, Edges.of(hulls))
