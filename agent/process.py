@@ -75,7 +75,7 @@ class AgentNode:
         k = self.keys
         z = session
         self.pub_beacon = z.declare_publisher(k.beacon(self.id), congestion_control=block)  # type: ignore[attr-defined]
-        self.pub_cmd = z.declare_publisher(k.cmd(self.id), congestion_control=block, express=True)  # type: ignore[attr-defined]
+        self.pub_cmd = z.declare_publisher(k.cmd(self.id), congestion_control=block)  # type: ignore[attr-defined]
         self.pub_obs = ext.declare_advanced_publisher(z, k.obstacles(self.id), cache=ext.CacheConfig(max_samples=1))
         cb = self.inbox.callback
         self.subs = [

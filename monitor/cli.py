@@ -148,9 +148,10 @@ def record_cmd(
 
     try:
         from monitor.process import MonitorConfig, run
-        from reconswarm.session import ZenohOptions, setup_logging
+        from reconswarm.session import ZenohOptions, bind_to_parent, setup_logging
 
         setup_logging()
+        bind_to_parent()
 
         code = run(MonitorConfig(scenario, db, ZenohOptions.build(connect, listen, mode, zenoh_config), run_id,
                                  live if live is not None else sys.stderr.isatty()))

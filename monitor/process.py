@@ -55,7 +55,7 @@ class MonitorNode:
         self.inbox = Inbox()
         self.p = s.starts.copy()
         self.theta = s.headings.copy()
-        self.pending: dict[int, dict[int, wire.State]] = {}
+        self.pending: dict[int, wire.Truth] = {}
         self.beacons: dict[int, dict[int, wire.Beacon]] = {}
         self.written = self.resume_from[0] if self.resume_from else -1
         self.t = self.resume_from[1] if self.resume_from else 0.0
@@ -70,8 +70,9 @@ class MonitorNode:
         k = self.keys
         self.pub_event = z.declare_publisher(k.event, congestion_control=zenoh.CongestionControl.BLOCK)
         cb = self.inbox.callback
-        self.subs = [z.declare_subscriber(k.all_agents("state"), cb), z.declare_subscriber(k.all_agents("beacon"), cb),
-                     z.declare_subscriber(k.clock, cb), z.liveliness().declare_subscriber(k.alive_all, cb, history=True)]
+        self.subs = [z.declare_subscriber(k.truth, cb), z.declare_subscriber(k.all_agents("beacon"), cb),
+                     z.declare_subscriber(k.clock, cb),
+                     z.liveliness().declare_subscriber(k.alive_all, cb, history=True)]
         self.token = z.liveliness().declare_token(k.alive_monitor)
 
     def emit(self, ev: dict[str, Any]) -> None:
@@ -87,7 +88,8 @@ class MonitorNode:
         self.alive[i] = up
         after = [int(a) for a in np.array(self.ids)[self.alive]]
         if up and not was and self.seen[i]:
-            self.emit({"t": round(self.t, 9), "kind": "agent_joined", "agent": aid, "before": [before], "after": [after]})
+            self.emit({"t": round(self.t, 9), "kind": "agent_joined", "agent": aid, "before": [before],
+                       "after": [after]})
             log.info("agent %d joined at t=%.2f", aid, self.t)
         elif not up and was:
             self.emit({"t": round(self.t, 9), "kind": "agent_lost", "agent": aid, "before": [before], "after": [after]})
@@ -114,15 +116,18 @@ class MonitorNode:
                 if c.end:
                     self.end, self.end_at = c, time.monotonic()
                 return
+            if what == "truth":
+                tr = wire.truth_from_wire(payload)
+                if any(a not in self.index for a in tr.ids):
+                    raise wire.WireError("truth names an agent that is not in the scenario")
+                if tr.k > self.written:
+                    self.pending[tr.k] = tr
+                return
             if what != "agent" or aid is None:
                 return
             if aid not in self.index:
                 raise wire.WireError(f"agent {aid} is not in the scenario")
-            if leaf == "state":
-                st = wire.state_from_wire(payload, aid)
-                if st.k > self.written:
-                    self.pending.setdefault(st.k, {})[aid] = st
-            elif leaf == "beacon":
+            if leaf == "beacon":
                 b = wire.beacon_from_wire(payload, aid)
                 self.counts[f"agent {aid}"] = b.rejected
                 if b.k > self.written:
@@ -131,18 +136,14 @@ class MonitorNode:
             self.rej.reject(key, str(exc))
 
     def flush(self, force: bool = False) -> None:
-        """Write every complete tick in order (or, forced, whatever has arrived)."""
+        """Write the ticks received, in order."""
         while self.pending:
             k = min(self.pending)
-            got = self.pending[k]
-            newer = any(kk > k for kk in self.pending)
-            if len(got) < len(self.ids) and not (force or newer):
-                return
-            del self.pending[k]
-            for aid, st in got.items():
+            tr = self.pending.pop(k)
+            for aid, px, py, th in zip(tr.ids, tr.px, tr.py, tr.theta, strict=True):
                 i = self.index[aid]
-                self.p[i] = (st.px, st.py)
-                self.theta[i] = st.theta
+                self.p[i] = (px, py)
+                self.theta[i] = th
             t = k * self.s.meta.dt_s
             if self.resume_from is not None and self.written == self.resume_from[0]:
                 self.writer.note_gap(self.resume_from[1], t, "monitor restarted: ticks in between not recorded")
@@ -164,8 +165,7 @@ class MonitorNode:
         self.writer.counters(self.counts)
         extra: dict[str, Any] = {}
         if self.end is not None:
-            extra = {f"world_{k}" if not k.startswith(("latency", "missed", "deadlines")) else k: v
-                     for k, v in self.end.stats.items()}
+            extra = dict(self.end.stats)
             extra["end_reason"] = self.end.reason
         wall = time.monotonic() - self.wall0 if self.wall0 is not None else 0.0
         meta: dict[str, Any] = {"extra": extra, "finished": "1" if self.end is not None else "0"}

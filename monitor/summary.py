@@ -94,6 +94,8 @@ def render(summary: dict[str, Any]) -> Any:
     table.add_column("field")
     table.add_column("value", overflow="fold")
     for key, val in summary.items():
+        if key == "messages_rejected_by_process":
+            val = {k: v for k, v in val.items() if v}
         if key in ("path_length_m", "messages_rejected_by_process", "record_gaps"):
             if isinstance(val, dict) and val:
                 nums = [v for v in val.values() if isinstance(v, int | float)]

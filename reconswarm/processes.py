@@ -15,7 +15,7 @@ from typing import Annotated
 import typer
 
 from reconswarm.errors import ReconswarmError
-from reconswarm.session import ZenohOptions, open_session, setup_logging, usage
+from reconswarm.session import ZenohOptions, bind_to_parent, open_session, setup_logging, usage
 
 log = logging.getLogger("reconswarm.router")
 
@@ -30,6 +30,7 @@ def _guard(fn, *args):  # type: ignore[no-untyped-def]
     from reconswarm.cli import fail
 
     setup_logging()
+    bind_to_parent()
     prof_dir = os.environ.get("RECONSWARM_PROFILE")  # a directory: dump cProfile stats per process
     prof = None
     if prof_dir:

@@ -155,6 +155,24 @@ class Rejections:
             self._suppressed += 1
 
 
+def bind_to_parent() -> None:
+    """If started by run_local.sh, die with it (Linux PR_SET_PDEATHSIG): no orphan outlives a run."""
+    import os
+
+    parent = os.environ.get("RECONSWARM_DIE_WITH_PARENT")
+    if not parent:
+        return
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGTERM, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):
+        return
+    if str(os.getppid()) != parent:  # the parent died before the prctl took effect
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
 def usage() -> dict[str, float]:
     """CPU seconds and peak resident memory of this process (for logs and benchmarks)."""
     import resource

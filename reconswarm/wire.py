@@ -34,6 +34,7 @@ class Keys:
     """All key expressions of one run (`swarm/<run>/...`)."""
 
     run: str
+    _parsed: dict[str, tuple[str, int | None, str]] = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def prefix(self) -> str:
@@ -83,9 +84,23 @@ class Keys:
     def alive_monitor(self) -> str:
         return f"{self.prefix}/alive/monitor"
 
+    @property
+    def truth(self) -> str:
+        return f"{self.prefix}/truth"
+
     def parse(self, key: str) -> tuple[str, int | None, str]:
         """Classify a key: ("agent", id, leaf) | ("clock", None, "") | ("event", None, "") |
-        ("alive", id or None, "agent" | "simworld" | "monitor"). Raises WireError for anything else."""
+        ("truth", None, "") | ("alive", id or None, "agent" | "simworld" | "monitor").
+        Raises WireError for anything else."""
+        hit = self._parsed.get(key)
+        if hit is not None:
+            return hit
+        out = self._parse(key)
+        if len(self._parsed) < 100_000:
+            self._parsed[key] = out
+        return out
+
+    def _parse(self, key: str) -> tuple[str, int | None, str]:
         pre = self.prefix + "/"
         if not key.startswith(pre):
             raise WireError(f"key {key!r} outside {self.prefix}")
@@ -94,6 +109,8 @@ class Keys:
             return "clock", None, ""
         if parts == ["event"]:
             return "event", None, ""
+        if parts == ["truth"]:
+            return "truth", None, ""
         if len(parts) == 3 and parts[0] == "agent":
             return "agent", _key_id(parts[1], key), parts[2]
         if len(parts) == 3 and parts[:2] == ["alive", "agent"]:
@@ -175,6 +192,20 @@ class Clock:
 
 
 @dataclass(frozen=True)
+class Truth:
+    """Every robot's state at tick k in one message (simworld -> monitor)."""
+
+    k: int
+    t: float
+    ids: tuple[int, ...]
+    x: tuple[float, ...]
+    y: tuple[float, ...]
+    theta: tuple[float, ...]
+    px: tuple[float, ...]
+    py: tuple[float, ...]
+
+
+@dataclass(frozen=True)
 class Event:
     t: float
     kind: str
@@ -216,6 +247,11 @@ def obstacles_to_wire(m: ObstacleSet) -> bytes:
 def clock_to_wire(m: Clock) -> bytes:
     return _pack({"k": m.k, "t": m.t, "alive": list(m.alive), "mode": m.mode, "speed": m.speed, "end": m.end,
                   "reason": m.reason, "rejected": m.rejected, "stats": m.stats})
+
+
+def truth_to_wire(m: Truth) -> bytes:
+    return _pack({"k": m.k, "t": m.t, "ids": list(m.ids), "x": list(m.x), "y": list(m.y), "theta": list(m.theta),
+                  "px": list(m.px), "py": list(m.py)})
 
 
 def event_to_wire(m: Event) -> bytes:
@@ -297,7 +333,7 @@ def scan_from_wire(payload: bytes, key_id: int | None = None) -> Scan:
     o = _unpack(payload)
     pts = o.get("points")
     if not isinstance(pts, list) or len(pts) > MAX_POINTS:
-        raise WireError("field 'points': expected a list of at most %d points" % MAX_POINTS)
+        raise WireError(f"field 'points': expected a list of at most {MAX_POINTS} points")
     out = []
     for p in pts:
         if not isinstance(p, list) or len(p) != 3:
@@ -362,6 +398,21 @@ def clock_from_wire(payload: bytes) -> Clock:
     if speed < 0:
         raise WireError("field 'speed': must be >= 0")
     return Clock(_int(o, "k"), _float(o, "t"), ids, mode, speed, end, reason, _int(o, "rejected", 0, 2**53, 0), stats)
+
+
+def truth_from_wire(payload: bytes) -> Truth:
+    o = _unpack(payload)
+    ids = o.get("ids")
+    if not isinstance(ids, list) or len(ids) > MAX_IDS:
+        raise WireError("field 'ids': expected a list of agent ids")
+    n = len(ids)
+    cols = []
+    for key in ("x", "y", "theta", "px", "py"):
+        col = o.get(key)
+        if not isinstance(col, list) or len(col) != n:
+            raise WireError(f"field {key!r}: expected {n} numbers")
+        cols.append(tuple(_num(v, f"field {key!r}") for v in col))
+    return Truth(_int(o, "k"), _float(o, "t"), tuple(_int({"id": a}, "id", 0, 2**31) for a in ids), *cols)
 
 
 def event_from_wire(payload: bytes) -> Event:

@@ -75,7 +75,8 @@ class World:
         z = session
         k = self.keys
         self.pub_clock = z.declare_publisher(k.clock, congestion_control=block)  # type: ignore[attr-defined]
-        self.pub_state = {a: z.declare_publisher(k.state(a), congestion_control=block, express=True)  # type: ignore[attr-defined]
+        self.pub_truth = z.declare_publisher(k.truth, congestion_control=block)  # type: ignore[attr-defined]
+        self.pub_state = {a: z.declare_publisher(k.state(a), congestion_control=block)  # type: ignore[attr-defined]
                           for a in self.ids}
         self.pub_scan = {a: z.declare_publisher(k.scan(a), congestion_control=block)  # type: ignore[attr-defined]
                          for a in self.ids}
@@ -139,6 +140,9 @@ class World:
         counts = np.bincount(qa, minlength=len(self.ids))
         s_centre = unicycle.body_centre(self.p, self.theta, self.l)
         self.pub_time[k] = time.monotonic()
+        self.pub_truth.put(wire.truth_to_wire(wire.Truth(
+            k, t, tuple(self.ids), tuple(s_centre[:, 0].tolist()), tuple(s_centre[:, 1].tolist()),
+            tuple(self.theta.tolist()), tuple(self.p[:, 0].tolist()), tuple(self.p[:, 1].tolist()))))
         for i, a in enumerate(self.ids):
             self.pub_state[a].put(wire.state_to_wire(wire.State(
                 a, k, t, float(s_centre[i, 0]), float(s_centre[i, 1]), float(self.theta[i]), float(self.p[i, 0]),

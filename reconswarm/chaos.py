@@ -1,0 +1,71 @@
+"""Fault injection for run_local.sh: real signals to real processes, real garbage on real zenoh keys.
+
+Nothing here reaches inside a process: an agent is killed with SIGKILL, frozen with SIGSTOP/SIGCONT,
+restarted as a new process; the router likewise; a flood is a separate process publishing malformed
+payloads on every key of the run.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from reconswarm.faults import Fault
+
+if TYPE_CHECKING:
+    from reconswarm.launcher import Fleet, LaunchConfig
+
+log = logging.getLogger("reconswarm.launch")
+Timer = tuple[float, Callable[[], Any]]
+
+
+def inject(f: Fault, fleet: Fleet, watch: Any, cfg: LaunchConfig) -> list[Timer]:
+    """Start fault f now; return the timers that finish it later (wall time, action)."""
+    now = time.monotonic()
+    if f.action == "flood":
+        args = ["flood", "--run", watch.keys.run, "--count", str(f.count)]
+        fleet.start("flood", "-", [*args, *_zargs(cfg, fleet)])
+        return []
+    if f.action == "partition":
+        from reconswarm import netns
+
+        netns.cut()
+        return [(now + f.duration_s, netns.heal)]
+    ident = str(f.agent_id) if f.agent_id is not None else "-"
+    proc = fleet.find(f.target, ident)
+    if proc is None or proc.popen.poll() is not None:
+        log.warning("fault: %s %s is not running", f.target, ident)
+        return []
+    if f.action == "kill":
+        proc.expected_exit = True
+        fleet.signal(proc, signal.SIGKILL)
+        return []
+    if f.action == "freeze":
+        fleet.signal(proc, signal.SIGSTOP)
+
+        def thaw() -> None:
+            log.warning("fault: SIGCONT %s %s", f.target, ident)
+            fleet.signal(proc, signal.SIGCONT)
+
+        return [(now + f.duration_s, thaw)]
+    if f.action == "restart":
+        proc.expected_exit = True
+        fleet.signal(proc, signal.SIGKILL)
+
+        def again() -> None:
+            proc.popen.wait()
+            log.warning("fault: starting %s %s again", f.target, ident)
+            fleet.restart(proc)
+
+        return [(now + f.duration_s, again)]
+    raise ValueError(f"unknown fault {f}")
+
+
+def _zargs(cfg: LaunchConfig, fleet: Fleet) -> list[str]:
+    router = fleet.find("router")
+    if router is not None and "--zenoh-config" in router.args:
+        return ["--zenoh-config", str(cfg.out / "secrets" / "intruder.json5")]
+    return ["--connect", cfg.router or "tcp/127.0.0.1:7447"]
