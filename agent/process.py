@@ -208,6 +208,10 @@ class AgentNode:
         else:  # realtime: whatever is latest
             linked = {a: max(self.sets.get(a, {0: None})) for a in self.brain.linked(p, peers)}
             every = {a: max(revs) for a, revs in self.sets.items() if revs}
+        if self.k < 0 and k > 0:  # joining a mission under way: catch up on everything peers have cached
+            linked = {a: max(revs) for a, revs in self.sets.items() if revs}
+            log.info("agent %d: joining at tick %d; cached obstacle sets from agents %s: %s", self.id, k,
+                     sorted(linked), sorted({o for revs in self.sets.values() for v in revs.values() for o in v}))
         shared = self._unmerged(linked, self.merged)
         swarm = self._unmerged(every, self.merged_union) if self.brain.leader is not None else None
         scan = self._scan_sets(self.k + 1 if self.k >= 0 else k, k)
@@ -280,6 +284,8 @@ def run(cfg: AgentConfig) -> int:
         node = AgentNode(cfg, s, session)
         log.info("agent %d up (run %s)", cfg.agent_id, node.keys.run)
         code = node.run(stop)
+        if node.ended and not stop.stopped:
+            time.sleep(0.5)  # let the monitor see the end of the mission before our token goes
         node.close()
         log.info("agent %d done: last tick %d, %d messages rejected", cfg.agent_id, node.k, node.rej.count)
         return code

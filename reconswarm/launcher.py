@@ -214,11 +214,13 @@ def run(cfg: LaunchConfig) -> int:
     watch: ClockWatch | None = None
     code = 3
     try:
-        if cfg.router is None:
-            if not _port_free(endpoint):
-                raise ProcessFailure(f"router: {endpoint} is in use (another run?); stop it or pass --router EP")
+        if _port_free(endpoint):
             fleet.start("router", "-", ["router", *(["--zenoh-config", str(secrets.router_config)] if secrets
                                                      else ["--listen", endpoint])])
+        elif cfg.router is None:
+            raise ProcessFailure(f"router: {endpoint} is in use (another run?); stop it or pass --router EP")
+        else:
+            log.info("using the router already listening on %s", endpoint)
         mon = fleet.start("monitor", "-", ["monitor", "record", "--scenario", str(scen_path), "--db",
                                            str(cfg.out / "run.db"), "--no-live", *zopt("monitor")])
         for a in s.agents:
@@ -358,7 +360,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--clock", default="lockstep", choices=["lockstep", "realtime"])
     ap.add_argument("--speed", type=float, default=10.0, help="realtime: simulated seconds per wall second")
     ap.add_argument("--planner", choices=["reconfigurable", "virtual-leader"])
-    ap.add_argument("--router", help="use this zenoh router instead of starting one on tcp/127.0.0.1:7447")
+    ap.add_argument("--router", metavar="EP",
+                    help="router endpoint (default tcp/127.0.0.1:7447): one is started there unless one already listens")
     ap.add_argument("--secure", action="store_true", help="mutual TLS, per-process credentials and access control")
     ap.add_argument("--fault", action="append", default=[], metavar="SPEC",
                     help="inject a fault (repeatable), e.g. kill:agent:3@60; see the README")

@@ -215,10 +215,12 @@ class World:
             if reason:
                 return reason
             if self.cfg.clock == "lockstep":
+                # Wait for the agents the clock announced (one that joins now starts at the next tick).
+                expected = set(self.alive)
                 deadline = time.monotonic() + self.cfg.step_timeout_s
                 while not stop.stopped and time.monotonic() < deadline:
                     got = self.cmds.get(k, {})
-                    if all(self.index[a] in got for a in self.alive):
+                    if all(self.index[a] in got for a in expected & self.alive):
                         break
                     self.pump(min(0.05, max(0.0, deadline - time.monotonic())))
             else:

@@ -1,0 +1,6 @@
+#!/usr/bin/env bash
+# The test suite: sets itself up like run_local.sh, then runs pytest (arguments are passed on).
+set -euo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/setup_env.sh"
+cd "$root"
+exec "$venv/bin/python" -m pytest -q "$@"

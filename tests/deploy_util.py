@@ -1,0 +1,105 @@
+"""Helpers for tests that run the distributed deployment with real processes on 127.0.0.1."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def launcher_cmd(out: Path, *args: str, port: int | None = None) -> list[str]:
+    port = port or free_port()
+    return [sys.executable, "-m", "reconswarm.launcher", "--router", f"tcp/127.0.0.1:{port}", "-o", str(out),
+            "--no-progress", *args]
+
+
+def run_launcher(out: Path, *args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(launcher_cmd(out, *args), capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+
+
+def reconswarm(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "reconswarm.cli", *args], capture_output=True, text=True,
+                          timeout=timeout, cwd=ROOT)
+
+
+def summary(db: Path) -> dict:
+    p = reconswarm("monitor", "summary", str(db), "--json")
+    assert p.returncode == 0, p.stderr
+    return json.loads(p.stdout)
+
+
+def events(db: Path) -> list[dict]:
+    p = reconswarm("monitor", "events", str(db), "--json")
+    assert p.returncode == 0, p.stderr
+    return json.loads(p.stdout)
+
+
+def trajectories(db: Path) -> dict[tuple[float, int], tuple[float, float, float]]:
+    p = reconswarm("monitor", "export", str(db), "--format", "csv")
+    assert p.returncode == 0, p.stderr
+    rows = csv.DictReader(io.StringIO(p.stdout))
+    return {(round(float(r["t_s"]), 6), int(r["agent"])): (float(r["px_m"]), float(r["py_m"]), float(r["theta_rad"]))
+            for r in rows}
+
+
+def max_difference(a: dict, b: dict) -> float:
+    assert a.keys() == b.keys(), f"different ticks/agents: {len(a)} vs {len(b)} rows"
+    return float(max(np.abs(np.array(a[k]) - np.array(b[k])).max() for k in a))
+
+
+def pids(out: Path) -> list[int]:
+    tsv = out / "processes.tsv"
+    if not tsv.exists():
+        return []
+    return [int(line.split("\t")[2]) for line in tsv.read_text().splitlines() if line.count("\t") == 2]
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    try:  # a zombie is dead for our purposes
+        state = Path(f"/proc/{pid}/stat").read_text().split()[2]
+        return state != "Z"
+    except OSError:
+        return False
+
+
+def assert_all_gone(out: Path, grace_s: float = 5.0) -> None:
+    """Every process the run started has exited; kill (and fail on) any leftover, by PID."""
+    deadline = time.monotonic() + grace_s
+    left = [p for p in pids(out) if alive(p)]
+    while left and time.monotonic() < deadline:
+        time.sleep(0.1)
+        left = [p for p in left if alive(p)]
+    for p in left:
+        os.kill(p, signal.SIGKILL)
+    assert not left, f"processes outlived the run: {left}"
+
+
+def scenario_with(tmp: Path, name: str, text: str, **replace: str) -> Path:
+    for old, new in replace.items():
+        assert old in text
+        text = text.replace(old, new, 1)
+    path = tmp / name
+    path.write_text(text)
+    return path
