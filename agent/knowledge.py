@@ -179,17 +179,17 @@ class SwarmKnowledge:
         if share_dirty:
             dst = np.concatenate([links[:, 0], links[:, 1]])  # (2E,)
             src = np.concatenate([links[:, 1], links[:, 0]])
-            vals_dirty = self.bits[:, dirty][src]  # (2E, C)
+            prev_dirty = self._pack(dirty)  # (N, W)
         share_new = new is not None and bool(new.any())
         if share_new:
             known = self.union_prev.nonzero()[0]  # columns anyone knew: the only ones sharing can bring
             fresh_links = links[new]  # (E', 2)
             dst_new = np.concatenate([fresh_links[:, 0], fresh_links[:, 1]])  # (2E',)
             src_new = np.concatenate([fresh_links[:, 1], fresh_links[:, 0]])
-            vals_new = self.bits[src_new][:, known]  # (2E', K)
+            vals_new = self._pack(known, src_new)  # (2E', W')
         changed = [self._sense(agents, samples)]
         if share_dirty:
-            changed.append(self._or_in(dirty, dst, vals_dirty))
+            changed.append(self._or_in(dirty, dst, prev_dirty[src]))
         if share_new:
             changed.append(self._or_in(known, dst_new, vals_new))
         changed = [c for c in changed if c.size]
@@ -213,30 +213,35 @@ class SwarmKnowledge:
         np.bitwise_or.at(self.union, byte, mask)
         return np.unique(byte)
 
-    def _or_in(self, cols: NDArray[np.int64], dst: NDArray[np.int64], vals: NDArray[np.uint8]) -> NDArray[np.int64]:
-        """bits[dst, cols] |= vals row by row (dst may repeat); returns the columns that changed.
+    def _pack(self, cols: NDArray[np.int64], rows: NDArray[np.int64] | None = None) -> NDArray[np.uint64]:
+        """bits[rows, cols] eight bytes to a uint64 word (zero padded): (R, C) bytes -> (R, W) words."""
+        c = cols.shape[0]
+        sub = self.bits[:, cols] if rows is None else self.bits[rows][:, cols]  # (R, C)
+        out = np.zeros((sub.shape[0], 8 * ((c + 7) // 8)), dtype=np.uint8)
+        out[:, :c] = sub
+        return out.view(np.uint64)
 
-        cols (C,), dst (Q,), vals (Q, C). The bytes are ORed eight at a time as uint64 words.
+    def _or_in(self, cols: NDArray[np.int64], dst: NDArray[np.int64], vals: NDArray[np.uint64]) -> NDArray[np.int64]:
+        """bits[dst, cols] |= vals row by row (dst may repeat); returns the columns that changed (sorted).
+
+        cols (C,), dst (Q,), vals (Q, W) the bytes packed by _pack.
         """
         c = cols.shape[0]
-        w = (c + 7) // 8
-        packed = np.zeros((vals.shape[0], 8 * w), dtype=np.uint8)  # (Q, 8W)
-        packed[:, :c] = vals
+        w = vals.shape[1]
         acc = np.zeros((self.bits.shape[0], w), dtype=np.uint64)  # (N, W)
         if w == 1:
-            np.bitwise_or.at(acc.reshape(-1), dst, packed.view(np.uint64).reshape(-1))
+            np.bitwise_or.at(acc.reshape(-1), dst, vals.reshape(-1))
         else:
-            np.bitwise_or.at(acc, dst, packed.view(np.uint64))
-        add = acc.view(np.uint8)[:, :c]  # (N, C)
-        before = self.bits[:, cols]
-        gain = add & ~before  # (N, C)
-        gained = gain.any(axis=0)
-        if not gained.any():
+            np.bitwise_or.at(acc, dst, vals)
+        cur = self._pack(cols)  # (N, W)
+        gain = acc & ~cur
+        rows = np.nonzero(gain.any(axis=1))[0]  # (R,) agents that learn something
+        if rows.size == 0:
             return _NONE
-        self.bits[:, cols] = before | add
-        rows, at = np.nonzero(gain)
-        self._touched(rows, cols[at])
-        return cols[gained]
+        self.bits[np.ix_(rows, cols)] = (cur[rows] | acc[rows]).view(np.uint8)[:, :c]
+        r, at = gain[rows].view(np.uint8)[:, :c].nonzero()
+        self._touched(rows[r], cols[at])
+        return np.unique(cols[at])
 
     def _touched(self, rows: NDArray[np.int64], cols: NDArray[np.int64]) -> None:
         """Bytes (rows[q], cols[q]) gained bits: those agents know those obstacles, their hulls are stale."""

@@ -182,7 +182,11 @@ def _same_components(lab: NDArray[np.int64], edges: NDArray[np.int64], keys: NDA
         return False
     if removed.size:
         a, b = np.divmod(removed, n)  # (R,) the ends of each removed edge
-        x, y = edges[:, 0], edges[:, 1]  # (E,)
+        ends = np.zeros(n, dtype=bool)
+        ends[a] = True
+        ends[b] = True
+        touching = edges[ends[edges[:, 0]] | ends[edges[:, 1]]]  # the only edges that can matter
+        x, y = touching[:, 0], touching[:, 1]  # (E',)
 
         def adjacent(v: NDArray[np.int64]) -> NDArray[np.bool_]:
             """(R, N): whether agent c is a neighbour of v[r] in the new graph."""
