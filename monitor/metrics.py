@@ -62,6 +62,9 @@ class SafetyMonitor:
     open: dict[tuple[str, str, str], float] = field(default_factory=dict)  # key -> t_start
     min_agent_gap_m: float = float("inf")
     min_obstacle_gap_m: float = float("inf")
+    _pairs_raw: bytes = b"\x00"  # the candidate pairs whose radii are _ri, _rj
+    _ri: Array = field(default_factory=lambda: np.zeros(0))
+    _rj: Array = field(default_factory=lambda: np.zeros(0))
 
     def step(self, t: float, p: Array, ob_d: Array, cand: NDArray[np.int64] | None = None,
              cand_d: Array | None = None) -> tuple[float, float, list[Episode], list[tuple[str, str, str]]]:
@@ -72,7 +75,13 @@ class SafetyMonitor:
         (kind, a, b) of those that ended.
         """
         reach = max(self.reach_m, self.d_safe_m)
-        pairs, gaps = agent_gaps(p, self.radii, reach, cand, cand_d)
+        if cand is not None and cand_d is not None:  # agent_gaps, with the pairs' radii kept while they last
+            raw = cand.tobytes()
+            if raw != self._pairs_raw:
+                self._pairs_raw, self._ri, self._rj = raw, self.radii[cand[:, 0]], self.radii[cand[:, 1]]
+            pairs, gaps = cand, cand_d - self._ri - self._rj
+        else:
+            pairs, gaps = agent_gaps(p, self.radii, reach, cand, cand_d)
         # Pairs outside the candidates have a gap of at least `reach`: the minimum is exact below it.
         tick_agent = float(gaps.min()) if gaps.size else float("inf")
         if tick_agent > reach and p.shape[0] > 1:

@@ -236,9 +236,12 @@ class TopologyTracker:
         old_keys = self._keys
         edges = graph_edges(p, active, prev_edges, self.link_m, self.hysteresis_m, cand, cand_d, old_keys)
         self.edges = edges
-        self._keys = keys = _sorted_keys(edges, n)
         same_active = self._labels is not None and active.tobytes() == self._active_bytes
-        if same_active and keys.shape == old_keys.shape and bool((keys == old_keys).all()):
+        if edges.shape == prev_edges.shape and edges.tobytes() == prev_edges.tobytes():
+            keys = old_keys  # the same edges (the common case)
+        else:
+            self._keys = keys = _sorted_keys(edges, n)
+        if same_active and keys is old_keys:
             pass  # the same graph: the same groups
         elif same_active and self._labels is not None and _same_components(self._labels, edges, keys, old_keys, n):
             pass
