@@ -9,6 +9,11 @@ Tick k, in this order (the agent process follows the same order for its own row)
      (virtual leader: the leader's step on the union of K(k-1) first);
   4. record tick k (truth, safety episodes, topology events); stop if every |e_i| <= tol;
   5. integrate the unicycles over dt under u(k).
+
+Speed (the results are those of the plain computation, bit for bit): work is skipped only where it
+provably contributes nothing (no sensing or obstacle table far from every obstacle, sharing only over the
+knowledge that changed, exact obstacle distances only where they can matter), and the pure functions get
+the inputs they would compute themselves (pair distances, tracking errors) instead of recomputing them.
 """
 
 from __future__ import annotations
@@ -139,8 +144,8 @@ class Engine:
         if not hulls:
             return self._no_obstacle
         key = tuple(map(id, hulls))
-        if self._edges is None or key != self._edges_key:  # the hulls (held alive here) are unchanged
-            self._edges_key, self._edges = key, (hulls, Edges.of(hulls))
+        if self._edges is None or key != self._edges_key:  # else: the very same hulls as last time
+            self._edges_key, self._edges = key, (hulls, Edges.of(hulls))  # held, so their ids stay theirs
         rows = rows_l[0] if len(rows_l) == 1 else np.concatenate(rows_l)
         cols_q = cols_l[0] if len(cols_l) == 1 else np.concatenate(cols_l)
         return view_of_edges(self.p, n, col, rows, cols_q, self._edges[1])
