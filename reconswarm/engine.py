@@ -172,7 +172,7 @@ def run(cfg: SimConfig) -> dict[str, Any]:
         t = k * s.meta.dt_s
         u = eng.plan(k)
         rec.tick(k, t, eng.p, eng.theta, alive, eng.true_d, eng.near, cand_d=eng.near_d, err=eng.slot_error)
-        if progress is not None and k % 20 == 0:
+        if progress is not None and k % 50 == 0:
             progress(k, rec.max_error_m)
         if rec.converged() or k == n_ticks:
             break
@@ -198,7 +198,8 @@ def _progress(enabled: bool, total: int) -> Any:
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     bar = Progress(TextColumn("sim"), BarColumn(), TextColumn("{task.completed}/{task.total} ticks"),
-                   TextColumn("max |e| {task.fields[err]:.1f} m"), TimeElapsedColumn(), transient=True)
+                   TextColumn("max |e| {task.fields[err]:.1f} m"), TimeElapsedColumn(), transient=True,
+                   refresh_per_second=4)  # its refresh thread competes with the mission loop for the GIL
     task = bar.add_task("sim", total=total, err=float("inf"))
     bar.start()
 
