@@ -1,0 +1,316 @@
+"""Secure mode (`run_local.sh --secure`): mutual TLS, per-process credentials, access control.
+
+The mission completes in secure mode; while a secure run goes on, anonymous sessions get nothing, a valid
+certificate the ACL does not name gets nothing, and a session holding agent 3's credentials cannot deliver
+anything on agent 5's keys (beacon, cmd, obstacle set, liveliness token) nor read agent 5's state, while
+agent 3's own keys do work with the same credentials.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import sqlite3
+import stat
+import subprocess
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+import zenoh
+from zenoh import ext
+
+from reconswarm import secure, wire
+from reconswarm.scenario import load
+from tests.deploy_util import PAPER, ROOT, assert_all_gone, free_port, launcher_cmd, reconswarm, run_launcher
+
+RUN = "swarm/paper"
+SETTLE_S = 1.5  # declarations reaching the router and the other sessions
+
+
+# --- helpers ---------------------------------------------------------------------------------------------
+
+@dataclass
+class Catch:
+    """Samples received by a callback: (key, payload bytes, kind)."""
+
+    items: list[tuple[str, bytes, str]] = field(default_factory=list)
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def __call__(self, sample: Any) -> None:
+        with self.lock:
+            self.items.append((str(sample.key_expr), sample.payload.to_bytes(), str(sample.kind)))
+
+    def key_set(self) -> set[str]:
+        with self.lock:
+            return {k for k, _, _ in self.items}
+
+    def payloads(self, key: str) -> list[bytes]:
+        with self.lock:
+            return [p for k, p, _ in self.items if k == key]
+
+    def __len__(self) -> int:
+        with self.lock:
+            return len(self.items)
+
+
+def _open(path: Path) -> Any:
+    return zenoh.open(zenoh.Config.from_file(str(path)))
+
+
+def _anonymous_config(endpoint: str, **tls: Any) -> Any:
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("connect/timeout_ms", '{"router": -1, "peer": -1, "client": 3000}')
+    for k, v in tls.items():
+        conf.insert_json5(f"transport/link/tls/{k}", json.dumps(v))
+    return conf
+
+
+def _ticks(db: Path) -> int:
+    try:
+        with sqlite3.connect(f"file:{db}?mode=ro", uri=True) as c:
+            return int(c.execute("SELECT COUNT(*) FROM ticks").fetchone()[0])
+    except sqlite3.Error:
+        return 0
+
+
+def _mode(p: Path) -> int:
+    return stat.S_IMODE(p.stat().st_mode)
+
+
+# --- without a mission: what create() writes -------------------------------------------------------------
+
+def test_create_writes_private_credentials_and_configs(tmp_path: Path) -> None:
+    s = load(PAPER)
+    d = tmp_path / "secrets"
+    d.mkdir(mode=0o755)
+    (d / "agent-99.json5").write_text("{}")  # a stale file from an earlier run with more agents
+    sec = secure.create(d, s, "tcp/127.0.0.1:7447")
+    assert sec.endpoint == "tls/127.0.0.1:7447"
+    assert _mode(d) == 0o700
+    files = sorted(d.iterdir())
+    assert files and all(_mode(f) == 0o600 for f in files)
+    assert not (d / "agent-99.json5").exists()
+    assert not any("ca-key" in f.name for f in files)  # the CA's key never touches the disk
+    ids = [a.id for a in s.agents]
+    documented = [sec.config_for("monitor", "-"), sec.config_for("simworld", "-"),
+                  *(sec.config_for("agent", str(i)) for i in ids)]
+    assert [p.name for p in documented] == ["monitor.json5", "simworld.json5", *(f"agent-{i}.json5" for i in ids)]
+    for p in [*documented, d / "observer.json5", d / "intruder.json5", sec.router_config]:
+        zenoh.Config.from_file(str(p))  # opens as is
+    assert sec.observer_options().config_file == d / "observer.json5"
+    client = json.loads((d / "agent-3.json5").read_text())
+    assert client["connect"]["endpoints"] == ["tls/127.0.0.1:7447"]
+    assert client["transport"]["link"]["tls"]["connect_certificate"] == str(d / "agent-3-cert.pem")
+    router = json.loads(sec.router_config.read_text())
+    assert router["listen"]["endpoints"] == ["tls/127.0.0.1:7447"]
+    assert router["transport"]["link"]["tls"]["enable_mtls"] is True
+    acl = router["access_control"]
+    assert acl["enabled"] and acl["default_permission"] == "deny"
+    rules = {r["id"]: r for r in acl["rules"]}
+    (pol3,) = [p for p in acl["policies"] if p["subjects"] == ["agent-3"]]
+    sent = {k for rid in pol3["rules"] for k in rules[rid]["key_exprs"]
+            if "ingress" in rules[rid]["flows"] and set(rules[rid]["messages"]) & {"put", "reply", "liveliness_token"}}
+    assert sent == {f"{RUN}/agent/3/cmd", f"{RUN}/agent/3/beacon", f"{RUN}/agent/3/obstacles",
+                    f"{RUN}/alive/agent/3"}
+    assert "intruder" not in {c for sub in acl["subjects"] for c in sub["cert_common_names"]}
+    with pytest.raises(Exception, match="no credentials for agent 42"):
+        sec.config_for("agent", "42")
+    with pytest.raises(Exception, match="tcp/HOST:PORT"):
+        secure.create(tmp_path / "x", s, "udp/127.0.0.1:7447")
+
+
+# --- 1. the mission, secure -----------------------------------------------------------------------------
+
+def test_secure_mission_completes(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    t0 = time.monotonic()
+    try:
+        p = run_launcher(out, "--secure", "--json")
+    finally:
+        assert_all_gone(out)
+    wall = time.monotonic() - t0
+    assert p.returncode == 0, p.stderr[-3000:]
+    s = json.loads(p.stdout)
+    assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == [] and s["messages_rejected"] == 0
+    ref = reconswarm("sim", str(PAPER), "-o", str(tmp_path / "sim"), "--json")
+    assert ref.returncode == 0, ref.stderr
+    assert s["convergence_time_s"] == json.loads(ref.stdout)["convergence_time_s"]  # TLS + ACL change nothing
+    d = out / "secrets"
+    assert _mode(d) == 0o700 and all(_mode(f) == 0o600 for f in d.iterdir())
+    ids = [a.id for a in load(PAPER).agents]
+    for name in ["monitor", "simworld", *(f"agent-{i}" for i in ids), "observer", "intruder", "router"]:
+        zenoh.Config.from_file(str(d / f"{name}.json5"))
+    print(f"secure paper mission: {wall:.1f} s wall, converged at {s['convergence_time_s']} s")
+
+
+# --- 2 and 3: against one live secure run ---------------------------------------------------------------
+
+@dataclass
+class Live:
+    out: Path
+    port: int
+    proc: subprocess.Popen[bytes]
+
+    @property
+    def secrets(self) -> Path:
+        return self.out / "secrets"
+
+    @property
+    def tls(self) -> str:
+        return f"tls/127.0.0.1:{self.port}"
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Live]:
+    out = tmp_path_factory.mktemp("secure") / "run"
+    port = free_port()
+    err = out.parent / "launcher.err"  # a file, not a pipe nobody reads while the run goes on
+    with err.open("wb") as fh:
+        proc = subprocess.Popen(launcher_cmd(out, "--secure", port=port), cwd=ROOT, stdout=subprocess.DEVNULL,
+                                stderr=fh)
+    try:
+        deadline = time.monotonic() + 120
+        while _ticks(out / "run.db") < 20:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                pytest.fail(f"the secure run did not start (exit {proc.poll()}): {err.read_text()[-2000:]}")
+            time.sleep(0.2)
+        yield Live(out, port, proc)
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        assert_all_gone(out)
+
+
+def test_anonymous_sessions_receive_nothing(live: Live) -> None:
+    # A trusted session shows that the run is publishing while the others listen.
+    trusted = _open(live.secrets / "monitor.json5")
+    clock = Catch()
+    trusted.declare_subscriber(f"{RUN}/clock", clock)
+    attempts = {
+        "tls, no certificate": _anonymous_config(live.tls),
+        "tls, the run's CA but no client certificate": _anonymous_config(
+            live.tls, root_ca_certificate=str(live.secrets / "ca.pem"), enable_mtls=True),
+        "tcp on the same port": _anonymous_config(f"tcp/127.0.0.1:{live.port}"),
+    }
+    outcome: dict[str, str] = {}
+    received: dict[str, int] = {}
+    try:
+        for what, conf in attempts.items():
+            try:
+                z = zenoh.open(conf)
+            except Exception as exc:  # the TLS handshake is refused: blocked before any zenoh message
+                outcome[what] = f"refused: {exc}".splitlines()[0][:120]
+                received[what] = 0
+                continue
+            got = Catch()
+            z.declare_subscriber("swarm/**", got)
+            z.liveliness().declare_subscriber("swarm/**", got, history=True)
+            time.sleep(3.0)
+            z.close()
+            outcome[what] = "opened"
+            received[what] = len(got)
+        # A certificate of the CA that no ACL subject names: connects, and gets nothing either.
+        intruder = _open(live.secrets / "intruder.json5")
+        got = Catch()
+        intruder.declare_subscriber("swarm/**", got)
+        intruder.declare_subscriber(f"{RUN}/clock", got)
+        intruder.liveliness().declare_subscriber(f"{RUN}/alive/**", got, history=True)
+        time.sleep(3.0)
+        tokens = list(intruder.liveliness().get(f"{RUN}/alive/**", timeout=2.0))
+        intruder.close()
+        received["intruder (CA-signed, no grant)"] = len(got) + sum(1 for r in tokens if r.ok is not None)
+    finally:
+        trusted.close()
+    print("anonymous sessions:", outcome, "received:", received)
+    assert len(clock) > 10, "the run was not publishing while the anonymous sessions listened"
+    assert all(n == 0 for n in received.values()), received
+    # What zenoh does with them on a mutual-TLS listener: the handshake fails, the session never opens.
+    assert all(o.startswith("refused") for o in outcome.values()), outcome
+
+
+def test_agent_credentials_cannot_impersonate_another_agent(live: Live) -> None:
+    sec = live.secrets
+    observers = [_open(sec / "monitor.json5"), _open(sec / "simworld.json5"), _open(sec / "agent-2.json5")]
+    mon, sim, a2 = observers
+    beacons, cmds, sets, alive, clock, reads = Catch(), Catch(), Catch(), Catch(), Catch(), Catch()
+    a3 = _open(sec / "agent-3.json5")
+    try:
+        mon.declare_subscriber(f"{RUN}/agent/*/beacon", beacons)
+        mon.declare_subscriber(f"{RUN}/clock", clock)
+        mon.liveliness().declare_subscriber(f"{RUN}/alive/**", alive, history=True)
+        sim.declare_subscriber(f"{RUN}/agent/*/cmd", cmds)
+        a3.declare_subscriber(f"{RUN}/agent/5/state", reads)  # not agent 3's to read
+        a3.declare_subscriber(f"{RUN}/agent/3/state", reads)  # its own: allowed
+        # Agent 3's credentials, agent 5's keys: beacon, command, obstacle set (an advanced publisher whose
+        # cache answers late joiners), liveliness token; and a token for an agent that does not exist.
+        fake_set = ext.declare_advanced_publisher(a3, f"{RUN}/agent/5/obstacles", cache=ext.CacheConfig(max_samples=1))
+        own_set = ext.declare_advanced_publisher(a3, f"{RUN}/agent/3/obstacles", cache=ext.CacheConfig(max_samples=1))
+        tokens = [a3.liveliness().declare_token(f"{RUN}/alive/agent/5"),
+                  a3.liveliness().declare_token(f"{RUN}/alive/agent/11")]
+        time.sleep(SETTLE_S)
+        k = wire.clock_from_wire(clock.items[-1][1]).k if len(clock) else 0
+        sent: dict[str, list[bytes]] = {}
+
+        def send(key: str, payload: bytes, publisher: Any = None) -> None:
+            if publisher is not None:
+                publisher.put(payload)
+            else:
+                a3.put(key, payload)
+            sent.setdefault(key, []).append(payload)
+
+        for n in range(20):  # valid-looking messages for the ticks to come
+            send(f"{RUN}/agent/5/beacon", wire.beacon_to_wire(wire.Beacon(5, k + n, 0.0, 123.0, 45.0, 2.6)))
+            send(f"{RUN}/agent/5/cmd", wire.cmd_to_wire(wire.Cmd(5, k + n, 100.0, 0.0)))
+            hull = {"fake": ((0.0, 0.0), (10.0, 0.0), (0.0, 10.0))}
+            send(f"{RUN}/agent/5/obstacles", wire.obstacles_to_wire(wire.ObstacleSet(5, k + n, 99, hull)), fake_set)
+            # the control: the same session on agent 3's own keys
+            send(f"{RUN}/agent/3/beacon", wire.beacon_to_wire(wire.Beacon(3, 0, 0.0, -77.0, 0.0, 2.6)))
+            send(f"{RUN}/agent/3/cmd", wire.cmd_to_wire(wire.Cmd(3, 0, 0.0, 0.0)))
+            time.sleep(0.1)
+        own_payload = wire.obstacles_to_wire(wire.ObstacleSet(3, 0, 99, {"own": ((5.0, 5.0), (6.0, 5.0), (5.0, 6.0))}))
+        send(f"{RUN}/agent/3/obstacles", own_payload, own_set)
+        time.sleep(0.5)
+        # A late joiner with agent 2's credentials asks the publishers' caches for their obstacle sets.
+        ext.declare_advanced_subscriber(a2, f"{RUN}/agent/*/obstacles", sets,
+                                        history=ext.HistoryConfig(detect_late_publishers=True))
+        time.sleep(SETTLE_S + 1.0)
+        for t in tokens:
+            t.undeclare()
+        time.sleep(0.5)
+    finally:
+        a3.close()
+        for z in observers:
+            z.close()
+    seen = {"beacon": beacons, "cmd": cmds, "obstacles": sets}
+    arrived = {key: sum(1 for x in seen[key.rsplit("/", 1)[1]].payloads(key) if x in payloads)
+               for key, payloads in sent.items()}
+    print("messages from agent 3's credentials that arrived, per key:", arrived)
+    for key in (f"{RUN}/agent/5/beacon", f"{RUN}/agent/5/cmd", f"{RUN}/agent/5/obstacles"):
+        assert arrived[key] == 0, f"a message from agent 3's credentials arrived on {key}"
+    assert f"{RUN}/alive/agent/11" not in alive.key_set()
+    assert [kind for key, _, kind in alive.items if key == f"{RUN}/alive/agent/5"] == ["SampleKind.PUT"]
+    assert f"{RUN}/agent/5/state" not in reads.key_set()
+    # The same credentials do work on agent 3's own keys: nothing above passes because all is blocked.
+    assert arrived[f"{RUN}/agent/3/beacon"] > 0 and arrived[f"{RUN}/agent/3/cmd"] > 0
+    assert arrived[f"{RUN}/agent/3/obstacles"] >= 1  # through the publisher's cache, to a late joiner
+    assert f"{RUN}/agent/3/state" in reads.key_set()
+    assert len(clock) > 10
+
+
+def test_secure_run_stops_on_sigint(live: Live) -> None:
+    live.proc.send_signal(signal.SIGINT)
+    assert live.proc.wait(timeout=30) == 130
+    assert_all_gone(live.out, grace_s=3.0)
