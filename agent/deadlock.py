@@ -3,8 +3,14 @@
 A stall is little movement *and* little progress toward the slot over a window while far from it:
 both below 10 % of what free motion under the attraction would achieve in that window. Sliding along
 an obstacle face is movement, so it is not a stall; a chattering agent pinned against a face normal to
-its path is. On a stall the agent draws a random direction from its own generator, seeded by
-(scenario seed, agent id), and pushes that way at `perturbation_mps` for one window. Pure and batched.
+its path is.
+
+On a stall the agent starts an escape episode: it adds `perturbation_mps` along the boundary of what
+repels it (perpendicular to its current repulsion, a wall-following push that turns with the boundary),
+in a direction (left or right) drawn from its own generator seeded by (scenario seed, agent id); with
+nothing repelling it, in a random direction. The episode lasts until the tracking error has dropped
+below its value at the start by 5 % + 1 m, or for at most ESCAPE_WINDOWS windows, after which it turns
+round once for twice as long. Pure and batched; a run repeats exactly.
 """
 
 from __future__ import annotations
@@ -28,20 +34,28 @@ def generator(seed: int, agent_id: int, stream: int = 0) -> np.random.Generator:
 
 @dataclass
 class StallState:
-    """Per-agent history over one window (rows = agents in the batch)."""
+    """Per-agent history over one window and the escape episode (rows = agents in the batch)."""
 
     hist_p: Array  # (N, W, 2) positions, ring buffer indexed by tick mod W
     hist_e: Array  # (N, W) error norms
     filled: NDArray[np.int64]  # (N,) ticks of history since the last reset
     pert: Array  # (N, 2) current perturbation
-    hold: NDArray[np.int64]  # (N,) ticks left to apply it
+    hold: NDArray[np.int64]  # (N,) ticks left in the current escape episode
     rngs: list[np.random.Generator]
     stalls: NDArray[np.int64]  # (N,) how many stalls each agent has had
+    side: Array  # (N,) +1 / -1: which way along the boundary; 0 outside an episode
+    turned: NDArray[np.bool_]  # (N,) the episode has already turned round once
+    e0: Array  # (N,) error when the episode started
+    free_dir: Array  # (N, 2) direction when nothing repels
 
     @staticmethod
     def create(n: int, window: int, rngs: list[np.random.Generator]) -> StallState:
         return StallState(np.zeros((n, window, 2)), np.zeros((n, window)), np.zeros(n, dtype=np.int64),
-                          np.zeros((n, 2)), np.zeros(n, dtype=np.int64), rngs, np.zeros(n, dtype=np.int64))
+                          np.zeros((n, 2)), np.zeros(n, dtype=np.int64), rngs, np.zeros(n, dtype=np.int64),
+                          np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n), np.zeros((n, 2)))
+
+
+ESCAPE_WINDOWS = 6
 
 
 def window_ticks(stall_window_s: float, dt_s: float) -> int:
@@ -49,18 +63,29 @@ def window_ticks(stall_window_s: float, dt_s: float) -> int:
 
 
 def stall_step(st: StallState, k: int, p: Array, e: Array, magnitude: float, k_att: float, r_c: float,
-               tol: float, dt: float) -> Array:
+               tol: float, dt: float, push: Array | None = None) -> Array:
     """Update the history with tick k and return this tick's perturbation (N, 2).
 
-    p (N, 2) positions, e (N,) error norms. `magnitude` 0 disables (always zeros).
+    p (N, 2) positions, e (N,) error norms, push (N, 2) the repulsion acting on each agent now (the
+    boundary to follow). `magnitude` 0 disables (always zeros).
     """
     n, w = st.hist_e.shape
     if magnitude <= 0.0:
         return np.zeros((n, 2))
     slot = k % w
-    active = st.hold > 0
+    # Episodes in progress: end on progress, turn round once on timeout, else count down.
+    active = st.side != 0.0
+    done = active & (e < st.e0 * 0.95 - 1.0)
     st.hold = np.where(active, st.hold - 1, 0)
-    st.pert = np.where((st.hold > 0)[:, None], st.pert, 0.0)
+    timeout = active & ~done & (st.hold <= 0)
+    turn = timeout & ~st.turned
+    st.side = np.where(turn, -st.side, st.side)
+    st.turned = st.turned | turn
+    st.hold = np.where(turn, 2 * ESCAPE_WINDOWS * w, st.hold)
+    st.free_dir = np.where(turn[:, None], -st.free_dir, st.free_dir)
+    ended = done | (timeout & ~turn)
+    st.side = np.where(ended, 0.0, st.side)
+    active = st.side != 0.0
     old_p = st.hist_p[:, slot].copy()
     old_e = st.hist_e[:, slot].copy()
     st.hist_p[:, slot] = p
@@ -71,10 +96,27 @@ def stall_step(st: StallState, k: int, p: Array, e: Array, magnitude: float, k_a
     thresh = PROGRESS_FRACTION * expected
     moved = norm2(p - old_p)
     stalled = full & ~active & (moved < thresh) & ((old_e - e) < thresh) & (e > 4 * tol)
-    for i in np.flatnonzero(stalled):
-        ang = st.rngs[i].uniform(0.0, 2 * np.pi)
-        st.pert[i] = (magnitude * np.cos(ang), magnitude * np.sin(ang))
-        st.hold[i] = w
+    for i in stalled.nonzero()[0]:
+        rng = st.rngs[i]
+        st.side[i] = 1.0 if rng.uniform() < 0.5 else -1.0
+        ang = rng.uniform(0.0, 2 * np.pi)
+        st.free_dir[i] = (np.cos(ang), np.sin(ang))
+        st.turned[i] = False
+        st.e0[i] = e[i]
+        st.hold[i] = ESCAPE_WINDOWS * w
         st.filled[i] = 0
         st.stalls[i] += 1
+    active = st.side != 0.0
+    if not active.any():
+        st.pert = np.zeros((n, 2))
+        return st.pert.copy()
+    # Along the boundary: the repulsion turned by 90 degrees to the episode's side.
+    if push is None:
+        push = np.zeros((n, 2))
+    mag = norm2(push)
+    has = mag > 1e-9
+    safe = np.where(has, mag, 1.0)
+    tx = np.where(has, -push[:, 1] / safe * st.side, st.free_dir[:, 0])
+    ty = np.where(has, push[:, 0] / safe * st.side, st.free_dir[:, 1])
+    st.pert = np.where(active[:, None], magnitude * np.stack([tx, ty], axis=1), 0.0)
     return st.pert.copy()

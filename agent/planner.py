@@ -143,16 +143,25 @@ class ObstacleView:
         return ObstacleView(np.zeros((n, 0)), np.zeros((n, 0, 2)), np.zeros((n, 0), dtype=bool))
 
 
+def repulsion(cfg: PlannerConfig, p: Array, r: Array, nb: Neighbours, ob: ObstacleView) -> tuple[Array, Array]:
+    """The two repulsive terms of eq. (7) for each agent: from neighbours and from known obstacles, (N, 2) each."""
+    return (agent_repulsion(p, r, nb.p, nb.r, nb.valid, cfg.d_safe_m, cfg.d_max_m, cfg.psi_mps),
+            obstacle_repulsion(r, ob.d, ob.n, ob.valid, cfg.d_safe_m, cfg.d_max_m, cfg.psi_mps))
+
+
 def command(cfg: PlannerConfig, p: Array, r: Array, offset: Array, center: Array, nb: Neighbours,
-            ob: ObstacleView, perturbation: Array, leader_velocity: Array | None = None) -> Array:
+            ob: ObstacleView, perturbation: Array, leader_velocity: Array | None = None,
+            rep: tuple[Array, Array] | None = None) -> Array:
     """The head-point velocity u_i (N, 2) of eq. (7), plus Remark 1's perturbation.
 
     center (N, 2): p* for the reconfigurable planner, each agent's copy of the virtual leader for the
     benchmark (which also passes the leader's velocity as feed-forward and adds containment).
+    rep: the terms of `repulsion` when the caller has them already.
     """
+    rep_a, rep_o = rep if rep is not None else repulsion(cfg, p, r, nb, ob)
     u = attraction(p, center, offset, cfg.k_att, cfg.target_radius_m)
-    u = u + agent_repulsion(p, r, nb.p, nb.r, nb.valid, cfg.d_safe_m, cfg.d_max_m, cfg.psi_mps)
-    u = u + obstacle_repulsion(r, ob.d, ob.n, ob.valid, cfg.d_safe_m, cfg.d_max_m, cfg.psi_mps)
+    u = u + rep_a
+    u = u + rep_o
     if leader_velocity is not None:
         u = u + leader_velocity
         u = u + containment(p, r, center, cfg.target_radius_m, cfg.d_safe_m, cfg.d_max_m, cfg.psi_mps)

@@ -37,7 +37,7 @@ class AgentConfig:
     scenario: Path
     zenoh: ZenohOptions
     run_id: str | None = None
-    wait_timeout_s: float = 3.0  # lockstep: longest wait for a peer's beacon or obstacle set
+    wait_timeout_s: float = 1.0  # lockstep: longest wait for a peer's beacon or obstacle set
 
 
 class AgentNode:
@@ -71,6 +71,8 @@ class AgentNode:
         self.act_at: float | None = None
         self.last_clock = time.monotonic()
         self.ended = False
+        self.last_cmd: bytes | None = None
+        self.beacon_again = 0.0
         block = zenoh.CongestionControl.BLOCK
         k = self.keys
         z = session
@@ -78,12 +80,14 @@ class AgentNode:
         self.pub_cmd = z.declare_publisher(k.cmd(self.id), congestion_control=block)  # type: ignore[attr-defined]
         self.pub_obs = ext.declare_advanced_publisher(z, k.obstacles(self.id), cache=ext.CacheConfig(max_samples=1))
         cb = self.inbox.callback
+        remote = zenoh.Locality.REMOTE
         self.subs = [
             z.declare_subscriber(k.state(self.id), cb),  # type: ignore[attr-defined]
             z.declare_subscriber(k.scan(self.id), cb),  # type: ignore[attr-defined]
             z.declare_subscriber(k.clock, cb),  # type: ignore[attr-defined]
-            z.declare_subscriber(k.all_agents("beacon"), cb),  # type: ignore[attr-defined]
-            ext.declare_advanced_subscriber(z, k.all_agents("obstacles"), cb,
+            # Our own announcements are not delivered back (REMOTE); anyone else's on our keys are checked.
+            z.declare_subscriber(k.all_agents("beacon"), cb, allowed_origin=remote),  # type: ignore[attr-defined]
+            ext.declare_advanced_subscriber(z, k.all_agents("obstacles"), cb, allowed_origin=remote,
                                             history=ext.HistoryConfig(detect_late_publishers=True)),
             z.liveliness().declare_subscriber(k.alive_all, cb, history=True),  # type: ignore[attr-defined]
         ]
@@ -118,19 +122,26 @@ class AgentNode:
                 return
             if leaf == "state" and aid == self.id:
                 st = wire.state_from_wire(payload, aid)
+                if st.k == self.k and self.last_cmd is not None:  # the world missed our command: again
+                    self.pub_cmd.put(self.last_cmd)
+                    return
                 self.states[st.k] = st
                 if self.mode == "realtime":
                     self.act_at = time.monotonic() + 0.25 * self.period_s
             elif leaf == "scan" and aid == self.id:
                 sc = wire.scan_from_wire(payload, aid)
                 self.scans[sc.k] = sc
-            elif leaf == "beacon" and aid != self.id:
+            elif leaf == "beacon":
                 b = wire.beacon_from_wire(payload, aid)
+                if aid == self.id:
+                    raise wire.WireError("a beacon on our own key from another session")
                 self.beacons.setdefault(b.k, {})[aid] = b
                 if aid not in self.last_seen or b.k >= self.last_seen[aid].k:
                     self.last_seen[aid] = b
-            elif leaf == "obstacles" and aid != self.id:
+            elif leaf == "obstacles":
                 o = wire.obstacles_from_wire(payload, aid)
+                if aid == self.id:
+                    raise wire.WireError("an obstacle set on our own key from another session")
                 self.sets.setdefault(aid, {})[o.rev] = {oid: np.array(v, dtype=np.float64)
                                                          for oid, v in o.obstacles.items()}
         except wire.WireError as exc:
@@ -156,11 +167,15 @@ class AgentNode:
         st, clock = self.states.get(k), self.clocks.get(k)
         if st is None or clock is None or (st.scan_n > 0 and k not in self.scans):
             return False
-        if self.beacon_sent < k:
+        if self.beacon_sent < k or time.monotonic() > self.beacon_again:  # (again if peers may have lost it)
             self.pub_beacon.put(wire.beacon_to_wire(wire.Beacon(
                 self.id, k, st.t, st.px, st.py, self.radius, self.brain.rev, self.rej.count)))
+            if self.beacon_sent < k:
+                self.wait_since = time.monotonic()
+            elif self.brain.rev:  # stuck on this tick: peers may have lost our obstacle set too
+                self.pub_obs.put(self._obstacles_wire(k))
             self.beacon_sent = k
-            self.wait_since = time.monotonic()
+            self.beacon_again = time.monotonic() + 0.5
         if self.wait_since is not None and time.monotonic() - self.wait_since > self.cfg.wait_timeout_s:
             log.warning("agent %d: tick %d: gave up waiting for peers' data", self.id, k)
             return True
@@ -217,12 +232,16 @@ class AgentNode:
         scan = self._scan_sets(self.k + 1 if self.k >= 0 else k, k)
         u, grew = self.brain.tick(k, p, scan, peers, shared, swarm)
         if grew:
-            sets = {oid: tuple(map(tuple, h.tolist())) for oid, h in self.brain.obstacle_sets().items()}
-            self.pub_obs.put(wire.obstacles_to_wire(wire.ObstacleSet(self.id, k, self.brain.rev, sets)))
-        self.pub_cmd.put(wire.cmd_to_wire(wire.Cmd(self.id, k, float(u[0]), float(u[1]))))
+            self.pub_obs.put(self._obstacles_wire(k))
+        self.last_cmd = wire.cmd_to_wire(wire.Cmd(self.id, k, float(u[0]), float(u[1])))
+        self.pub_cmd.put(self.last_cmd)
         self.k = k
         self.wait_since = None
         self._prune(k)
+
+    def _obstacles_wire(self, k: int) -> bytes:
+        sets = {oid: tuple(map(tuple, h.tolist())) for oid, h in self.brain.obstacle_sets().items()}
+        return wire.obstacles_to_wire(wire.ObstacleSet(self.id, k, self.brain.rev, sets))
 
     def _prune(self, k: int) -> None:
         for store in (self.states, self.clocks, self.beacons, self.scans):

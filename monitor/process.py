@@ -26,6 +26,8 @@ from reconswarm.session import Inbox, Rejections, Stopper, ZenohOptions, open_se
 
 log = logging.getLogger("reconswarm.monitor")
 END_GRACE_S = 3.0  # after the world's last clock, how long to wait for the last states
+BURST_S = 1.0  # agents lost (or back) within this much wall time of each other count as one network event
+COMMIT_SIM_S = 0.5  # commit the record at least every this much simulated time (and every 0.5 s of wall time)
 
 
 @dataclass(frozen=True)
@@ -66,6 +68,13 @@ class MonitorNode:
         self.mode: str | None = None
         self.wall0: float | None = None
         self.min_gap = float("inf")
+        self.committed_t = self.t
+        self.burst_lost: list[int] = []  # agents lost in the current burst (network split detection)
+        self.burst_lost_at = self.burst_lost_t = 0.0
+        self.burst_before: list[int] = []
+        self.burst_back: list[int] = []
+        self.burst_back_at = self.burst_back_t = 0.0
+        self.partitioned: set[int] = set()
         z = session
         k = self.keys
         self.pub_event = z.declare_publisher(k.event, congestion_control=zenoh.CongestionControl.BLOCK)
@@ -76,6 +85,7 @@ class MonitorNode:
         self.token = z.liveliness().declare_token(k.alive_monitor)
 
     def emit(self, ev: dict[str, Any]) -> None:
+        ev = {**ev, "wall_unix": round(time.time(), 6)}  # when the monitor noticed, for fault-detection latency
         self.writer.event(ev)
         self.pub_event.put(wire.event_to_wire(wire.Event(
             float(ev["t"]), ev["kind"], tuple(tuple(g) for g in ev.get("before", [])),
@@ -84,6 +94,14 @@ class MonitorNode:
     def membership(self, aid: int, up: bool) -> None:
         i = self.index[aid]
         before = [int(a) for a in np.array(self.ids)[self.alive]]
+        if not up and self.alive[i]:
+            if not self.burst_lost:
+                self.burst_lost_at, self.burst_lost_t, self.burst_before = time.monotonic(), self.t, before
+            self.burst_lost.append(aid)
+        elif up and not self.alive[i] and aid in self.partitioned:
+            if not self.burst_back:
+                self.burst_back_at, self.burst_back_t = time.monotonic(), self.t
+            self.burst_back.append(aid)
         was = bool(self.alive[i])
         self.alive[i] = up
         after = [int(a) for a in np.array(self.ids)[self.alive]]
@@ -95,6 +113,27 @@ class MonitorNode:
             self.emit({"t": round(self.t, 9), "kind": "agent_lost", "agent": aid, "before": [before], "after": [after]})
             log.warning("agent %d lost at t=%.2f", aid, self.t)
         self.seen[i] |= up
+
+    def network_events(self) -> None:
+        """Several agents lost together while others stay is the swarm's network splitting: record a split
+        (cause "network"); their return, a merge. Single losses stay agent_lost / agent_joined only."""
+        now = time.monotonic()
+        alive = [int(a) for a in np.array(self.ids)[self.alive]]
+        if self.burst_lost and now - self.burst_lost_at >= BURST_S:
+            lost = sorted(a for a in set(self.burst_lost) if not self.alive[self.index[a]])
+            if len(lost) >= 2 and alive:
+                self.emit({"t": round(self.burst_lost_t, 9), "kind": "split", "cause": "network",
+                           "before": [self.burst_before], "after": sorted([alive, lost], key=lambda g: g[0])})
+                self.partitioned |= set(lost)
+            self.burst_lost = []
+        if self.burst_back and now - self.burst_back_at >= BURST_S:
+            back = sorted(a for a in set(self.burst_back) if self.alive[self.index[a]])
+            rest = [a for a in alive if a not in back]
+            if back and rest:
+                self.emit({"t": round(self.burst_back_t, 9), "kind": "merge", "cause": "network",
+                           "before": sorted([rest, back], key=lambda g: g[0]), "after": [alive]})
+            self.partitioned -= set(back)
+            self.burst_back = []
 
     def handle(self, key: str, payload: bytes, kind: str) -> None:
         try:
@@ -113,6 +152,8 @@ class MonitorNode:
                 self.counts["simworld"] = c.rejected
                 if self.wall0 is None:
                     self.wall0 = time.monotonic()
+                    if self.resume_from is None:
+                        self.writer.set_meta(mission_start_unix=f"{time.time():.6f}")
                 if c.end:
                     self.end, self.end_at = c, time.monotonic()
                 return
@@ -159,6 +200,9 @@ class MonitorNode:
                 del self.beacons[kk]
             self.written, self.t = k, t
             self.min_gap = min(self.min_gap, self.rec.safety.min_agent_gap_m)
+            if t - self.committed_t >= COMMIT_SIM_S:  # a killed monitor loses at most this much of the record
+                self.writer.commit()
+                self.committed_t = t
 
     def finish(self) -> None:
         self.counts["monitor"] = self.rej.count
@@ -167,10 +211,10 @@ class MonitorNode:
         if self.end is not None:
             extra = dict(self.end.stats)
             extra["end_reason"] = self.end.reason
-        wall = time.monotonic() - self.wall0 if self.wall0 is not None else 0.0
         meta: dict[str, Any] = {"extra": extra, "finished": "1" if self.end is not None else "0"}
-        if self.resume_from is None:
-            meta["wall_time_s"] = f"{wall:.6f}"
+        start = self.writer.get_meta("mission_start_unix")
+        if start is not None:  # from the first clock, whichever monitor incarnation saw it
+            meta["wall_time_s"] = f"{time.time() - float(start):.6f}"
         if self.mode:
             meta["mode"] = self.mode
         self.writer.close(**meta)
@@ -202,6 +246,8 @@ class MonitorNode:
                     for more in self.inbox.drain():
                         self.handle(*more)
                 self.flush()
+                if self.end is None:
+                    self.network_events()
                 if self.end is not None:
                     done = self.written >= self.end.k
                     if done or time.monotonic() - self.end_at > END_GRACE_S:

@@ -82,6 +82,10 @@ class RunWriter:
         self.db.executemany("INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)",
                             [(k, v if isinstance(v, str) else json.dumps(v)) for k, v in kv.items()])
 
+    def get_meta(self, key: str) -> str | None:
+        row = self.db.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
+        return None if row is None else str(row[0])
+
     def last_tick(self) -> tuple[int, float] | None:
         self._flush()
         row = self.db.execute("SELECT k, t FROM ticks ORDER BY k DESC LIMIT 1").fetchone()

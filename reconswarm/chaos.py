@@ -26,8 +26,9 @@ def inject(f: Fault, fleet: Fleet, watch: Any, cfg: LaunchConfig) -> list[Timer]
     """Start fault f now; return the timers that finish it later (wall time, action)."""
     now = time.monotonic()
     if f.action == "flood":
-        args = ["flood", "--run", watch.keys.run, "--count", str(f.count)]
-        fleet.start("flood", "-", [*args, *_zargs(cfg, fleet)])
+        args = ["flood", "--run", watch.keys.run, "--count", str(f.count), "--scenario", str(cfg.out / "scenario.toml")]
+        prefix, zargs = fleet.zopt("flood")
+        fleet.start("flood", "-", [*args, *zargs], prefix)
         return []
     if f.action == "partition":
         from reconswarm import netns
@@ -40,7 +41,8 @@ def inject(f: Fault, fleet: Fleet, watch: Any, cfg: LaunchConfig) -> list[Timer]
         log.warning("fault: %s %s is not running", f.target, ident)
         return []
     if f.action == "kill":
-        proc.expected_exit = True
+        # A killed agent or router stays dead; a killed monitor is restarted by the launcher's supervision.
+        proc.expected_exit = f.target != "monitor"
         fleet.signal(proc, signal.SIGKILL)
         return []
     if f.action == "freeze":
@@ -63,9 +65,3 @@ def inject(f: Fault, fleet: Fleet, watch: Any, cfg: LaunchConfig) -> list[Timer]
         return [(now + f.duration_s, again)]
     raise ValueError(f"unknown fault {f}")
 
-
-def _zargs(cfg: LaunchConfig, fleet: Fleet) -> list[str]:
-    router = fleet.find("router")
-    if router is not None and "--zenoh-config" in router.args:
-        return ["--zenoh-config", str(cfg.out / "secrets" / "intruder.json5")]
-    return ["--connect", cfg.router or "tcp/127.0.0.1:7447"]

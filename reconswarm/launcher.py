@@ -11,6 +11,7 @@ this process (PR_SET_PDEATHSIG) so none outlives it.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import os
@@ -49,6 +50,7 @@ class LaunchConfig:
     progress: bool = True
     as_json: bool = False
     start_timeout_s: float = 120.0
+    hosts: int = 1
 
 
 @dataclass
@@ -58,6 +60,7 @@ class Proc:
     args: list[str]
     popen: subprocess.Popen[bytes]
     log_path: Path
+    prefix: list[str] = field(default_factory=list)  # e.g. `ip netns exec NS` for host B
     expected_exit: bool = False  # stopped on purpose (a fault or the end of the run)
 
 
@@ -68,17 +71,18 @@ class Fleet:
     out: Path
     env: dict[str, str]
     procs: list[Proc] = field(default_factory=list)
+    zopt: Any = None  # (role, id) -> (command prefix, zenoh args), set by run()
 
-    def start(self, role: str, ident: str, args: list[str]) -> Proc:
+    def start(self, role: str, ident: str, args: list[str], prefix: list[str] | None = None) -> Proc:
         logs = self.out / "logs"
         logs.mkdir(parents=True, exist_ok=True)
         name = role if ident == "-" else f"{role}-{ident}"
         log_path = logs / f"{name}.log"
         fh = log_path.open("ab")
-        popen = subprocess.Popen([sys.executable, "-m", "reconswarm.cli", *args], stdout=fh, stderr=subprocess.STDOUT,
-                                 stdin=subprocess.DEVNULL, env=self.env, cwd=str(ROOT))
+        popen = subprocess.Popen([*(prefix or []), sys.executable, "-m", "reconswarm.cli", *args], stdout=fh,
+                                 stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=self.env, cwd=str(ROOT))
         fh.close()
-        proc = Proc(role, ident, args, popen, log_path)
+        proc = Proc(role, ident, args, popen, log_path, list(prefix or []))
         self.procs.append(proc)
         with (self.out / "processes.tsv").open("a") as tsv:
             tsv.write(f"{role}\t{ident}\t{popen.pid}\n")
@@ -89,14 +93,12 @@ class Fleet:
         return live[-1] if live else None
 
     def restart(self, proc: Proc) -> Proc:
-        return self.start(proc.role, proc.id, proc.args)
+        return self.start(proc.role, proc.id, proc.args, proc.prefix)
 
     def signal(self, proc: Proc, sig: int) -> None:
         if proc.popen.poll() is None:
-            try:
+            with contextlib.suppress(ProcessLookupError):
                 os.kill(proc.popen.pid, sig)
-            except ProcessLookupError:
-                pass
 
     def stop_all(self, grace_s: float = 3.0) -> None:
         """SIGCONT (frozen ones), SIGTERM, then SIGKILL what is still there; reap everything."""
@@ -151,7 +153,7 @@ def prepare_scenario(cfg: LaunchConfig) -> tuple[Scenario, Path]:
 class ClockWatch:
     """Follows the run's clock (and events) on its own zenoh session: progress and fault timing."""
 
-    def __init__(self, endpoint: str, run: str, zopts: ZenohOptions) -> None:
+    def __init__(self, run: str, zopts: ZenohOptions) -> None:
         self.keys = wire.Keys(run)
         self.inbox = Inbox()
         self.session = open_session(zopts, "run_local")
@@ -181,23 +183,73 @@ class ClockWatch:
         self.session.close()
 
 
+@dataclass
+class Net:
+    """Where the routers run and how each process reaches one."""
+
+    watch: ZenohOptions  # the launcher's own session (progress, fault timing)
+    routers: list[tuple[str, list[str], list[str]]]  # (id, router args, command prefix) to start
+    reach: dict[tuple[str, str], tuple[list[str], list[str]]]  # (role, id) -> (prefix, zenoh args)
+    default: list[str]
+    hosts: Any = None
+
+    def zopt(self, role: str, ident: str = "-") -> tuple[list[str], list[str]]:
+        return self.reach.get((role, ident), ([], self.default))
+
+
+def plan_network(cfg: LaunchConfig, s: Scenario) -> Net:
+    endpoint = cfg.router or DEFAULT_ROUTER
+    if cfg.secure and cfg.hosts > 1:
+        raise BadInput("--secure with --hosts 2 is not supported")
+    if cfg.secure:
+        from reconswarm import secure
+
+        sec = secure.create(cfg.out / "secrets", s, endpoint)
+        reach = {("monitor", "-"): ([], ["--zenoh-config", str(sec.config_for("monitor", "-"))]),
+                 ("simworld", "-"): ([], ["--zenoh-config", str(sec.config_for("simworld", "-"))]),
+                 ("flood", "-"): ([], ["--zenoh-config", str(cfg.out / "secrets" / "intruder.json5")])}
+        reach |= {("agent", str(a.id)): ([], ["--zenoh-config", str(sec.config_for("agent", str(a.id)))])
+                  for a in s.agents}
+        if not _port_free(sec.endpoint):  # a router already there holds another run's CA: it cannot serve us
+            raise ProcessFailure(f"router: {sec.endpoint} is in use; secure mode starts its own router")
+        routers = [("-", ["router", "--zenoh-config", str(sec.router_config)], [])]
+        return Net(sec.observer_options(), routers, reach, [])
+    if cfg.hosts == 2:
+        from reconswarm import netns
+
+        hosts = netns.TwoHosts.for_run(os.getpid())
+        hosts.create()
+        netns.ACTIVE.append(hosts)
+        port = endpoint.rpartition(":")[2]
+        ep_a, ep_b = f"tcp/{hosts.ip_a}:{port}", f"tcp/{hosts.ip_b}:{port}"
+        on_b = [a.id for a in s.agents][len(s.agents) // 2:]
+        reach = {("agent", str(a)): (hosts.exec_prefix(), ["--connect", ep_b]) for a in on_b}
+        routers = [("A", ["router", "--listen", ep_a], []),
+                   ("B", ["router", "--listen", ep_b, "--connect", ep_a], hosts.exec_prefix())]
+        log.info("two hosts: A (this namespace, router %s: simworld, monitor, agents %s) and B (%s, router %s: "
+                 "agents %s)", ep_a, [a.id for a in s.agents if a.id not in on_b], hosts.ns_b, ep_b, on_b)
+        return Net(ZenohOptions.build([ep_a], None, "client", None), routers, reach, ["--connect", ep_a], hosts)
+    if _port_free(endpoint):
+        routers = [("-", ["router", "--listen", endpoint], [])]
+    elif cfg.router is None:
+        raise ProcessFailure(f"router: {endpoint} is in use (another run?); stop it or pass --router EP")
+    else:
+        log.info("using the router already listening on %s", endpoint)
+        routers = []
+    return Net(ZenohOptions.build([endpoint], None, "client", None), routers, {}, ["--connect", endpoint])
+
+
 def run(cfg: LaunchConfig) -> int:
     cfg.out.mkdir(parents=True, exist_ok=True)
-    for stale in ("processes.tsv", "run.db", "run.db-wal", "run.db-shm"):
+    for stale in ("processes.tsv", "faults.tsv", "run.db", "run.db-wal", "run.db-shm"):
         (cfg.out / stale).unlink(missing_ok=True)
     s, scen_path = prepare_scenario(cfg)
     if cfg.clock not in ("lockstep", "realtime"):
         raise BadInput(f"--clock: expected lockstep or realtime, got {cfg.clock!r}")
+    if any(f.action == "partition" for f in cfg.faults) and cfg.hosts != 2:
+        raise BadInput("--fault partition@...: needs --hosts 2 (two hosts to cut apart)")
     env = dict(os.environ, RECONSWARM_DIE_WITH_PARENT=str(os.getpid()), PYTHONUNBUFFERED="1")
     fleet = Fleet(cfg.out, env)
-    endpoint = cfg.router or DEFAULT_ROUTER
-    zargs: list[str] = ["--connect", endpoint]
-    secrets: Any = None
-    if cfg.secure:
-        from reconswarm import secure
-
-        secrets = secure.create(cfg.out / "secrets", s, endpoint)
-        endpoint = secrets.endpoint
     stop_sig: list[int] = []
 
     def on_signal(signum: int, _frame: Any) -> None:
@@ -206,36 +258,35 @@ def run(cfg: LaunchConfig) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, on_signal)
 
-    def zopt(role: str, ident: str = "-") -> list[str]:
-        if secrets is not None:
-            return ["--zenoh-config", str(secrets.config_for(role, ident))]
-        return zargs
-
+    net: Net | None = None
     watch: ClockWatch | None = None
     code = 3
     try:
-        if _port_free(endpoint):
-            fleet.start("router", "-", ["router", *(["--zenoh-config", str(secrets.router_config)] if secrets
-                                                     else ["--listen", endpoint])])
-        elif cfg.router is None:
-            raise ProcessFailure(f"router: {endpoint} is in use (another run?); stop it or pass --router EP")
-        else:
-            log.info("using the router already listening on %s", endpoint)
+        net = plan_network(cfg, s)
+        fleet.zopt = net.zopt
+        for ident, args, prefix in net.routers:
+            fleet.start("router", ident, args, prefix)
+        prefix, zargs = net.zopt("monitor")
         mon = fleet.start("monitor", "-", ["monitor", "record", "--scenario", str(scen_path), "--db",
-                                           str(cfg.out / "run.db"), "--no-live", *zopt("monitor")])
+                                           str(cfg.out / "run.db"), "--no-live", *zargs], prefix)
         for a in s.agents:
-            fleet.start("agent", str(a.id), ["agent", "--id", str(a.id), "--scenario", str(scen_path),
-                                             *zopt("agent", str(a.id))])
+            prefix, zargs = net.zopt("agent", str(a.id))
+            fleet.start("agent", str(a.id), ["agent", "--id", str(a.id), "--scenario", str(scen_path), *zargs], prefix)
+        prefix, zargs = net.zopt("simworld")
         world = fleet.start("simworld", "-", ["simworld", "--scenario", str(scen_path), "--clock", cfg.clock,
                                               "--speed", str(cfg.speed), "--start-timeout", str(cfg.start_timeout_s),
-                                              *zopt("simworld")])
-        watch = ClockWatch(endpoint, s.meta.name, secrets.observer_options() if secrets else
-                           ZenohOptions.build([endpoint], None, "client", None))
+                                              *zargs], prefix)
+        watch = ClockWatch(s.meta.name, net.watch)
         code = _supervise(cfg, s, fleet, world, mon, watch, stop_sig)
     finally:
         if watch is not None:
             watch.close()
         fleet.stop_all()
+        if net is not None and net.hosts is not None:
+            from reconswarm import netns
+
+            net.hosts.delete()
+            netns.ACTIVE.clear()
     if stop_sig:
         log.warning("stopped by signal %d", stop_sig[0])
         return 128 + stop_sig[0]
@@ -258,6 +309,8 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
             while pending and watch.k >= 0 and watch.t >= pending[0].at_s and watch.end is None:
                 f = pending.pop(0)
                 log.warning("fault: %s", f.describe())
+                with (cfg.out / "faults.tsv").open("a") as tsv:
+                    tsv.write(f"{time.time():.6f}\t{watch.t:.3f}\t{f.describe()}\n")
                 timers += chaos.inject(f, fleet, watch, cfg)
             for item in [x for x in timers if x[0] <= now]:
                 timers.remove(item)
@@ -266,6 +319,8 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
                 rc = p.popen.poll()
                 if rc is not None and not p.expected_exit and p.role in ("agent", "router", "monitor"):
                     p.expected_exit = True
+                    if p.role == "monitor" and rc == 0:
+                        continue  # it saw the end of the mission and closed the record
                     if p.role == "monitor" and world.popen.poll() is None:
                         log.warning("monitor died (exit %s): restarting it", rc)
                         mon = fleet.restart(p)
@@ -292,10 +347,8 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
         deadline = time.monotonic() + 5
         for p in fleet.procs:
             if p.role == "agent" and p.popen.poll() is None:
-                try:
+                with contextlib.suppress(subprocess.TimeoutExpired):
                     p.popen.wait(timeout=max(0.1, deadline - time.monotonic()))
-                except subprocess.TimeoutExpired:
-                    pass
     finally:
         bar.close()
     return _report(cfg, crashed)
@@ -365,6 +418,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--secure", action="store_true", help="mutual TLS, per-process credentials and access control")
     ap.add_argument("--fault", action="append", default=[], metavar="SPEC",
                     help="inject a fault (repeatable), e.g. kill:agent:3@60; see the README")
+    ap.add_argument("--hosts", type=int, default=1, choices=[1, 2],
+                    help="2: two hosts as network namespaces, each with its own router (needs root)")
     ap.add_argument("--timeout", type=float, help="give up after this many seconds of wall time (exit 3)")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
     ap.add_argument("--no-progress", action="store_true")
@@ -382,7 +437,7 @@ def main(argv: list[str] | None = None) -> int:
         cfg = LaunchConfig(out=args.out.resolve(), scenario=args.scenario, agents=args.agents, clock=args.clock,
                            speed=args.speed, planner=args.planner, router=args.router, secure=args.secure,
                            faults=tuple(faults_mod.parse(f) for f in args.fault), timeout_s=args.timeout,
-                           progress=not args.no_progress, as_json=args.json)
+                           progress=not args.no_progress, as_json=args.json, hosts=args.hosts)
         return run(cfg)
     except ReconswarmError as exc:
         if args.debug:

@@ -105,7 +105,24 @@ def router_cmd(
     _guard(go)
 
 
+def flood_cmd(
+    run_id: Annotated[str, typer.Option("--run", help="Run name (the scenario name) whose keys to flood.")],
+    count: Annotated[int, typer.Option("--count", help="How many malformed payloads.", min=1)] = 10_000,
+    scenario: Annotated[Path | None, typer.Option("--scenario", help="Scenario (for the agent ids).")] = None,
+    connect: Connect = None, listen: Listen = None, mode: Mode = "client", zenoh_config: ZConfig = None,
+) -> None:
+    """Fault injection: publish malformed payloads on every key of a run (each must be dropped and counted)."""
+    from reconswarm.flood import FloodConfig, run
+
+    def go() -> int:
+        run(FloodConfig(run_id, scenario, count, ZenohOptions.build(connect, listen, mode, zenoh_config)))
+        return 0
+
+    _guard(go)
+
+
 def register(app: typer.Typer) -> None:
     app.command("agent")(agent_cmd)
     app.command("simworld")(simworld_cmd)
     app.command("router")(router_cmd)
+    app.command("flood", hidden=False)(flood_cmd)

@@ -31,6 +31,7 @@ from simworld.sensing import ContourField
 
 log = logging.getLogger("reconswarm.simworld")
 CLOCKS = ("lockstep", "realtime")
+REPUBLISH_S = 0.5  # lockstep: re-publish a tick that has waited this long for commands
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,7 @@ class WorldConfig:
     start_timeout_s: float = 60.0
     step_timeout_s: float = 5.0  # lockstep: longest wait for a live agent's command
     hold_s: float = 0.2  # a missing command is held this long, then the robot stops
+    no_agents_grace_s: float = 30.0  # with no agent reachable, hold this long before ending the mission
 
 
 class World:
@@ -207,22 +209,15 @@ class World:
                 reason = "converged"
             elif k == n_ticks:
                 reason = "duration"
-            elif not self.alive:
-                reason = "no agents"
             elif stop.stopped:
                 reason = "stopped"
+            elif not self.alive and not self.wait_for_agents(stop):
+                reason = "no agents"
             self.publish(k, bool(reason), reason)
             if reason:
                 return reason
             if self.cfg.clock == "lockstep":
-                # Wait for the agents the clock announced (one that joins now starts at the next tick).
-                expected = set(self.alive)
-                deadline = time.monotonic() + self.cfg.step_timeout_s
-                while not stop.stopped and time.monotonic() < deadline:
-                    got = self.cmds.get(k, {})
-                    if all(self.index[a] in got for a in expected & self.alive):
-                        break
-                    self.pump(min(0.05, max(0.0, deadline - time.monotonic())))
+                self.wait_commands(k, stop)
             else:
                 due = t0 + (k + 1) * period
                 if time.monotonic() > due:
@@ -231,6 +226,36 @@ class World:
                     self.pump(max(0.0, due - time.monotonic()))
             self.apply(k)
         return "duration"
+
+    def wait_for_agents(self, stop: Stopper) -> bool:
+        """No agent reachable (all gone, or the router restarting): hold the world rather than run on."""
+        log.warning("no agent is reachable: holding the world for up to %.0f s", self.cfg.no_agents_grace_s)
+        deadline = time.monotonic() + self.cfg.no_agents_grace_s
+        while not stop.stopped and not self.alive and time.monotonic() < deadline:
+            self.pump(0.1)
+        if self.alive:
+            log.info("agents reachable again: %s", sorted(self.alive))
+        return bool(self.alive)
+
+    def wait_commands(self, k: int, stop: Stopper) -> None:
+        """Lockstep: wait for tick k's command of every agent the clock announced (one that joins now starts
+        at the next tick). Re-publish the tick while waiting, so data lost in an outage is sent again."""
+        expected = set(self.alive)
+        now = time.monotonic()
+        deadline, again = now + self.cfg.step_timeout_s, now + REPUBLISH_S
+        while not stop.stopped and time.monotonic() < deadline:
+            got = self.cmds.get(k, {})
+            if all(self.index[a] in got for a in expected & self.alive):
+                return
+            if time.monotonic() > again:
+                missing = sorted(a for a in expected & self.alive if self.index[a] not in got)
+                log.info("tick %d: still waiting for agents %s: publishing the tick again", k, missing)
+                self.publish(k, False, "")
+                again = time.monotonic() + REPUBLISH_S
+            self.pump(min(0.05, max(0.0, deadline - time.monotonic())))
+        log.warning("tick %d: no command from %s within %.1f s: holding their robots", k,
+                    sorted(a for a in expected & self.alive if self.index[a] not in self.cmds.get(k, {})),
+                    self.cfg.step_timeout_s)
 
     def close(self) -> None:
         with contextlib.suppress(Exception):

@@ -31,7 +31,7 @@ def launcher_cmd(out: Path, *args: str, port: int | None = None) -> list[str]:
             "--no-progress", *args]
 
 
-def run_launcher(out: Path, *args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+def run_launcher(out: Path, *args: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
     return subprocess.run(launcher_cmd(out, *args), capture_output=True, text=True, timeout=timeout, cwd=ROOT)
 
 
@@ -103,3 +103,22 @@ def scenario_with(tmp: Path, name: str, text: str, **replace: str) -> Path:
     path = tmp / name
     path.write_text(text)
     return path
+
+
+def faults_log(out: Path) -> list[tuple[float, float, str]]:
+    """(wall unix time, simulated time, description) of each fault the launcher injected."""
+    rows = []
+    for line in (out / "faults.tsv").read_text().splitlines():
+        wall, t, what = line.split("\t")
+        rows.append((float(wall), float(t), what))
+    return rows
+
+
+def positions(db: Path, agent: int) -> list[tuple[float, float, float]]:
+    """(t, px, py) of one agent over the run."""
+    traj = trajectories(db)
+    return sorted((t, xy[0], xy[1]) for (t, a), xy in traj.items() if a == agent)
+
+
+def paper_with(tmp: Path, **replace: str) -> Path:
+    return scenario_with(tmp, "paper.toml", PAPER.read_text(), **replace)

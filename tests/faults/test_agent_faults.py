@@ -1,0 +1,57 @@
+"""Agents killed, frozen and restarted by real signals while the paper's mission runs (real processes)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from tests.deploy_util import assert_all_gone, events, faults_log, positions, run_launcher
+
+
+@pytest.fixture
+def out(tmp_path: Path):
+    d = tmp_path / "run"
+    yield d
+    assert_all_gone(d)
+
+
+def test_agent_killed(out: Path) -> None:
+    p = run_launcher(out, "--fault", "kill:agent:3@50", "--json")
+    assert p.returncode == 0, p.stderr[-3000:]
+    s = json.loads(p.stdout)
+    assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == [3]  # converged: the survivors
+    lost = [e for e in events(out / "run.db") if e["kind"] == "agent_lost"]
+    assert [e["agent"] for e in lost] == [3]
+    (kill_wall, _kill_t, _), = faults_log(out)
+    assert lost[0]["wall_unix"] - kill_wall <= 1.0  # the monitor noticed within 1 s of wall time
+    # The body stays where the robot stopped: held for 0.2 s, then still until the end.
+    track = [(t, x, y) for t, x, y in positions(out / "run.db", 3) if t >= lost[0]["t"] + 0.5]
+    assert len(track) > 100 and max(abs(x - track[0][1]) + abs(y - track[0][2]) for _, x, y in track) == 0.0
+
+
+def test_agent_frozen_then_rejoins(out: Path) -> None:
+    p = run_launcher(out, "--fault", "freeze:agent:2@50+5", "--json")
+    assert p.returncode == 0, p.stderr[-3000:]
+    s = json.loads(p.stdout)
+    assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
+    ev = [e for e in events(out / "run.db") if e.get("agent") == 2]
+    assert [e["kind"] for e in ev] == ["agent_lost", "agent_joined"]
+    # While its commands were missing the robot was held, then stopped.
+    frozen = [(x, y) for t, x, y in positions(out / "run.db", 2) if ev[0]["t"] + 0.5 <= t <= ev[1]["t"] - 0.1]
+    assert len(frozen) > 20 and len(set(frozen)) == 1
+    # After rejoining it moves again and reaches its slot (converged).
+    after = [(x, y) for t, x, y in positions(out / "run.db", 2) if t > ev[1]["t"] + 1.0]
+    assert len(set(after)) > 10
+
+
+def test_agent_restarted_rejoins_with_shared_obstacles(out: Path) -> None:
+    p = run_launcher(out, "--fault", "restart:agent:4@70+1", "--json")
+    assert p.returncode == 0, p.stderr[-3000:]
+    s = json.loads(p.stdout)
+    assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
+    ev = [e["kind"] for e in events(out / "run.db") if e.get("agent") == 4]
+    assert ev == ["agent_lost", "agent_joined"]
+    joined = [ln for ln in (out / "logs" / "agent-4.log").read_text().splitlines() if "joining at tick" in ln]
+    assert joined and "'diamond'" in joined[-1]  # its peers' cached obstacle sets

@@ -1,0 +1,55 @@
+"""The monitor killed, the router restarted, 10,000 malformed messages: the mission goes on, the record holds."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from tests.deploy_util import assert_all_gone, faults_log, run_launcher, summary
+
+
+@pytest.fixture
+def out(tmp_path: Path):
+    d = tmp_path / "run"
+    yield d
+    assert_all_gone(d)
+
+
+def test_monitor_killed_is_restarted_and_appends(out: Path) -> None:
+    p = run_launcher(out, "--fault", "kill:monitor@80", "--json")
+    assert p.returncode == 0, p.stderr[-3000:]
+    s = json.loads(p.stdout)
+    assert s["converged"] and s["collisions"] == 0
+    (_, kill_t, _), = faults_log(out)
+    gaps = s["record_gaps"]
+    assert len(gaps) == 1
+    # At most 1 s of simulated time is lost before the kill; the restarted monitor notes the gap.
+    assert gaps[0]["t_from"] >= kill_t - 1.0 and gaps[0]["t_to"] > gaps[0]["t_from"]
+    assert s["duration_s"] == s["convergence_time_s"]  # recorded to the end by the second monitor
+    assert len((out / "logs" / "monitor.log").read_text().split("monitor up")) == 3  # two incarnations
+
+
+def test_router_restarted(out: Path) -> None:
+    p = run_launcher(out, "--fault", "restart:router@90+2", "--json")
+    assert p.returncode == 0, p.stderr[-3000:]
+    s = json.loads(p.stdout)
+    assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
+    assert s["convergence_time_s"] <= 240
+
+
+def test_flood_of_malformed_messages(out: Path) -> None:
+    p = run_launcher(out, "--fault", "flood@30", "--json")
+    assert p.returncode == 0, p.stderr[-3000:]
+    s = json.loads(p.stdout)
+    assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
+    assert s["convergence_time_s"] == 222.25  # malformed input changed nothing
+    sent = json.loads((out / "logs" / "flood.log").read_text().strip().splitlines()[-1])
+    assert sent["total"] == 10_000
+    # Who receives each key (agents never receive their own announcements, but do check anyone else's):
+    fanout = {"clock": 10 + 1, "truth": 1, "event": 0, "state": 1, "scan": 1, "cmd": 1, "beacon": 10 + 1,
+              "obstacles": 10}
+    expected = sum(n * fanout[key.rsplit("/", 1)[1]] for key, n in sent["sent"].items())
+    assert s["messages_rejected"] == expected, s["messages_rejected_by_process"]
+    assert summary(out / "run.db")["messages_rejected"] == expected
