@@ -31,7 +31,8 @@ def machine() -> str:
 
 
 def command_line() -> str:
-    return " ".join([os.path.relpath(sys.executable), *sys.argv]) if sys.argv else ""
+    exe = os.path.relpath(sys.executable)
+    return " ".join([sys.executable if exe.startswith("..") else exe, *sys.argv])
 
 
 def with_ticks(s: Scenario, ticks: int) -> Scenario:
