@@ -414,7 +414,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--speed", type=float, default=10.0, help="realtime: simulated seconds per wall second")
     ap.add_argument("--planner", choices=["reconfigurable", "virtual-leader"])
     ap.add_argument("--router", metavar="EP",
-                    help="router endpoint (default tcp/127.0.0.1:7447): one is started there unless one already listens")
+                    help="router endpoint (default tcp/127.0.0.1:7447); one is started there unless one listens")
     ap.add_argument("--secure", action="store_true", help="mutual TLS, per-process credentials and access control")
     ap.add_argument("--fault", action="append", default=[], metavar="SPEC",
                     help="inject a fault (repeatable), e.g. kill:agent:3@60; see the README")

@@ -169,7 +169,8 @@ class _Reader:
             raise self.fail(where, f"must be {need}, got {v}")
         return float(v)
 
-    def integer(self, data: dict[str, Any], path: str, key: str, default: int | None = None) -> int:
+    def integer(self, data: dict[str, Any], path: str, key: str, default: int | None = None,
+                lo: int | None = None) -> int:
         where = _join(path, key)
         if key not in data:
             if default is None:
@@ -178,6 +179,8 @@ class _Reader:
         v = data[key]
         if isinstance(v, bool) or not isinstance(v, int):
             raise self.fail(where, f"expected an integer, got {_kind(v)}")
+        if lo is not None and v < lo:
+            raise self.fail(where, f"must be >= {lo}, got {v}")
         return int(v)
 
     def string(self, data: dict[str, Any], path: str, key: str, default: str | None = None) -> str:
@@ -264,12 +267,13 @@ def _build(data: dict[str, Any], src: str) -> tuple[Scenario, None]:
     r.keys(s, "scenario", {"name", "duration_s", "dt_s"}, {"seed"})
     meta = ScenarioMeta(
         name=r.string(s, "scenario", "name"),
-        seed=r.integer(s, "scenario", "seed", 0),
+        seed=r.integer(s, "scenario", "seed", 0, lo=0),
         duration_s=r.number(s, "scenario", "duration_s", check=lambda v: v > 0, need="> 0"),
         dt_s=r.number(s, "scenario", "dt_s", check=lambda v: 0 < v <= 1.0, need="in (0, 1]"),
     )
-    if not all(c.isalnum() or c in "-_." for c in meta.name):
-        raise r.fail("scenario.name", f"only letters, digits, '-', '_' and '.' (it names zenoh keys), got {meta.name!r}")
+    if not all((c.isascii() and c.isalnum()) or c in "-_." for c in meta.name):
+        raise r.fail("scenario.name", f"only ASCII letters, digits, '-', '_' and '.' (it names zenoh keys), "
+                                      f"got {meta.name!r}")
     if meta.duration_s / meta.dt_s > 10_000_000:
         raise r.fail("scenario.duration_s", "more than 10 million steps of dt_s")
 
@@ -355,7 +359,7 @@ def _obstacles(r: _Reader, raw: Any) -> tuple[ObstacleSpec, ...]:
         o = r.table(o, path)
         r.keys(o, path, {"id", "vertices_m"}, set())
         oid = r.string(o, path, "id")
-        if not all(c.isalnum() or c in "-_." for c in oid):
+        if not all((c.isascii() and c.isalnum()) or c in "-_." for c in oid):
             raise r.fail(f"{path}.id", f"only letters, digits, '-', '_' and '.', got {oid!r}")
         if oid in seen:
             raise r.fail(f"{path}.id", f"duplicate obstacle id {oid!r} (also obstacles[{seen[oid]}])")

@@ -74,12 +74,12 @@ def _step_limited(p: Array, theta: Array, u: Array, l: Array, dt: float, max_spe
             v = np.clip(v, -max_speed, max_speed)
         if max_turn_rate > 0.0:
             w = np.clip(w, -max_turn_rate, max_turn_rate)
-        small = np.abs(w * h) < 1e-9
-        th_new = th + w * h
-        safe_w = np.where(small, 1.0, w)
-        dx = np.where(small, v * h * np.cos(th), v / safe_w * (np.sin(th_new) - np.sin(th)))
-        dy = np.where(small, v * h * np.sin(th), v / safe_w * (np.cos(th) - np.cos(th_new)))
-        s = s + np.stack([dx, dy], axis=1)
-        th = th_new
+        # Exact arc for constant (v, ω) over h, written without cancellation:
+        # chord = v h sinc(ω h / 2), along the mid-step heading θ + ω h / 2.
+        half = w * h / 2
+        chord = v * h * np.sinc(half / np.pi)  # np.sinc(x) = sin(πx) / (πx)
+        mid = th + half
+        s = s + np.stack([chord * np.cos(mid), chord * np.sin(mid)], axis=1)
+        th = th + w * h
     th = wrap(th)
     return head_point(s, th, l), th

@@ -179,18 +179,13 @@ def test_assumption_4_1_violation_is_a_warning_not_an_error(tmp_path):
     assert "ok" in r.stdout
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: reconswarm/scenario.py _build accepts scenario.seed < 0 (scenario check "
-                   "exits 0), then reconswarm sim crashes with a 50-line numpy ValueError traceback and exit 1 "
-                   "(np.random.SeedSequence([seed, id, 0]) in agent/deadlock.py generator); expected exit 2 with "
-                   "one line naming scenario.seed")
 def test_sim_with_negative_seed_in_file(tmp_path):
     f = tmp_path / "neg-seed.toml"
     f.write_text(sub("duration_s = 300.0", "duration_s = 1.0", sub("seed = 0", "seed = -1")))
     r = cli("sim", str(f), "-o", str(tmp_path / "run"), "--json")
     assert "Traceback" not in r.stderr
-    assert r.returncode in (0, 1, 2)
-    if r.returncode == 2:
-        assert len(r.stderr.splitlines()) == 1 and "scenario.seed" in r.stderr
+    assert r.returncode == 2
+    assert len(r.stderr.splitlines()) == 1 and "scenario.seed" in r.stderr and str(f) in r.stderr
 
 
 def test_clockwise_obstacle_is_normalised_to_ccw():

@@ -168,8 +168,7 @@ def test_limits_respected(case, v_max, w_max):
         p1, th1 = step(p, th, u, l, dt, v_max, w_max)
         s1 = body_centre(p1, th1, l)
         # |v| <= v_max: the body travels at most v_max dt; |ω| <= ω_max: it turns at most ω_max dt.
-        # (Slack 1e-6 relative: the arc formula loses ~1e-7 to cancellation, see the xfail test below.)
-        assert np.all(np.hypot(*(s1 - s0).T) <= v_max * dt * (1 + 1e-6))
+        assert np.all(np.hypot(*(s1 - s0).T) <= v_max * dt * (1 + 1e-9))  # rounding of |s| ~ 1e3 only
         assert np.all(angle_diff(th1, th) <= w_max * dt * (1 + 1e-9) + 1e-12)
         p, th = p1, th1
 
@@ -203,9 +202,6 @@ def test_limited_step_matches_fine_integration_of_saturated_unicycle(case, v_max
     assert np.all(angle_diff(th1, th_ref) <= w_max * dt / 10 + 1e-9)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG (numerical, minor): simworld/unicycle.py _step_limited computes the arc "
-                   "as v/ω (sin(θ+ωh) - sin θ), which cancels catastrophically for |ωh| just above its 1e-9 "
-                   "cut-off: the body travels ~3e-8 relative farther than v h, exceeding |v| <= v_max")
 def test_limited_arc_is_accurate_for_tiny_turn_rates():
     l = np.array([0.5])
     p = np.array([[300.0, -200.0]])
@@ -221,4 +217,4 @@ def test_limited_arc_is_accurate_for_tiny_turn_rates():
         travelled = float(np.hypot(*(body_centre(p1, th1, l) - s0)[0]))
         worst = max(worst, abs(travelled - v * dt) / (v * dt))
     # The exact arc of length v dt turning by ~1e-8 rad has a chord equal to v dt to ~1e-17 relative.
-    assert worst < 1e-12
+    assert worst < 1e-10  # rounding of |s| ~ 360 m alone is ~1e-12 relative; the cancelling formula gave 3e-8

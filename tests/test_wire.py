@@ -122,7 +122,8 @@ def test_beacon_rejections(mutate, why):
 
 
 @pytest.mark.parametrize("payload", [b"", b"\xc1", b"\x93\x01\x02\x03", b"\xff" * 64, msgpack.packb([1, 2]),
-                                     msgpack.packb("text"), msgpack.packb({1: 2}), b"\x00" * (wire.MAX_PAYLOAD_BYTES + 1)])
+                                     msgpack.packb("text"), msgpack.packb({1: 2}),
+                                     b"\x00" * (wire.MAX_PAYLOAD_BYTES + 1)])
 def test_garbage_is_rejected_by_every_decoder(payload):
     for decode in (wire.state_from_wire, wire.scan_from_wire, wire.cmd_from_wire, wire.beacon_from_wire,
                    wire.obstacles_from_wire):
