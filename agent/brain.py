@@ -13,9 +13,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agent.deadlock import StallState, generator, stall_step, window_ticks
-from agent.knowledge import KnownObstacles, obstacle_view, view_of_edges
+from agent.knowledge import KnownObstacles, view_of_edges
 from agent.leader import VirtualLeader
-from agent.planner import Neighbours, command, errors
+from agent.planner import Neighbours, ObstacleView, command, errors, repulsion
 from reconswarm.geometry import Edges, norm2
 from reconswarm.scenario import Scenario
 
@@ -48,6 +48,8 @@ class AgentBrain:
         self._union_rev = 0  # own revision last merged into the union
         self._edges: Edges | None = None  # edges of the known hulls, in obstacle-id order
         self._edges_rev = 0
+        self._centres = np.zeros((0, 2))
+        self._reach = np.zeros(0)
         self._seen: set[tuple[float, float]] = set()  # contour points already merged (merging again is a no-op)
         w = window_ticks(self.cfg.stall_window_s, s.meta.dt_s)
         self.stall = StallState.create(1, w, [generator(s.meta.seed, agent_id)])
@@ -87,30 +89,45 @@ class AgentBrain:
         if grew:
             self.rev += 1
 
-        near = sorted((x for x in peers), key=lambda x: x.id)
-        if near:
-            q = np.array([[x.px, x.py] for x in near])
-            rr = np.array([x.radius for x in near])
-            d = norm2(pos - q)
-            keep = d <= self.r[0] + rr + c.d_max_m
-            q, rr = q[keep], rr[keep]
-        else:
-            q, rr = np.zeros((0, 2)), np.zeros(0)
-        nb = Neighbours(q.reshape(1, -1, 2), rr.reshape(1, -1), np.ones((1, q.shape[0]), dtype=bool))
-        if self._edges_rev != self.rev:  # the hulls' edges change only when the set grows
-            items = self.known.sorted_items()
-            self._edges = Edges.of([h for _, h in items]) if items else None
-            self._edges_rev = self.rev
-        m = 0 if self._edges is None else self._edges.ax.shape[0]
-        if self._edges is None:
-            ob = obstacle_view(pos, 1, 0, [])
-        else:
-            ob = view_of_edges(pos, 1, m, np.zeros(m, dtype=np.int64), np.arange(m), self._edges)
+        nb = self._neighbours(pos, peers)
+        ob = self._obstacles(pos)
         e = errors(pos, center.reshape(-1, 2)[0], self.offset)
+        rep = repulsion(c, pos, self.r, nb, ob)
+        push = rep[0] + rep[1]
         pert = stall_step(self.stall, k, pos, e, c.perturbation_mps, c.k_att, c.target_radius_m, c.converge_tol_m,
-                          self.s.meta.dt_s)
-        u = command(c, pos, self.r, self.offset, center, nb, ob, pert, lead_vel)
+                          self.s.meta.dt_s, push)
+        u = command(c, pos, self.r, self.offset, center, nb, ob, pert, lead_vel, rep)
         return u[0], grew
+
+    def _neighbours(self, pos: Array, peers: list[Peer]) -> Neighbours:
+        """Peers within d_max,ij, in increasing id (entries beyond it would add exact zeros)."""
+        if not peers:
+            return Neighbours.empty(1)
+        near = sorted(peers, key=lambda x: x.id)
+        q = np.array([[x.px, x.py] for x in near])
+        rr = np.array([x.radius for x in near])
+        keep = norm2(pos - q) <= self.r[0] + rr + self.cfg.d_max_m
+        if not keep.any():
+            return Neighbours.empty(1)
+        q, rr = q[keep], rr[keep]
+        return Neighbours(q.reshape(1, -1, 2), rr.reshape(1, -1), np.ones((1, q.shape[0]), dtype=bool))
+
+    def _obstacles(self, pos: Array) -> ObstacleView:
+        """Distances to the known hulls; none at all when every hull is beyond repulsion reach (their terms
+        would be exact zeros), which a bounding circle per hull tells cheaply."""
+        if self._edges_rev != self.rev:  # the hulls' edges change only when the set grows
+            hulls = [h for _, h in self.known.sorted_items()]
+            self._edges = Edges.of(hulls) if hulls else None
+            self._centres = np.array([h.mean(axis=0) for h in hulls]).reshape(-1, 2)
+            self._reach = np.array([float(norm2(h - h.mean(axis=0)).max()) for h in hulls])
+            self._edges_rev = self.rev
+        if self._edges is None:
+            return ObstacleView.empty(1)
+        bound = norm2(pos - self._centres) - self._reach  # <= the distance to each hull
+        if not (bound <= self.r[0] + self.cfg.d_max_m).any():
+            return ObstacleView.empty(1)
+        m = self._edges.ax.shape[0]
+        return view_of_edges(pos, 1, m, np.zeros(m, dtype=np.int64), np.arange(m), self._edges)
 
     def _new_points(self, scan: dict[str, Array]) -> dict[str, Array]:
         out = {}

@@ -254,15 +254,22 @@ class AgentNode:
 
     def step(self) -> None:
         """Advance as far as the data allows."""
-        if self.mode == "realtime":
-            if self.act_at is not None and time.monotonic() >= self.act_at and self.states:
+        if self.mode == "realtime":  # act on the newest state once the peers' beacons for it are in, or
+            if not self.states:      # at the deadline a quarter of a period after it arrived
+                return
+            k = max(self.states)
+            if k <= self.k:
+                return
+            if self.beacon_sent < k:
+                st = self.states[k]
+                self.pub_beacon.put(wire.beacon_to_wire(wire.Beacon(
+                    self.id, k, st.t, st.px, st.py, self.radius, self.brain.rev, self.rej.count)))
+                self.beacon_sent = k
+            fresh = self.beacons.get(k, {})
+            due = self.act_at is not None and time.monotonic() >= self.act_at
+            if due or all(a in fresh for a in self.alive if a != self.id):
                 self.act_at = None
-                k = max(self.states)
-                if k > self.k:
-                    st = self.states[k]
-                    self.pub_beacon.put(wire.beacon_to_wire(wire.Beacon(
-                        self.id, k, st.t, st.px, st.py, self.radius, self.brain.rev, self.rej.count)))
-                    self.act(k)
+                self.act(k)
             return
         while True:
             if not self.states:
