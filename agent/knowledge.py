@@ -31,7 +31,6 @@ class KnownObstacles:
     """One agent's obstacle knowledge: obstacle id -> canonical hull (V, 2)."""
 
     hulls: dict[str, Array] = field(default_factory=dict)
-    rev: int = 0  # bumped whenever any hull grows
 
     def merge(self, oid: str, points: Array) -> bool:
         """Add points (P, 2) to obstacle `oid`; True if its hull changed."""

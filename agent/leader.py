@@ -41,10 +41,11 @@ class VirtualLeader:
         u = attraction(v, self.target, np.zeros((1, 2)), c.k_att, c.target_radius_m)
         view = obstacle_view(v, 1, len(hulls), [(0, m, h) for m, h in enumerate(hulls)])
         body = np.array([c.target_radius_m])
-        u = u + obstacle_repulsion(body, view.d, view.n, view.valid, c.d_safe_m, c.d_max_m, c.psi_mps)
+        rep = obstacle_repulsion(body, view.d, view.n, view.valid, c.d_safe_m, c.d_max_m, c.psi_mps)
+        u = u + rep
         err = norm2(v - self.target)
         u = u + stall_step(self.stall, k, v, err, c.perturbation_mps, c.k_att, c.target_radius_m,
-                           c.converge_tol_m, self.dt)
+                           c.converge_tol_m, self.dt, rep)
         cap = c.target_radius_m * c.k_att
         speed = float(norm2(u)[0])
         if speed > cap:

@@ -43,13 +43,24 @@ def agent_gaps(p: Array, r: Array, reach_m: float, cand: NDArray[np.int64] | Non
 
 
 def nearest_gap(p: Array, r: Array) -> float:
-    """Smallest surface gap to the nearest centre (used when no pair is close); inf for one robot."""
+    """The smallest surface gap over all pairs, exactly (used when no pair is close); inf for one robot.
+
+    For robot i, no robot farther than its nearest centre d_1 + (r_max - r_min) can have a smaller gap to
+    it than the nearest one, so only those are examined.
+    """
     if p.shape[0] < 2:
         return float("inf")
     from scipy.spatial import cKDTree
 
-    d, j = cKDTree(p).query(p, k=2)
-    return float(np.min(d[:, 1] - r - r[j[:, 1]]))
+    tree = cKDTree(p)
+    d, _ = tree.query(p, k=2)
+    spread = float(r.max() - r.min())
+    best = float("inf")
+    for i, js in enumerate(tree.query_ball_point(p, d[:, 1] + spread + 1e-9)):
+        js = np.array([j for j in js if j != i], dtype=np.int64)
+        if js.size:
+            best = min(best, float(np.min(norm2(p[js] - p[i]) - r[i] - r[js])))
+    return best
 
 
 @dataclass

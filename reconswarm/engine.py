@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from agent.deadlock import StallState, generator, stall_step, window_ticks
 from agent.knowledge import SwarmKnowledge, view_of_edges
 from agent.leader import VirtualLeader
-from agent.planner import ObstacleView, command, errors, neighbour_table_d
+from agent.planner import ObstacleView, command, errors, neighbour_table_d, repulsion
 from monitor.record import RunRecord, RunWriter
 from monitor.recorder import Recorder
 from monitor.summary import summarize
@@ -113,9 +113,10 @@ class Engine:
         e_track = errors(p, center, self.offsets)
         # (N,) |p_i - (p* + Δ_i)|, the recorder's tracking error, when the centre is p* itself
         self.slot_error = e_track if self.leader is None else None
+        rep = repulsion(c, p, self.r, nb, ob)
         pert = stall_step(self.stall, k, p, e_track, c.perturbation_mps, c.k_att, c.target_radius_m,
-                          c.converge_tol_m, self.s.meta.dt_s)
-        return command(c, p, self.r, self.offsets, center, nb, ob, pert, lead_vel)
+                          c.converge_tol_m, self.s.meta.dt_s, rep[0] + rep[1])
+        return command(c, p, self.r, self.offsets, center, nb, ob, pert, lead_vel, rep)
 
     def obstacle_view(self) -> ObstacleView:
         """The planner's obstacle table: each agent's known hull of every obstacle within its reach.

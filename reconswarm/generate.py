@@ -18,6 +18,7 @@ from reconswarm.scenario import AgentSpec, ObstacleSpec, PlannerConfig, Scenario
 
 R_MIN_M, R_MAX_M = 2.5, 5.0
 D_SAFE_M, D_MAX_M = 2.0, 10.0
+CRUISE_MPS = 0.08 * 80.0  # the paper's R_c k_att
 
 
 def _hex_lattice(n: int, spacing: float) -> NDArray[np.float64]:
@@ -56,14 +57,15 @@ def generate(n_agents: int, n_obstacles: int = 3, seed: int = 0) -> Scenario:
     rng = np.random.default_rng(seed)
     radii = np.round(rng.uniform(R_MIN_M, R_MAX_M, n_agents), 2)
     spacing = 2 * R_MAX_M + D_MAX_M + 2.0
-    offsets = np.round(_hex_lattice(n_agents, spacing), 2)
-    rng.shuffle(offsets)
+    lattice = _hex_lattice(n_agents, spacing)
+    # Each agent's slot keeps its place in the swarm (the start lattice translated to the target), so
+    # nobody has to cross the formation: what the agents must solve is the obstacles, not the assignment.
+    offsets = np.round(lattice, 2)
     form_r = float(np.hypot(offsets[:, 0], offsets[:, 1]).max())
     r_c = max(80.0, math.ceil(form_r + R_MAX_M + D_MAX_M + 15.0))
-    # Starts: a jittered lattice (spacing minus twice the jitter still clears r_i + r_j + d_safe).
+    # Starts: the jittered lattice (spacing minus twice the jitter still clears r_i + r_j + d_safe).
     jitter = 3.0
-    starts = _hex_lattice(n_agents, spacing) + rng.uniform(-jitter, jitter, (n_agents, 2))
-    starts = np.round(starts, 2)
+    starts = np.round(lattice + rng.uniform(-jitter, jitter, (n_agents, 2)), 2)
     start_r = float(np.hypot(starts[:, 0], starts[:, 1]).max())
     width = max(100.0, form_r + 40.0)
     corridor = max(300.0, 2.5 * width)
@@ -84,13 +86,16 @@ def generate(n_agents: int, n_obstacles: int = 3, seed: int = 0) -> Scenario:
         poly = _convex_polygon(rng, centre, size)
         obstacles.append(ObstacleSpec(id=f"obs{len(obstacles):03d}", vertices_m=tuple(map(tuple, poly))))
         placed.append((centre, size))
-    speed = r_c * 0.08
-    travel = target_x / speed
-    settle = math.log(max(r_c, 1.0) / 0.5) / 0.08
-    duration = math.ceil((1.6 * travel + 2.0 * settle) / 10.0) * 10.0
+    # The paper's cruise speed R_c k_att = 6.4 m/s whatever the size: a larger target disk lowers k_att rather
+    # than speeding the swarm up (the pressure a crowd puts on an obstacle grows with the attraction).
+    k_att = round(CRUISE_MPS / r_c, 6)
+    travel = target_x / CRUISE_MPS
+    settle = math.log(max(r_c, 1.0) / 0.5) / k_att
+    # A generous limit (a run ends when it converges): detours, stalls and crowding at the slots take time.
+    duration = math.ceil((2.5 * travel + 3.0 * settle) / 10.0) * 10.0
     return Scenario(
         meta=ScenarioMeta(name=f"gen-n{n_agents}-m{n_obstacles}-s{seed}", seed=seed, duration_s=duration, dt_s=0.05),
-        planner=PlannerConfig(kind="reconfigurable", k_att=0.08, target_radius_m=float(r_c), psi_mps=-65.0,
+        planner=PlannerConfig(kind="reconfigurable", k_att=k_att, target_radius_m=float(r_c), psi_mps=-65.0,
                               d_safe_m=D_SAFE_M, d_max_m=D_MAX_M, sensing_range_m=40.0, link_range_m=40.0,
                               perturbation_mps=1.0, converge_tol_m=0.5),
         world=WorldConfig(),

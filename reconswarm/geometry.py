@@ -21,6 +21,7 @@ Array = NDArray[np.float64]
 # along a straight edge deviate from it by rounding only (~1e-16 relative), so they are dropped
 # consistently whatever else is in the input; real corners are many orders of magnitude above this.
 COLLINEAR_TOL = 1e-9
+ON_EDGE_M = 1e-9  # closer to an edge than this, a point's direction from it is the edge's normal
 
 
 def norm2(v: Array) -> Array:
@@ -236,8 +237,10 @@ def signed_distance(px: Array, py: Array, e: Edges) -> tuple[Array, Array, Array
     cross = abx * apy - aby * apx
     inside = ((cross >= 0.0) | full(e.invalid)).all(axis=1)
     inside &= (e.closed if same else np.broadcast_to(e.closed, shape[:-1])).reshape(-1)
-    on_edge = dist == 0.0
-    if on_edge.any():  # on the boundary: the edge's outward normal (right-hand side of a CCW edge)
+    # On the boundary (to within 1 nm, where p - q is rounding noise): the edge's outward normal
+    # (right-hand side of a CCW edge).
+    on_edge = dist <= ON_EDGE_M
+    if on_edge.any():
         ex, ey = abx[rows, k], aby[rows, k]
         elen = np.sqrt(ex * ex + ey * ey)
         ok = elen > 0.0

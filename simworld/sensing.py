@@ -87,8 +87,15 @@ class ContourField:
             return np.zeros((n, 0))
         bound = norm2(p[:, None, :] - self.centre[None, :, :]) - self.reach  # (N, M)
         close = bound <= exact_within_m
-        if not close.any():
-            return bound
+        if not close.any():  # all far: exact for the pair(s) that can hold the minimum gap, bounds elsewhere
+            out = bound.copy()
+            gap = bound - radii[:, None]
+            i, j = np.unravel_index(int(np.argmin(gap)), gap.shape)
+            out[i, j] = self._exact(p, np.array([i]), np.array([j]))[0]
+            rows, cols = np.nonzero(gap < out[i, j] - radii[i])
+            if rows.size:
+                out[rows, cols] = self._exact(p, rows, cols)
+            return out
         if n * m <= 256:  # small: exact everywhere, as true_distances, is cheaper than picking
             return self._exact_all(p)
         out = bound.copy()

@@ -148,10 +148,6 @@ def test_knowledge_is_only_sensed_or_shared():
             assert all(poly.covers(Point(*q)) for q in h)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG (minor): run summary min_obstacle_gap_m is a lower bound, not the surface "
-                   "gap, when no agent ever comes within exact_within_m (= max(R_v, r_max + d_max)) of any obstacle: "
-                   "Engine.plan uses ContourField.true_distances(p, exact_within_m), which then returns "
-                   "‖p - centre‖ - reach for every pair, and the Recorder takes the gaps from it")
 def test_min_obstacle_gap_is_exact_when_obstacles_stay_far(tmp_path):
     base = load(PAPER)
     far = ((300.0, 300.0), (700.0, 300.0), (700.0, 310.0), (300.0, 310.0))  # a long wall ~250 m off the path
@@ -168,10 +164,6 @@ def test_min_obstacle_gap_is_exact_when_obstacles_stay_far(tmp_path):
     assert summary["min_obstacle_gap_m"] == pytest.approx(true_min, abs=1e-3)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG (planner/generator): generate(10, 3, seed=0) is not solved within its own "
-                   "duration_s: agent 9 stays pinned ~223 m from its slot against the flat face of obs001 near "
-                   "(318, -3.9) despite ~20 stall perturbations of 1 m/s (Remark 1's remedy is too weak against the "
-                   "attraction R_c k_att = 6.4 m/s), so `reconswarm sim` / run_local.sh -n 10 exit 1")
 def test_generated_scenario_with_obstacles_converges():
     s = generate(10, 3, 0)
     out = run(SimConfig(s, Path("/nonexistent-not-written"), record=False))

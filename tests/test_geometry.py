@@ -244,10 +244,6 @@ def test_signed_distance_zero_on_boundary_with_outward_normal(poly, edge, t):
         np.testing.assert_allclose(n0, [[0.0, -1.0], [1.0, 0.0]], atol=1e-15)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG (robustness, minor): reconswarm/geometry.py signed_distance: for a point "
-                   "within rounding of an edge (|d| ~ 4e-16, but not exactly 0) the normal is (p - q)/|p - q| of "
-                   "two nearly equal points, i.e. rounding noise, here almost tangent to the edge instead of "
-                   "its outward normal")
 def test_signed_distance_normal_within_rounding_of_an_edge():
     poly = np.array([[1.9214184860311239, 0.22204540131706907], [-1.5317613773090513, 0.5143861713513346],
                      [-0.47996684718033167, -0.77662158874013]])

@@ -240,9 +240,6 @@ def test_safety_monitor_gaps_and_episodes():
     assert mon.min_obstacle_gap_m == pytest.approx(1.5)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG (minor): monitor/metrics.py SafetyMonitor.step: when every pair is beyond "
-                   "the candidate reach, the tick's minimum agent gap comes from nearest_gap(), which only looks at "
-                   "each agent's nearest *centre*; with unequal radii the smallest surface gap can be another pair")
 def test_safety_monitor_min_gap_when_everything_is_far():
     # A (r 5) at 0, C (r 5) at -31: gap 21. But C's nearest centre is D (r 1, 30.5 away, gap 24.5) and A's is
     # B (r 1, 30.9 away, gap 24.9): nobody's nearest centre is the closest surface.
