@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from agent.deadlock import StallState, generator, stall_step, window_ticks
+from agent.deadlock import ESCAPE_WINDOWS, StallState, generator, stall_step, window_ticks
 from agent.leader import VirtualLeader
 from reconswarm.scenario import AgentSpec, PlannerConfig, Scenario, ScenarioMeta, WorldConfig
 
@@ -15,14 +15,23 @@ K_ATT, R_C, TOL, DT = 0.08, 80.0, 0.5, 0.05
 
 
 def run_stall(positions: np.ndarray, errors: np.ndarray, magnitude: float = 1.0, seed: int = 0,
-              ids=(1,), window_s: float = 5.0):
-    """Feed (T, N, 2) positions and (T, N) error norms; return per-tick perturbations (T, N, 2) and the state."""
+              ids=(1,), window_s: float = 5.0, push: np.ndarray | None = None):
+    """Feed (T, N, 2) positions, (T, N) error norms and optionally (T, N, 2) repulsion; return per-tick
+    perturbations (T, N, 2) and the state."""
     n = positions.shape[1]
     w = window_ticks(window_s, DT)
     st = StallState.create(n, w, [generator(seed, i) for i in ids])
-    out = np.array([stall_step(st, k, positions[k], errors[k], magnitude, K_ATT, R_C, TOL, DT)
+    out = np.array([stall_step(st, k, positions[k], errors[k], magnitude, K_ATT, R_C, TOL, DT,
+                               None if push is None else push[k])
                     for k in range(positions.shape[0])])
     return out, st, w
+
+
+def first_draws(seed: int, agent_id: int) -> tuple[float, float]:
+    """An episode's draws from the agent's own generator: its side, then a free direction."""
+    g = generator(seed, agent_id)
+    side = 1.0 if g.uniform() < 0.5 else -1.0
+    return side, g.uniform(0.0, 2 * math.pi)
 
 
 def test_window_ticks():
@@ -30,29 +39,42 @@ def test_window_ticks():
     assert window_ticks(0.05, 0.05) == 2  # at least two ticks
 
 
-def test_pinned_agent_stalls_after_a_full_window_and_is_pushed_for_one_window():
-    t = 400
-    pos = np.zeros((t, 1, 2)) + np.array([300.0, 4.0])
-    err = np.full((t, 1), 200.0)
-    pert, st, w = run_stall(pos, err, magnitude=1.5, seed=11, ids=(7,))
+def test_pinned_agent_escape_episode_turns_round_once_then_ends():
+    pos = np.zeros((1, 1, 2)) + np.array([300.0, 4.0])
+    w = window_ticks(5.0, DT)
+    t = w * (1 + ESCAPE_WINDOWS * 3 + 3)
+    pert, st, w = run_stall(np.repeat(pos, t, axis=0), np.full((t, 1), 200.0), magnitude=1.5, seed=11, ids=(7,))
     mag = np.hypot(pert[..., 0], pert[..., 1])[:, 0]
     on = np.flatnonzero(mag > 0)
     first = int(on[0])
     assert w <= first <= w + 1  # needs a full window of history first
-    # Pushes at perturbation_mps for exactly one window, in one direction.
-    assert np.allclose(mag[first:first + w], 1.5) and mag[first + w] == 0.0
-    assert np.all(pert[first:first + w] == pert[first])
-    # The direction is the first draw of the agent's own generator, seeded by (seed, id).
-    ang = generator(11, 7).uniform(0.0, 2 * math.pi)
+    # Nothing repels it: it pushes at perturbation_mps in the free direction drawn from its own generator...
+    _, ang = first_draws(11, 7)
     np.testing.assert_allclose(pert[first, 0], [1.5 * math.cos(ang), 1.5 * math.sin(ang)], atol=1e-15)
-    # Still pinned: it stalls again after another full window, with the generator's next draw.
-    assert st.stalls[0] >= 2
-    second = int(on[on > first + w][0])
-    assert second >= first + 2 * w
-    g = generator(11, 7)
-    g.uniform(0.0, 2 * math.pi)
-    ang2 = g.uniform(0.0, 2 * math.pi)
-    np.testing.assert_allclose(pert[second, 0], [1.5 * math.cos(ang2), 1.5 * math.sin(ang2)], atol=1e-15)
+    leg = ESCAPE_WINDOWS * w
+    assert np.all(pert[first:first + leg] == pert[first])
+    # ...with no progress it turns round once, for twice as long, then the episode ends.
+    assert np.all(pert[first + leg:first + 3 * leg] == -pert[first])
+    assert mag[first + 3 * leg] == 0.0
+    # Still pinned: a new stall after another full window.
+    again = on[on > first + 3 * leg]
+    assert again.size and again[0] >= first + 3 * leg + w and st.stalls[0] == 2
+
+
+def test_escape_follows_the_boundary_and_ends_on_progress():
+    w = window_ticks(5.0, DT)
+    t = 3 * w
+    pos = np.zeros((t, 1, 2)) + np.array([300.0, 4.0])
+    err = np.full((t, 1), 200.0)
+    push = np.zeros((t, 1, 2)) + np.array([0.0, 10.0])  # a face below it pushes it up
+    progress_at = 2 * w
+    err[progress_at:] = 200.0 * 0.95 - 1.5  # below e0 * 0.95 - 1: the episode is over
+    pert, _, _ = run_stall(pos, err, magnitude=2.0, seed=3, ids=(5,), push=push)
+    on = np.flatnonzero(np.hypot(pert[:, 0, 0], pert[:, 0, 1]) > 0)
+    side, _ = first_draws(3, 5)
+    # Along the face (perpendicular to the push), to the side drawn for this episode.
+    np.testing.assert_allclose(pert[on[0], 0], [-2.0 * side, 0.0], atol=1e-15)
+    assert on[-1] == progress_at - 1 and np.all(pert[progress_at:] == 0.0)
 
 
 def test_no_stall_when_moving_freely_sliding_or_close_to_the_slot_or_disabled():
