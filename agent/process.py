@@ -72,6 +72,7 @@ class AgentNode:
         self.last_clock = time.monotonic()
         self.ended = False
         self.last_cmd: bytes | None = None
+        self._linked: tuple[int, dict[int, int]] = (-1, {})  # (tick, linked peer -> its set's revision)
         self.beacon_again = 0.0
         block = zenoh.CongestionControl.BLOCK
         k = self.keys
@@ -180,18 +181,14 @@ class AgentNode:
             log.warning("agent %d: tick %d: gave up waiting for peers' data", self.id, k)
             return True
         fresh = self.beacons.get(k, {})
-        expected = [a for a in clock.alive if a != self.id and a in self.alive]
-        if any(a not in fresh for a in expected):
+        if len(fresh) < len(clock.alive) - 1 and any(a not in fresh for a in clock.alive
+                                                      if a != self.id and a in self.alive):
             return False
-        need = self._set_sources(k, np.array([st.px, st.py]))
-        return all(rev == 0 or rev in self.sets.get(a, {}) for a, rev in need)
-
-    def _set_sources(self, k: int, p: np.ndarray) -> list[tuple[int, int]]:
-        """(peer, revision) of the obstacle sets tick k merges: linked peers (all, for the leader)."""
-        fresh = self.beacons.get(k, {})
-        peers = [Peer(a, b.px, b.py, b.radius) for a, b in fresh.items()]
-        ids = [b.id for b in peers] if self.brain.leader is not None else self.brain.linked(p, peers)
-        return [(a, fresh[a].rev) for a in ids]
+        if self._linked[0] != k:
+            fresh_peers = [Peer(a, b.px, b.py, b.radius) for a, b in fresh.items()]
+            self._linked = (k, {a: fresh[a].rev for a in self.brain.linked(np.array([st.px, st.py]), fresh_peers)})
+        need = {a: b.rev for a, b in fresh.items()} if self.brain.leader is not None else self._linked[1]
+        return all(rev == 0 or rev in self.sets.get(a, ()) for a, rev in need.items())
 
     def _unmerged(self, wanted: dict[int, int], merged: dict[int, int]) -> list[dict[str, np.ndarray]]:
         """The sets at the wanted revisions that are not merged yet (and mark them merged)."""
@@ -217,8 +214,10 @@ class AgentNode:
         peers = [Peer(b.id, b.px, b.py, b.radius) for b in self._peers(k)]
         if self.mode == "lockstep":  # exactly the peers' sets at k-1, as their beacons at k announce
             fresh = self.beacons.get(k, {})
-            fresh_peers = [Peer(a, b.px, b.py, b.radius) for a, b in fresh.items()]
-            linked = {a: fresh[a].rev for a in self.brain.linked(p, fresh_peers)}
+            if self._linked[0] != k:  # (the wait gave up before all beacons came)
+                fresh_peers = [Peer(a, b.px, b.py, b.radius) for a, b in fresh.items()]
+                self._linked = (k, {a: fresh[a].rev for a in self.brain.linked(p, fresh_peers)})
+            linked = self._linked[1]
             every = {a: b.rev for a, b in fresh.items()}
         else:  # realtime: whatever is latest
             linked = {a: max(self.sets.get(a, {0: None})) for a in self.brain.linked(p, peers)}
@@ -237,7 +236,8 @@ class AgentNode:
         self.pub_cmd.put(self.last_cmd)
         self.k = k
         self.wait_since = None
-        self._prune(k)
+        if k % 20 == 0:
+            self._prune(k)
 
     def _obstacles_wire(self, k: int) -> bytes:
         sets = {oid: tuple(map(tuple, h.tolist())) for oid, h in self.brain.obstacle_sets().items()}

@@ -26,6 +26,8 @@ from reconswarm.session import Inbox, Rejections, Stopper, ZenohOptions, open_se
 
 log = logging.getLogger("reconswarm.monitor")
 END_GRACE_S = 3.0  # after the world's last clock, how long to wait for the last states
+CHANNEL_DEPTH = 1 << 20  # samples a queue holds (deep enough that zenoh never waits for the monitor)
+POLL_S = 0.002  # with nothing queued, look again after this long
 BURST_S = 1.0  # agents lost (or back) within this much wall time of each other count as one network event
 COMMIT_SIM_S = 0.5  # commit the record at least every this much simulated time (and every 0.5 s of wall time)
 
@@ -79,9 +81,11 @@ class MonitorNode:
         k = self.keys
         self.pub_event = z.declare_publisher(k.event, congestion_control=zenoh.CongestionControl.BLOCK)
         cb = self.inbox.callback
-        self.subs = [z.declare_subscriber(k.truth, cb), z.declare_subscriber(k.all_agents("beacon"), cb),
-                     z.declare_subscriber(k.clock, cb),
-                     z.liveliness().declare_subscriber(k.alive_all, cb, history=True)]
+        # Data arrives in queues read by the loop in batches (the monitor is off the lockstep's critical
+        # path, so it need not wake for every message); liveliness changes come through the inbox.
+        self.channels = [z.declare_subscriber(key, zenoh.handlers.FifoChannel(CHANNEL_DEPTH))
+                         for key in (k.truth, k.all_agents("beacon"), k.clock)]
+        self.subs = [z.liveliness().declare_subscriber(k.alive_all, cb, history=True)]
         self.token = z.liveliness().declare_token(k.alive_monitor)
 
     def emit(self, ev: dict[str, Any]) -> None:
@@ -240,11 +244,15 @@ class MonitorNode:
         last_counts = time.monotonic()
         try:
             while not stop.stopped:
-                item = self.inbox.get(0.05)
-                if item is not None:
+                for item in self.inbox.drain():
                     self.handle(*item)
-                    for more in self.inbox.drain():
-                        self.handle(*more)
+                got = 0
+                for ch in self.channels:
+                    while (sample := ch.try_recv()) is not None:
+                        self.handle(str(sample.key_expr), sample.payload.to_bytes(), "PUT")
+                        got += 1
+                if not got:
+                    time.sleep(POLL_S)
                 self.flush()
                 if self.end is None:
                     self.network_events()

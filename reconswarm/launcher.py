@@ -28,11 +28,12 @@ from reconswarm import faults as faults_mod
 from reconswarm import wire
 from reconswarm.errors import BadInput, ProcessFailure, ReconswarmError
 from reconswarm.scenario import Scenario, load, to_toml
-from reconswarm.session import DEFAULT_ROUTER, Inbox, ZenohOptions, open_session
+from reconswarm.session import DEFAULT_ROUTER, ZenohOptions, open_session
 
 log = logging.getLogger("reconswarm.launch")
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
+ZENOH_RUNTIME = "(" + ", ".join(f"{pool}: (worker_threads: 1)" for pool in ("app", "acc", "tx", "rx", "net")) + ")"
 
 
 @dataclass(frozen=True)
@@ -151,14 +152,19 @@ def prepare_scenario(cfg: LaunchConfig) -> tuple[Scenario, Path]:
 
 
 class ClockWatch:
-    """Follows the run's clock (and events) on its own zenoh session: progress and fault timing."""
+    """Follows the run's clock (and events) on its own zenoh session: progress and fault timing.
+
+    The clock lands in a one-slot ring (only the latest matters), events in a queue; both are read when
+    the launcher polls, so this process does not wake for every tick.
+    """
 
     def __init__(self, run: str, zopts: ZenohOptions) -> None:
+        import zenoh
+
         self.keys = wire.Keys(run)
-        self.inbox = Inbox()
         self.session = open_session(zopts, "run_local")
-        self.subs = [self.session.declare_subscriber(self.keys.clock, self.inbox.callback),
-                     self.session.declare_subscriber(self.keys.event, self.inbox.callback)]
+        self.clock_sub = self.session.declare_subscriber(self.keys.clock, zenoh.handlers.RingChannel(1))
+        self.event_sub = self.session.declare_subscriber(self.keys.event, zenoh.handlers.FifoChannel(10_000))
         self.t = 0.0
         self.k = -1
         self.alive = 0
@@ -166,18 +172,17 @@ class ClockWatch:
         self.events: list[wire.Event] = []
 
     def poll(self) -> None:
-        for key, payload, _ in self.inbox.drain():
-            try:
-                if key == self.keys.clock:
-                    c = wire.clock_from_wire(payload)
-                    if c.k >= self.k:
-                        self.t, self.k, self.alive = c.t, c.k, len(c.alive)
-                    if c.end:
-                        self.end = c
-                else:
-                    self.events.append(wire.event_from_wire(payload))
-            except wire.WireError:
-                pass
+        with contextlib.suppress(wire.WireError):
+            sample = self.clock_sub.try_recv()
+            if sample is not None:
+                c = wire.clock_from_wire(sample.payload.to_bytes())
+                if c.k >= self.k:
+                    self.t, self.k, self.alive = c.t, c.k, len(c.alive)
+                if c.end:
+                    self.end = c
+        while (sample := self.event_sub.try_recv()) is not None:
+            with contextlib.suppress(wire.WireError):
+                self.events.append(wire.event_from_wire(sample.payload.to_bytes()))
 
     def close(self) -> None:
         self.session.close()
@@ -249,6 +254,9 @@ def run(cfg: LaunchConfig) -> int:
     if any(f.action == "partition" for f in cfg.faults) and cfg.hosts != 2:
         raise BadInput("--fault partition@...: needs --hosts 2 (two hosts to cut apart)")
     env = dict(os.environ, RECONSWARM_DIE_WITH_PARENT=str(os.getpid()), PYTHONUNBUFFERED="1")
+    # One worker thread per zenoh runtime pool: a process here handles a few hundred messages a second,
+    # and fewer threads mean fewer hand-offs between them (measured ~3 % less CPU on the paper mission).
+    env.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)
     fleet = Fleet(cfg.out, env)
     stop_sig: list[int] = []
 
