@@ -336,9 +336,15 @@ def scan_from_wire(payload: bytes, key_id: int | None = None) -> Scan:
         raise WireError(f"field 'points': expected a list of at most {MAX_POINTS} points")
     out = []
     for p in pts:
-        if not isinstance(p, list) or len(p) != 3:
+        if type(p) is not list or len(p) != 3:
             raise WireError("field 'points': each point is [x, y, obstacle_id]")
-        out.append((_num(p[0], "point x"), _num(p[1], "point y"), _str(p[2], "point obstacle_id")))
+        x, y, oid = p
+        # Inline for the common case (two finite floats and a short name); the helpers say what is wrong.
+        if not (type(x) is float and type(y) is float and x - x == 0.0 and y - y == 0.0):
+            x, y = _num(x, "point x"), _num(y, "point y")
+        if type(oid) is not str or not 0 < len(oid) <= MAX_STR:
+            _str(oid, "point obstacle_id")
+        out.append((x, y, oid))
     return Scan(_agent_id(o, key_id), _int(o, "k"), _float(o, "t"), tuple(out))
 
 

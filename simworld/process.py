@@ -154,8 +154,9 @@ class World:
             ends = np.searchsorted(qa, np.arange(len(self.ids)), side="right")
             for i in np.flatnonzero(counts):
                 idx = qs[starts[i]:ends[i]]
-                pts = tuple((float(x), float(y), self.field.ids[o])
-                            for (x, y), o in zip(self.field.samples[idx], self.field.owner[idx], strict=True))
+                names = self.field.ids
+                pts = tuple(zip(*self.field.samples[idx].T.tolist(),
+                                [names[o] for o in self.field.owner[idx].tolist()], strict=True))
                 self.pub_scan[self.ids[i]].put(wire.scan_to_wire(wire.Scan(self.ids[i], k, t, pts)))
         for kk in [x for x in self.pub_time if x < k - 1000]:
             del self.pub_time[kk]
