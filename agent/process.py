@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import zenoh
 
 from agent.brain import AgentBrain, Peer
 from reconswarm import wire
@@ -41,8 +42,7 @@ class AgentConfig:
 
 
 class AgentNode:
-    def __init__(self, cfg: AgentConfig, s: Scenario, session: object) -> None:
-        import zenoh
+    def __init__(self, cfg: AgentConfig, s: Scenario, session: zenoh.Session) -> None:
         from zenoh import ext
 
         self.cfg, self.s, self.z = cfg, s, session
@@ -77,23 +77,23 @@ class AgentNode:
         block = zenoh.CongestionControl.BLOCK
         k = self.keys
         z = session
-        self.pub_beacon = z.declare_publisher(k.beacon(self.id), congestion_control=block)  # type: ignore[attr-defined]
-        self.pub_cmd = z.declare_publisher(k.cmd(self.id), congestion_control=block)  # type: ignore[attr-defined]
+        self.pub_beacon = z.declare_publisher(k.beacon(self.id), congestion_control=block)
+        self.pub_cmd = z.declare_publisher(k.cmd(self.id), congestion_control=block)
         self.pub_obs = ext.declare_advanced_publisher(z, k.obstacles(self.id), cache=ext.CacheConfig(max_samples=1))
         cb = self.inbox.callback
         remote = zenoh.Locality.REMOTE
         self.subs = [
-            z.declare_subscriber(k.state(self.id), cb),  # type: ignore[attr-defined]
-            z.declare_subscriber(k.scan(self.id), cb),  # type: ignore[attr-defined]
-            z.declare_subscriber(k.clock, cb),  # type: ignore[attr-defined]
+            z.declare_subscriber(k.state(self.id), cb),
+            z.declare_subscriber(k.scan(self.id), cb),
+            z.declare_subscriber(k.clock, cb),
             # Our own announcements are not delivered back (REMOTE); anyone else's on our keys are checked.
-            z.declare_subscriber(k.all_agents("beacon"), cb, allowed_origin=remote),  # type: ignore[attr-defined]
+            z.declare_subscriber(k.all_agents("beacon"), cb, allowed_origin=remote),
             ext.declare_advanced_subscriber(z, k.all_agents("obstacles"), cb, allowed_origin=remote,
                                             history=ext.HistoryConfig(detect_late_publishers=True)),
-            z.liveliness().declare_subscriber(k.alive_all, cb, history=True),  # type: ignore[attr-defined]
+            z.liveliness().declare_subscriber(k.alive_all, cb, history=True),
         ]
         # Declared last: the token tells the world this agent is ready to receive.
-        self.token = z.liveliness().declare_token(k.alive_agent(self.id))  # type: ignore[attr-defined]
+        self.token = z.liveliness().declare_token(k.alive_agent(self.id))
 
     # ------------------------------------------------------------------------------------------ input
 

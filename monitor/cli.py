@@ -5,7 +5,7 @@ from __future__ import annotations
 import csv
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -16,7 +16,7 @@ monitor_app = typer.Typer(no_args_is_help=True, help="Record runs and read run r
 DbArg = Annotated[Path, typer.Argument(help="A run record (run.db).")]
 
 
-def _open(db: Path):  # type: ignore[no-untyped-def]
+def _open(db: Path) -> Any:
     from monitor.record import RunRecord
 
     return RunRecord(db)

@@ -80,7 +80,7 @@ def plot_run(rec: RunRecord, out: Path) -> None:
         lab = labels(len(ids), graph_edges(np.nan_to_num(p), alive, np.zeros((0, 2), np.int64),
                                            s.planner.link_range_m, 0.0), alive)
         groups = {g: n for n, g in enumerate(sorted(set(lab[lab >= 0].tolist())))}
-        for k in np.flatnonzero(np.isfinite(p[:, 0])):
+        for k in map(int, np.flatnonzero(np.isfinite(p[:, 0]))):
             c = group_cmap(groups[lab[k]] % 9) if lab[k] >= 0 else "0.2"
             a.add_patch(Circle(p[k], radii[k], fc=c, ec="k", lw=0.5, alpha=0.85, zorder=3))
             a.plot([p[k, 0], slots[k, 0]], [p[k, 1], slots[k, 1]], ":", lw=0.4, color="0.6", zorder=0)

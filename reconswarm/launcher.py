@@ -210,14 +210,16 @@ def plan_network(cfg: LaunchConfig, s: Scenario) -> Net:
         from reconswarm import secure
 
         sec = secure.create(cfg.out / "secrets", s, endpoint)
-        reach = {("monitor", "-"): ([], ["--zenoh-config", str(sec.config_for("monitor", "-"))]),
+        reach: dict[tuple[str, str], tuple[list[str], list[str]]] = {
+            ("monitor", "-"): ([], ["--zenoh-config", str(sec.config_for("monitor", "-"))]),
                  ("simworld", "-"): ([], ["--zenoh-config", str(sec.config_for("simworld", "-"))]),
                  ("flood", "-"): ([], ["--zenoh-config", str(cfg.out / "secrets" / "intruder.json5")])}
         reach |= {("agent", str(a.id)): ([], ["--zenoh-config", str(sec.config_for("agent", str(a.id)))])
                   for a in s.agents}
         if not _port_free(sec.endpoint):  # a router already there holds another run's CA: it cannot serve us
             raise ProcessFailure(f"router: {sec.endpoint} is in use; secure mode starts its own router")
-        routers = [("-", ["router", "--zenoh-config", str(sec.router_config)], [])]
+        routers: list[tuple[str, list[str], list[str]]] = [
+            ("-", ["router", "--zenoh-config", str(sec.router_config)], [])]
         return Net(sec.observer_options(), routers, reach, [])
     if cfg.hosts == 2:
         from reconswarm import netns

@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -26,7 +27,7 @@ ZConfig = Annotated[Path | None, typer.Option("--zenoh-config", help="Zenoh JSON
 RunId = Annotated[str | None, typer.Option("--run", help="Run name in key expressions (default: scenario name).")]
 
 
-def _guard(fn, *args):  # type: ignore[no-untyped-def]
+def _guard(fn: Callable[[], int]) -> None:
     from reconswarm.cli import fail
 
     setup_logging()
@@ -39,14 +40,14 @@ def _guard(fn, *args):  # type: ignore[no-untyped-def]
         prof = cProfile.Profile()
         prof.enable()
     try:
-        code = fn(*args)
+        code = fn()
     except ReconswarmError as exc:
         fail(exc)
         return
     finally:
         if prof is not None:
             prof.disable()
-            prof.dump_stats(os.path.join(prof_dir, f"{fn.__module__}-{os.getpid()}.prof"))
+            prof.dump_stats(os.path.join(str(prof_dir), f"{fn.__module__}-{os.getpid()}.prof"))
     raise typer.Exit(code)
 
 

@@ -294,7 +294,7 @@ def _num(v: Any, what: str) -> float:
     t = type(v)
     if t is float:
         if v - v == 0.0:  # false for NaN and ±inf
-            return v  # type: ignore[no-any-return]
+            return float(v)
         raise WireError(f"{what}: not finite")
     if t is int:
         return float(v)
@@ -304,7 +304,7 @@ def _num(v: Any, what: str) -> float:
 def _float(obj: dict[str, Any], key: str) -> float:
     v = obj.get(key)
     if type(v) is float and v - v == 0.0:  # the common case, checked inline
-        return v  # type: ignore[no-any-return]
+        return float(v)
     if v is None:
         raise WireError(f"field {key!r} missing")
     return _num(v, f"field {key!r}")

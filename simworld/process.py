@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import zenoh
 
 from agent.planner import errors
 from reconswarm import wire
@@ -48,8 +49,7 @@ class WorldConfig:
 
 
 class World:
-    def __init__(self, cfg: WorldConfig, s: Scenario, session: object) -> None:
-        import zenoh
+    def __init__(self, cfg: WorldConfig, s: Scenario, session: zenoh.Session) -> None:
 
         self.cfg, self.s, self.z = cfg, s, session
         self.keys = wire.Keys(cfg.run_id or s.meta.name)
@@ -76,15 +76,15 @@ class World:
         block = zenoh.CongestionControl.BLOCK
         z = session
         k = self.keys
-        self.pub_clock = z.declare_publisher(k.clock, congestion_control=block)  # type: ignore[attr-defined]
-        self.pub_truth = z.declare_publisher(k.truth, congestion_control=block)  # type: ignore[attr-defined]
-        self.pub_state = {a: z.declare_publisher(k.state(a), congestion_control=block)  # type: ignore[attr-defined]
+        self.pub_clock = z.declare_publisher(k.clock, congestion_control=block)
+        self.pub_truth = z.declare_publisher(k.truth, congestion_control=block)
+        self.pub_state = {a: z.declare_publisher(k.state(a), congestion_control=block)
                           for a in self.ids}
-        self.pub_scan = {a: z.declare_publisher(k.scan(a), congestion_control=block)  # type: ignore[attr-defined]
+        self.pub_scan = {a: z.declare_publisher(k.scan(a), congestion_control=block)
                          for a in self.ids}
-        self.subs = [z.declare_subscriber(k.all_agents("cmd"), self.inbox.callback),  # type: ignore[attr-defined]
-                     z.liveliness().declare_subscriber(k.alive_all, self.inbox.callback, history=True)]  # type: ignore[attr-defined]
-        self.token = z.liveliness().declare_token(k.alive_simworld)  # type: ignore[attr-defined]
+        self.subs = [z.declare_subscriber(k.all_agents("cmd"), self.inbox.callback),
+                     z.liveliness().declare_subscriber(k.alive_all, self.inbox.callback, history=True)]
+        self.token = z.liveliness().declare_token(k.alive_simworld)
 
     def handle(self, key: str, payload: bytes, kind: str) -> None:
         try:
@@ -152,7 +152,7 @@ class World:
         if qa.size:
             starts = np.searchsorted(qa, np.arange(len(self.ids)))
             ends = np.searchsorted(qa, np.arange(len(self.ids)), side="right")
-            for i in np.flatnonzero(counts):
+            for i in map(int, np.flatnonzero(counts)):
                 idx = qs[starts[i]:ends[i]]
                 names = self.field.ids
                 pts = tuple(zip(*self.field.samples[idx].T.tolist(),
