@@ -50,7 +50,6 @@ class WorldConfig:
 
 class World:
     def __init__(self, cfg: WorldConfig, s: Scenario, session: zenoh.Session) -> None:
-
         self.cfg, self.s, self.z = cfg, s, session
         self.keys = wire.Keys(cfg.run_id or s.meta.name)
         self.ids = [a.id for a in s.agents]
