@@ -13,7 +13,6 @@ A peer whose beacon is missing is kept where it was last seen (a static obstacle
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import time
 from dataclasses import dataclass
@@ -26,7 +25,7 @@ from agent.brain import AgentBrain, Peer
 from reconswarm import wire
 from reconswarm.errors import BadInput
 from reconswarm.scenario import Scenario, load
-from reconswarm.session import Inbox, Rejections, Stopper, ZenohOptions, open_session, usage
+from reconswarm.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
 
 log = logging.getLogger("reconswarm.agent")
 WORLD_SILENCE_S = 30.0  # exit 3 if the world says nothing for this long after the mission began
@@ -41,7 +40,7 @@ class AgentConfig:
     wait_timeout_s: float = 1.0  # lockstep: longest wait for a peer's beacon or obstacle set
 
 
-class AgentNode:
+class AgentNode(Member):
     def __init__(self, cfg: AgentConfig, s: Scenario, session: zenoh.Session) -> None:
         from zenoh import ext
 
@@ -295,18 +294,11 @@ class AgentNode:
                 return 3
         return 0
 
-    def close(self) -> None:
-        with contextlib.suppress(Exception):
-            self.token.undeclare()
-
-
 def run(cfg: AgentConfig) -> int:
     s = load(cfg.scenario)
     if cfg.agent_id not in {a.id for a in s.agents}:
         raise BadInput(f"--id: agent {cfg.agent_id} is not in {cfg.scenario}")
-    stop = Stopper()
-    session = open_session(cfg.zenoh, f"agent {cfg.agent_id}")
-    try:
+    with serving(cfg.zenoh, f"agent {cfg.agent_id}") as (session, stop):
         node = AgentNode(cfg, s, session)
         log.info("agent %d up (run %s)", cfg.agent_id, node.keys.run)
         code = node.run(stop)
@@ -315,6 +307,3 @@ def run(cfg: AgentConfig) -> int:
         node.close()
         log.info("agent %d done: last tick %d, %d messages rejected", cfg.agent_id, node.k, node.rej.count)
         return code
-    finally:
-        session.close()
-        log.info("usage: %s", usage())

@@ -9,7 +9,6 @@ that comes back `agent_joined`. Restarted on an existing run.db it appends, and 
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import time
 from dataclasses import dataclass
@@ -22,7 +21,7 @@ from monitor.record import RunWriter
 from monitor.recorder import Recorder
 from reconswarm import wire
 from reconswarm.scenario import Scenario, load
-from reconswarm.session import Inbox, Rejections, Stopper, ZenohOptions, open_session, usage
+from reconswarm.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
 
 log = logging.getLogger("reconswarm.monitor")
 END_GRACE_S = 3.0  # after the world's last clock, how long to wait for the last states
@@ -41,7 +40,7 @@ class MonitorConfig:
     live: bool = False
 
 
-class MonitorNode:
+class MonitorNode(Member):
     def __init__(self, cfg: MonitorConfig, s: Scenario, session: Any) -> None:
         import zenoh
 
@@ -275,22 +274,12 @@ class MonitorNode:
             self.finish()
         return 0
 
-    def close(self) -> None:
-        with contextlib.suppress(Exception):
-            self.token.undeclare()
-
-
 def run(cfg: MonitorConfig) -> int:
     s = load(cfg.scenario)
-    stop = Stopper()
-    session = open_session(cfg.zenoh, "monitor")
-    try:
+    with serving(cfg.zenoh, "monitor") as (session, stop):
         node = MonitorNode(cfg, s, session)
         log.info("monitor up (run %s): recording to %s", node.keys.run, cfg.db)
         code = node.run(stop)
         node.close()
         log.info("monitor done: %d ticks recorded, %d messages rejected", node.written + 1, node.rej.count)
         return code
-    finally:
-        session.close()
-        log.info("usage: %s", usage())

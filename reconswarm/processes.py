@@ -16,7 +16,7 @@ from typing import Annotated
 import typer
 
 from reconswarm.errors import ReconswarmError
-from reconswarm.session import ZenohOptions, bind_to_parent, open_session, setup_logging, usage
+from reconswarm.session import ZenohOptions, bind_to_parent, serving, setup_logging
 
 log = logging.getLogger("reconswarm.router")
 
@@ -88,19 +88,14 @@ def router_cmd(
     listen: Listen = None, connect: Connect = None, zenoh_config: ZConfig = None,
 ) -> None:
     """A zenoh router (Python-hosted) for local and multi-host runs; default tcp/127.0.0.1:7447."""
-    from reconswarm.session import DEFAULT_ROUTER, Stopper
+    from reconswarm.session import DEFAULT_ROUTER
 
     def go() -> int:
         opts = ZenohOptions.build(connect, listen or ([] if zenoh_config else [DEFAULT_ROUTER]), "router", zenoh_config)
-        stop = Stopper()
-        session = open_session(opts, "router", timeout_s=5.0)
-        try:
+        with serving(opts, "router", timeout_s=5.0) as (_session, stop):
             log.info("router up: listening on %s", ", ".join(opts.listen) or "(config file)")
             while not stop.stopped:
                 time.sleep(0.1)
-        finally:
-            session.close()
-            log.info("usage: %s", usage())
         return 0
 
     _guard(go)

@@ -82,29 +82,32 @@ class Scenario:
     source: str = field(default="<memory>", compare=False)
 
     # Arrays in agent-id order, built on demand (the dataclass stays hashable and immutable).
+    def _column(self, attr: str, dtype: type = np.float64) -> np.ndarray:
+        return np.array([getattr(a, attr) for a in self.agents], dtype=dtype)
+
     @property
-    def ids(self) -> np.ndarray:
-        return np.array([a.id for a in self.agents], dtype=np.int64)
+    def ids(self) -> np.ndarray:  # (N,)
+        return self._column("id", np.int64)
 
     @property
     def starts(self) -> np.ndarray:  # (N, 2)
-        return np.array([a.start_m for a in self.agents], dtype=np.float64).reshape(-1, 2)
+        return self._column("start_m").reshape(-1, 2)
 
     @property
     def radii(self) -> np.ndarray:  # (N,)
-        return np.array([a.radius_m for a in self.agents], dtype=np.float64)
+        return self._column("radius_m")
 
     @property
     def offsets(self) -> np.ndarray:  # (N, 2)
-        return np.array([a.offset_m for a in self.agents], dtype=np.float64).reshape(-1, 2)
+        return self._column("offset_m").reshape(-1, 2)
 
     @property
     def headings(self) -> np.ndarray:  # (N,)
-        return np.array([a.heading_rad for a in self.agents], dtype=np.float64)
+        return self._column("heading_rad")
 
     @property
     def head_offsets(self) -> np.ndarray:  # (N,)
-        return np.array([a.head_offset_m for a in self.agents], dtype=np.float64)
+        return self._column("head_offset_m")
 
     def polygon(self, k: int) -> np.ndarray:  # (V, 2)
         return np.array(self.obstacles[k].vertices_m, dtype=np.float64)

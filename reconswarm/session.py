@@ -14,6 +14,8 @@ import queue
 import signal
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -68,6 +70,28 @@ class ZenohOptions:
         if self.listen:
             conf.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
         return conf
+
+
+@contextmanager
+def serving(opts: ZenohOptions, what: str, timeout_s: float = 20.0) -> Iterator[tuple[Any, Stopper]]:
+    """A process's session and its SIGINT/SIGTERM flag; the session is closed however the body ends."""
+    stop = Stopper()
+    session = open_session(opts, what, timeout_s)
+    try:
+        yield session, stop
+    finally:
+        session.close()
+        log.info("usage: %s", usage())
+
+
+class Member:
+    """A process that announces itself with a liveliness token (closing withdraws it)."""
+
+    token: Any
+
+    def close(self) -> None:
+        with suppress(Exception):
+            self.token.undeclare()
 
 
 def open_session(opts: ZenohOptions, what: str, timeout_s: float = 20.0) -> Any:

@@ -13,7 +13,6 @@ latest commands and measures state-to-command latency and missed deadlines.
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import time
 from dataclasses import dataclass
@@ -26,7 +25,7 @@ from agent.planner import errors
 from reconswarm import wire
 from reconswarm.errors import BadInput, ProcessFailure
 from reconswarm.scenario import Scenario, load
-from reconswarm.session import Inbox, Rejections, Stopper, ZenohOptions, open_session, usage
+from reconswarm.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
 from simworld import unicycle
 from simworld.sensing import ContourField
 
@@ -48,7 +47,7 @@ class WorldConfig:
     no_agents_grace_s: float = 30.0  # with no agent reachable, hold this long before ending the mission
 
 
-class World:
+class World(Member):
     def __init__(self, cfg: WorldConfig, s: Scenario, session: zenoh.Session) -> None:
         self.cfg, self.s, self.z = cfg, s, session
         self.keys = wire.Keys(cfg.run_id or s.meta.name)
@@ -257,20 +256,13 @@ class World:
                     sorted(a for a in expected & self.alive if self.index[a] not in self.cmds.get(k, {})),
                     self.cfg.step_timeout_s)
 
-    def close(self) -> None:
-        with contextlib.suppress(Exception):
-            self.token.undeclare()
-
-
 def run(cfg: WorldConfig) -> int:
     if cfg.clock not in CLOCKS:
         raise BadInput(f"--clock: expected lockstep or realtime, got {cfg.clock!r}")
     if not cfg.speed > 0:
         raise BadInput(f"--speed: must be > 0, got {cfg.speed}")
     s = load(cfg.scenario)
-    stop = Stopper()
-    session = open_session(cfg.zenoh, "simworld")
-    try:
+    with serving(cfg.zenoh, "simworld") as (session, stop):
         world = World(cfg, s, session)
         log.info("simworld up (run %s, %s clock): waiting for %d agents and the monitor", world.keys.run,
                  cfg.clock, len(world.ids))
@@ -284,6 +276,3 @@ def run(cfg: WorldConfig) -> int:
         time.sleep(0.3)  # let the last messages reach the monitor before the session closes
         world.close()
         return 0
-    finally:
-        session.close()
-        log.info("usage: %s", usage())

@@ -122,3 +122,14 @@ def positions(db: Path, agent: int) -> list[tuple[float, float, float]]:
 
 def paper_with(tmp: Path, **replace: str) -> Path:
     return scenario_with(tmp, "paper.toml", PAPER.read_text(), **replace)
+
+
+def tick_count(db: Path) -> int:
+    """Ticks recorded so far in a run record that may still be written (0 if not readable yet)."""
+    import sqlite3
+
+    try:
+        with sqlite3.connect(f"file:{db}?mode=ro", uri=True) as c:
+            return int(c.execute("SELECT COUNT(*) FROM ticks").fetchone()[0])
+    except sqlite3.Error:
+        return 0

@@ -24,15 +24,9 @@ from tests.deploy_util import (
     run_launcher,
     scenario_with,
     summary,
+    tick_count,
     trajectories,
 )
-
-
-@pytest.fixture
-def out(tmp_path: Path):
-    d = tmp_path / "run"
-    yield d
-    assert_all_gone(d)
 
 
 def test_lockstep_equals_inprocess_engine(tmp_path: Path, out: Path) -> None:
@@ -75,7 +69,7 @@ def test_sigint_stops_everything(tmp_path: Path, out: Path) -> None:
     try:
         deadline = time.monotonic() + 90
         while time.monotonic() < deadline:  # all 13 processes up and the record growing
-            if len(pids(out)) == 13 and (out / "run.db").exists() and _ticks(out / "run.db") > 50:
+            if len(pids(out)) == 13 and (out / "run.db").exists() and tick_count(out / "run.db") > 50:
                 break
             time.sleep(0.2)
         else:
@@ -89,16 +83,6 @@ def test_sigint_stops_everything(tmp_path: Path, out: Path) -> None:
     assert_all_gone(out, grace_s=2.0)
     s = summary(out / "run.db")  # the record stays readable
     assert s["ticks"] > 50 and not s["converged"]
-
-
-def _ticks(db: Path) -> int:
-    import sqlite3
-
-    try:
-        with sqlite3.connect(f"file:{db}?mode=ro", uri=True) as c:
-            return int(c.execute("SELECT COUNT(*) FROM ticks").fetchone()[0])
-    except sqlite3.Error:
-        return 0
 
 
 def test_late_agent_catches_up_on_obstacles(tmp_path: Path, out: Path) -> None:

@@ -5,16 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import pytest
-
-from tests.deploy_util import assert_all_gone, events, faults_log, positions, run_launcher
-
-
-@pytest.fixture
-def out(tmp_path: Path):
-    d = tmp_path / "run"
-    yield d
-    assert_all_gone(d)
+from tests.deploy_util import events, faults_log, positions, run_launcher
 
 
 def test_agent_killed(out: Path) -> None:

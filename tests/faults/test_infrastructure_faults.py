@@ -5,16 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import pytest
-
-from tests.deploy_util import assert_all_gone, faults_log, run_launcher, summary
-
-
-@pytest.fixture
-def out(tmp_path: Path):
-    d = tmp_path / "run"
-    yield d
-    assert_all_gone(d)
+from tests.deploy_util import faults_log, run_launcher, summary
 
 
 def test_monitor_killed_is_restarted_and_appends(out: Path) -> None:

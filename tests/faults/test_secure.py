@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import signal
-import sqlite3
 import stat
 import subprocess
 import threading
@@ -26,7 +25,16 @@ from zenoh import ext
 
 from reconswarm import secure, wire
 from reconswarm.scenario import load
-from tests.deploy_util import PAPER, ROOT, assert_all_gone, free_port, launcher_cmd, reconswarm, run_launcher
+from tests.deploy_util import (
+    PAPER,
+    ROOT,
+    assert_all_gone,
+    free_port,
+    launcher_cmd,
+    reconswarm,
+    run_launcher,
+    tick_count,
+)
 
 RUN = "swarm/paper"
 SETTLE_S = 1.5  # declarations reaching the router and the other sessions
@@ -71,14 +79,6 @@ def _anonymous_config(endpoint: str, **tls: Any) -> Any:
     for k, v in tls.items():
         conf.insert_json5(f"transport/link/tls/{k}", json.dumps(v))
     return conf
-
-
-def _ticks(db: Path) -> int:
-    try:
-        with sqlite3.connect(f"file:{db}?mode=ro", uri=True) as c:
-            return int(c.execute("SELECT COUNT(*) FROM ticks").fetchone()[0])
-    except sqlite3.Error:
-        return 0
 
 
 def _mode(p: Path) -> int:
@@ -178,7 +178,7 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Live]:
                                 stderr=fh)
     try:
         deadline = time.monotonic() + 120
-        while _ticks(out / "run.db") < 20:
+        while tick_count(out / "run.db") < 20:
             if proc.poll() is not None or time.monotonic() > deadline:
                 pytest.fail(f"the secure run did not start (exit {proc.poll()}): {err.read_text()[-2000:]}")
             time.sleep(0.2)
