@@ -100,7 +100,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--lockstep-agents", type=int, nargs="+", default=[10, 25, 50])
     ap.add_argument("--lockstep-sim-s", type=float, default=30.0, help="simulated seconds per lockstep run")
-    ap.add_argument("--realtime-agents", type=int, nargs="+", default=[5, 10, 15, 20, 25, 30])
+    ap.add_argument("--realtime-agents", type=int, nargs="+", default=[5, 10, 20, 30, 40, 50, 60])
     ap.add_argument("--realtime-sim-s", type=float, default=20.0, help="simulated (= wall) seconds per run")
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args()
