@@ -183,11 +183,11 @@ class World(Member):
         out: dict[str, float] = {"world_overruns": float(self.overruns)}
         if self.latency_ms:
             lat = np.array(self.latency_ms)
-            out.update(latency_p50_ms=float(np.percentile(lat, 50)), latency_p99_ms=float(np.percentile(lat, 99)),
-                       latency_samples=float(lat.size))
+            out.update(latency_p50_ms=round(float(np.percentile(lat, 50)), 3),
+                       latency_p99_ms=round(float(np.percentile(lat, 99)), 3), latency_samples=float(lat.size))
         if self.cfg.clock == "realtime":
             out.update(missed_deadlines=float(self.missed), deadlines=float(self.expected),
-                       missed_deadline_ratio=float(self.missed / self.expected) if self.expected else 0.0)
+                       missed_deadline_ratio=round(self.missed / self.expected, 5) if self.expected else 0.0)
         return out
 
     def converged(self) -> bool:

@@ -32,6 +32,7 @@ class ContourField:
     centre: Array  # (M, 2) centre of each polygon's bounding circle
     reach: Array  # (M,) its radius
     _tiled: dict[int, Edges] = field(default_factory=dict, compare=False, repr=False)
+    _one: dict[int, Edges] = field(default_factory=dict, compare=False, repr=False)
     _idx: dict[bytes, tuple[NDArray[np.int64], Array, Array]] = field(default_factory=dict, compare=False, repr=False)
 
     @staticmethod
@@ -90,9 +91,12 @@ class ContourField:
         if not close.any():  # all far: exact for the pair(s) that can hold the minimum gap, bounds elsewhere
             out = bound.copy()
             gap = bound - radii[:, None]
-            i, j = np.unravel_index(int(np.argmin(gap)), gap.shape)
-            out[i, j] = self._exact(p, np.array([i]), np.array([j]))[0]
-            rows, cols = np.nonzero(gap < out[i, j] - radii[i])
+            i, j = divmod(int(gap.argmin()), m)
+            one = self._one.get(j)
+            if one is None:
+                one = self._one[j] = self._edges_of(np.array([j]))
+            out[i, j] = float(signed_distance_only(p[i:i + 1, 0], p[i:i + 1, 1], one)[0])
+            rows, cols = (gap < out[i, j] - radii[i]).nonzero()
             if rows.size:
                 out[rows, cols] = self._exact(p, rows, cols)
             return out
@@ -112,10 +116,13 @@ class ContourField:
 
         The same edges (padded alike) and element-wise arithmetic as the tiled call in true_distances.
         """
+        return signed_distance_only(p[rows, 0], p[rows, 1], self._edges_of(cols))
+
+    def _edges_of(self, cols: NDArray[np.int64]) -> Edges:
+        """The true polygons' edges for the given obstacle columns, one row each: (Q,) -> Edges (Q, V)."""
         e = self.edges
-        sub = Edges(e.ax[cols], e.ay[cols], e.abx[cols], e.aby[cols], e.inv_den[cols], e.pad[cols],
-                    e.invalid[cols], e.closed[cols])
-        return signed_distance_only(p[rows, 0], p[rows, 1], sub)
+        return Edges(e.ax[cols], e.ay[cols], e.abx[cols], e.aby[cols], e.inv_den[cols], e.pad[cols],
+                     e.invalid[cols], e.closed[cols])
 
     def scan(self, p: Array, sensing_range_m: float, true_d: Array) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """Contour points within R_v of each head point.
