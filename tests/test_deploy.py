@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -17,6 +18,7 @@ from tests.deploy_util import (
     ROOT,
     assert_all_gone,
     events,
+    free_port,
     launcher_cmd,
     max_difference,
     pids,
@@ -97,3 +99,28 @@ def test_late_agent_catches_up_on_obstacles(tmp_path: Path, out: Path) -> None:
     assert "joining at tick" in log
     joined = [ln for ln in log.splitlines() if "joining at tick" in ln][-1]
     assert "'diamond'" in joined  # learned from its peers' cached sets, before sensing anything itself
+
+
+def test_simworld_exits_3_naming_who_is_missing(tmp_path: Path) -> None:
+    port = free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    env = dict(__import__("os").environ, PYTHONUNBUFFERED="1")
+    router = subprocess.Popen([sys.executable, "-m", "reconswarm.cli", "router", "--listen", ep], cwd=ROOT,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    try:
+        agent = subprocess.Popen([sys.executable, "-m", "reconswarm.cli", "agent", "--id", "4", "--scenario",
+                                  str(PAPER), "--connect", ep], cwd=ROOT, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL, env=env)
+        try:
+            p = subprocess.run([sys.executable, "-m", "reconswarm.cli", "simworld", "--scenario", str(PAPER),
+                                "--connect", ep, "--start-timeout", "4"], cwd=ROOT, capture_output=True, text=True,
+                               timeout=60)
+        finally:
+            agent.terminate()
+            agent.wait(timeout=10)
+    finally:
+        router.terminate()
+        router.wait(timeout=10)
+    assert p.returncode == 3
+    last = p.stderr.strip().splitlines()[-1]
+    assert "not up after 4 s" in last and "monitor" in last and "agent 1," in last and "agent 4," not in last
