@@ -123,43 +123,38 @@ def create(secrets_dir: Path, scenario: Scenario, endpoint: str) -> Secrets:
 
 # --- configurations ------------------------------------------------------------------------------------
 
+def _base(mode: str, tls: dict[str, Any]) -> dict[str, Any]:
+    """What every configuration of a secure run shares: no multicast, timestamps, the lease, mTLS with our CA."""
+    return {
+        "mode": mode,
+        "scouting": {"multicast": {"enabled": False}},
+        "timestamping": {"enabled": True},
+        "transport": {"link": {"tx": {"lease": LEASE_MS}, "tls": {**tls, "enable_mtls": True}}},
+    }
+
+
 def client_config(sec: Secrets, name: str) -> dict[str, Any]:
     """A complete client configuration: `zenoh.Config.from_file` opens it as is."""
     d = sec.dir
-    return {
-        "mode": "client",
-        "connect": {"endpoints": [sec.endpoint], "timeout_ms": {"router": -1, "peer": -1, "client": 15000}},
-        "scouting": {"multicast": {"enabled": False}},
-        "timestamping": {"enabled": True},
-        "transport": {"link": {
-            "tx": {"lease": LEASE_MS},
-            "tls": {
-                "root_ca_certificate": str(d / "ca.pem"),
-                "connect_private_key": str(d / f"{name}-key.pem"),
-                "connect_certificate": str(d / f"{name}-cert.pem"),
-                "enable_mtls": True,
-                "verify_name_on_connect": True,
-            },
-        }},
-    }
+    conf = _base("client", {
+        "root_ca_certificate": str(d / "ca.pem"),
+        "connect_private_key": str(d / f"{name}-key.pem"),
+        "connect_certificate": str(d / f"{name}-cert.pem"),
+        "verify_name_on_connect": True,
+    })
+    conf["connect"] = {"endpoints": [sec.endpoint], "timeout_ms": {"router": -1, "peer": -1, "client": 15000}}
+    return conf
 
 
 def router_config(sec: Secrets) -> dict[str, Any]:
     d = sec.dir
     return {
-        "mode": "router",
+        **_base("router", {
+            "root_ca_certificate": str(d / "ca.pem"),
+            "listen_private_key": str(d / "router-key.pem"),
+            "listen_certificate": str(d / "router-cert.pem"),
+        }),
         "listen": {"endpoints": [sec.endpoint]},
-        "scouting": {"multicast": {"enabled": False}},
-        "timestamping": {"enabled": True},
-        "transport": {"link": {
-            "tx": {"lease": LEASE_MS},
-            "tls": {
-                "root_ca_certificate": str(d / "ca.pem"),
-                "listen_private_key": str(d / "router-key.pem"),
-                "listen_certificate": str(d / "router-cert.pem"),
-                "enable_mtls": True,
-            },
-        }},
         "access_control": access_control(sec.run, sec.agent_ids),
     }
 
