@@ -29,6 +29,9 @@ from reconswarm.session import Inbox, Member, Rejections, Stopper, ZenohOptions,
 
 log = logging.getLogger("reconswarm.agent")
 WORLD_SILENCE_S = 30.0  # exit 3 if the world says nothing for this long after the mission began
+RESUBSCRIBE_S = 5.0  # no state for this long (the world re-sends it every 0.5 s): open a new session
+PEER_SILENT_S = 2.0  # a peer whose beacons stopped this long ago is not waited for
+RECONNECT = -1  # AgentNode.run's answer when the session must be opened again
 
 
 @dataclass(frozen=True)
@@ -41,13 +44,15 @@ class AgentConfig:
 
 
 class AgentNode(Member):
-    def __init__(self, cfg: AgentConfig, s: Scenario, session: zenoh.Session) -> None:
+    def __init__(self, cfg: AgentConfig, s: Scenario, session: zenoh.Session,
+                 brain: AgentBrain | None = None) -> None:
         from zenoh import ext
 
         self.cfg, self.s, self.z = cfg, s, session
         self.id = cfg.agent_id
         self.keys = wire.Keys(cfg.run_id or s.meta.name)
-        self.brain = AgentBrain(s, self.id)
+        self.brain = brain if brain is not None else AgentBrain(s, self.id)  # (kept across a new session)
+        self.resumed = brain is not None
         self.radius = float(self.brain.r[0])
         self.rej = Rejections(f"agent {self.id}")
         self.inbox = Inbox()
@@ -71,6 +76,8 @@ class AgentNode(Member):
         self.last_clock = time.monotonic()
         self.ended = False
         self.last_cmd: bytes | None = None
+        self.heard: dict[int, float] = {}  # wall time of each peer's latest beacon (or of its token)
+        self.last_world = time.monotonic()  # wall time of our latest state (the world sends it every tick)
         self._linked: tuple[int, dict[int, int]] = (-1, {})  # (tick, linked peer -> its set's revision)
         self.beacon_again = 0.0
         block = zenoh.CongestionControl.BLOCK
@@ -104,10 +111,8 @@ class AgentNode(Member):
                     if kind == "DELETE":
                         self.alive.discard(aid)
                     else:
-                        if aid not in self.alive and aid != self.id:
-                            for store in (self.sets, self.merged, self.merged_union):
-                                store.pop(aid, None)  # a new incarnation starts its revisions again
                         self.alive.add(aid)
+                        self.heard.setdefault(aid, time.monotonic())
                 return
             if what == "clock":
                 c = wire.clock_from_wire(payload)
@@ -122,6 +127,7 @@ class AgentNode(Member):
                 return
             if leaf == "state" and aid == self.id:
                 st = wire.state_from_wire(payload, aid)
+                self.last_world = time.monotonic()
                 if st.k == self.k and self.last_cmd is not None:  # the world missed our command: again
                     self.pub_cmd.put(self.last_cmd)
                     return
@@ -136,6 +142,7 @@ class AgentNode(Member):
                 if aid == self.id:
                     raise wire.WireError("a beacon on our own key from another session")
                 self.beacons.setdefault(b.k, {})[aid] = b
+                self.heard[aid] = time.monotonic()
                 if aid not in self.last_seen or b.k >= self.last_seen[aid].k:
                     self.last_seen[aid] = b
             elif leaf == "obstacles":
@@ -180,14 +187,20 @@ class AgentNode(Member):
             log.warning("agent %d: tick %d: gave up waiting for peers' data", self.id, k)
             return True
         fresh = self.beacons.get(k, {})
-        if len(fresh) < len(clock.alive) - 1 and any(a not in fresh for a in clock.alive
-                                                      if a != self.id and a in self.alive):
+        now = time.monotonic()
+        # A peer silent for PEER_SILENT_S (alive by its token, but saying nothing) is not waited for.
+        if any(a not in fresh and now - self.heard.get(a, now) < PEER_SILENT_S
+               for a in clock.alive if a != self.id and a in self.alive):
             return False
         if self._linked[0] != k:
             fresh_peers = [Peer(a, b.px, b.py, b.radius) for a, b in fresh.items()]
             self._linked = (k, {a: fresh[a].rev for a in self.brain.linked(np.array([st.px, st.py]), fresh_peers)})
         need = {a: b.rev for a, b in fresh.items()} if self.brain.leader is not None else self._linked[1]
-        return all(rev == 0 or rev in self.sets.get(a, ()) for a, rev in need.items())
+        # A set is there, or nothing to wait for: an empty set (rev 0), or a revision we merged already (a
+        # peer that reconnected keeps counting; one restarted counts again from 1, and what it knew is
+        # static knowledge we hold anyway).
+        merged = self.merged_union if self.brain.leader is not None else self.merged
+        return all(rev == 0 or rev in self.sets.get(a, ()) or rev <= merged.get(a, 0) for a, rev in need.items())
 
     def _unmerged(self, wanted: dict[int, int], merged: dict[int, int]) -> list[dict[str, np.ndarray]]:
         """The sets at the wanted revisions that are not merged yet (and mark them merged)."""
@@ -280,7 +293,7 @@ class AgentNode(Member):
             self.act(k)
 
     def run(self, stop: Stopper) -> int:
-        started = False
+        started = self.resumed  # a new session of an agent already in the mission watches at once
         while not stop.stopped and not self.ended:
             item = self.inbox.get(timeout=0.05 if self.act_at is None else max(0.0, self.act_at - time.monotonic()))
             if item is not None:
@@ -292,18 +305,28 @@ class AgentNode(Member):
             if started and time.monotonic() - self.last_clock > WORLD_SILENCE_S:
                 log.error("agent %d: no clock from the world for %.0f s", self.id, WORLD_SILENCE_S)
                 return 3
+            if started and time.monotonic() - self.last_world > RESUBSCRIBE_S:
+                return RECONNECT
         return 0
 
 def run(cfg: AgentConfig) -> int:
     s = load(cfg.scenario)
     if cfg.agent_id not in {a.id for a in s.agents}:
         raise BadInput(f"--id: agent {cfg.agent_id} is not in {cfg.scenario}")
-    with serving(cfg.zenoh, f"agent {cfg.agent_id}") as (session, stop):
-        node = AgentNode(cfg, s, session)
-        log.info("agent %d up (run %s)", cfg.agent_id, node.keys.run)
-        code = node.run(stop)
-        if node.ended and not stop.stopped:
-            time.sleep(0.5)  # let the monitor see the end of the mission before our token goes
-        node.close()
-        log.info("agent %d done: last tick %d, %d messages rejected", cfg.agent_id, node.k, node.rej.count)
-        return code
+    brain: AgentBrain | None = None
+    while True:
+        with serving(cfg.zenoh, f"agent {cfg.agent_id}") as (session, stop):
+            node = AgentNode(cfg, s, session, brain)
+            log.info("agent %d up (run %s)", cfg.agent_id, node.keys.run)
+            code = node.run(stop)
+            if node.ended and not stop.stopped:
+                time.sleep(0.5)  # let the monitor see the end of the mission before our token goes
+            node.close()
+            if code != RECONNECT:
+                log.info("agent %d done: last tick %d, %d messages rejected", cfg.agent_id, node.k, node.rej.count)
+                return code
+            # Our state stopped coming (seen after a router restart: the route to our key was not restored)
+            # while the mission goes on: a new session re-declares everything, with the same knowledge.
+            log.warning("agent %d: no state from the world for %.0f s: opening a new session", cfg.agent_id,
+                        RESUBSCRIBE_S)
+            brain = node.brain

@@ -63,6 +63,8 @@ class World(Member):
         self.cmds: dict[int, dict[int, np.ndarray]] = {}  # tick -> agent index -> u
         self.alive: set[int] = set()
         self.ever: set[int] = set()
+        self.strikes: dict[int, int] = {}  # lockstep: consecutive step timeouts of each agent
+        self.unresponsive: set[int] = set()  # not waited for until they command again
         self.monitor_up = False
         self.inbox = Inbox()
         self.rej = Rejections("simworld")
@@ -103,6 +105,10 @@ class World(Member):
                 if aid not in self.index:
                     raise wire.WireError(f"agent {aid} is not in the scenario")
                 self.cmds.setdefault(c.k, {})[self.index[aid]] = np.array([c.ux, c.uy])
+                if aid in self.unresponsive:
+                    self.unresponsive.discard(aid)
+                    self.strikes.pop(aid, None)
+                    log.info("agent %d commands again", aid)
                 sent = self.pub_time.get(c.k)
                 if sent is not None and self.cfg.clock == "realtime":
                     self.latency_ms.append((time.monotonic() - sent) * 1000.0)
@@ -238,13 +244,15 @@ class World(Member):
 
     def wait_commands(self, k: int, stop: Stopper) -> None:
         """Lockstep: wait for tick k's command of every agent the clock announced (one that joins now starts
-        at the next tick). Re-publish the tick while waiting, so data lost in an outage is sent again."""
-        expected = set(self.alive)
+        at the next tick). Re-publish the tick while waiting, so data lost in an outage is sent again. An
+        agent that has let the step time out twice in a row is not waited for again until it speaks."""
+        expected = set(self.alive) - self.unresponsive
         now = time.monotonic()
         deadline, again = now + self.cfg.step_timeout_s, now + REPUBLISH_S
         while not stop.stopped and time.monotonic() < deadline:
             got = self.cmds.get(k, {})
             if all(self.index[a] in got for a in expected & self.alive):
+                self.strikes.clear()
                 return
             if time.monotonic() > again:
                 missing = sorted(a for a in expected & self.alive if self.index[a] not in got)
@@ -252,9 +260,14 @@ class World(Member):
                 self.publish(k, False, "")
                 again = time.monotonic() + REPUBLISH_S
             self.pump(min(0.05, max(0.0, deadline - time.monotonic())))
-        log.warning("tick %d: no command from %s within %.1f s: holding their robots", k,
-                    sorted(a for a in expected & self.alive if self.index[a] not in self.cmds.get(k, {})),
+        missing = sorted(a for a in expected & self.alive if self.index[a] not in self.cmds.get(k, {}))
+        log.warning("tick %d: no command from %s within %.1f s: holding their robots", k, missing,
                     self.cfg.step_timeout_s)
+        for a in missing:
+            self.strikes[a] = self.strikes.get(a, 0) + 1
+            if self.strikes[a] >= 2:
+                self.unresponsive.add(a)
+                log.warning("agent %d is unresponsive: not waiting for it until it commands again", a)
 
 def run(cfg: WorldConfig) -> int:
     if cfg.clock not in CLOCKS:
