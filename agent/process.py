@@ -29,7 +29,7 @@ from reconswarm.session import Inbox, Member, Rejections, Stopper, ZenohOptions,
 
 log = logging.getLogger("reconswarm.agent")
 WORLD_SILENCE_S = 30.0  # exit 3 if the world says nothing for this long after the mission began
-RESUBSCRIBE_S = 5.0  # no state for this long (the world re-sends it every 0.5 s): open a new session
+RESUBSCRIBE_S = 5.0  # no command for this long, though the world re-sends a waiting tick every 0.5 s: new session
 PEER_SILENT_S = 2.0  # a peer whose beacons stopped this long ago is not waited for
 RECONNECT = -1  # AgentNode.run's answer when the session must be opened again
 
@@ -77,7 +77,8 @@ class AgentNode(Member):
         self.ended = False
         self.last_cmd: bytes | None = None
         self.heard: dict[int, float] = {}  # wall time of each peer's latest beacon (or of its token)
-        self.last_world = time.monotonic()  # wall time of our latest state (the world sends it every tick)
+        self.last_act = time.monotonic()  # wall time of our latest command
+        self.state_at: dict[int, float] = {}  # wall time each tick's state arrived (while waiting for the rest)
         self._linked: tuple[int, dict[int, int]] = (-1, {})  # (tick, linked peer -> its set's revision)
         self.beacon_again = 0.0
         block = zenoh.CongestionControl.BLOCK
@@ -127,7 +128,6 @@ class AgentNode(Member):
                 return
             if leaf == "state" and aid == self.id:
                 st = wire.state_from_wire(payload, aid)
-                self.last_world = time.monotonic()
                 if st.k == self.k and self.last_cmd is not None:  # the world missed our command: again
                     self.pub_cmd.put(self.last_cmd)
                     return
@@ -172,8 +172,15 @@ class AgentNode(Member):
     def _ready_lockstep(self, k: int) -> bool:
         """True once everything tick k needs is in (or the wait timed out)."""
         st, clock = self.states.get(k), self.clocks.get(k)
-        if st is None or clock is None or (st.scan_n > 0 and k not in self.scans):
+        if st is None:
             return False
+        if clock is None or (st.scan_n > 0 and k not in self.scans):
+            # The tick's clock or scan may have been lost (an outage): after a while, go on without it
+            # (the newest clock's list of agents; the next scan sees the same contour again).
+            first = self.state_at.setdefault(k, time.monotonic())
+            if time.monotonic() - first < self.cfg.wait_timeout_s or not self.clocks:
+                return False
+            clock = self.clocks[max(self.clocks)]
         if self.beacon_sent < k or time.monotonic() > self.beacon_again:  # (again if peers may have lost it)
             self.pub_beacon.put(wire.beacon_to_wire(wire.Beacon(
                 self.id, k, st.t, st.px, st.py, self.radius, self.brain.rev, self.rej.count)))
@@ -246,6 +253,7 @@ class AgentNode(Member):
             self.pub_obs.put(self._obstacles_wire(k))
         self.last_cmd = wire.cmd_to_wire(wire.Cmd(self.id, k, float(u[0]), float(u[1])))
         self.pub_cmd.put(self.last_cmd)
+        self.last_act = time.monotonic()
         self.k = k
         self.wait_since = None
         if k % 20 == 0:
@@ -256,7 +264,7 @@ class AgentNode(Member):
         return wire.obstacles_to_wire(wire.ObstacleSet(self.id, k, self.brain.rev, sets))
 
     def _prune(self, k: int) -> None:
-        for store in (self.states, self.clocks, self.beacons, self.scans):
+        for store in (self.states, self.clocks, self.beacons, self.scans, self.state_at):
             for kk in [x for x in store if x < k - 2]:
                 del store[kk]
         for a, revs in self.sets.items():  # keep the newest merged revision and everything after it
@@ -301,11 +309,12 @@ class AgentNode(Member):
                 for more in self.inbox.drain():
                     self.handle(*more)
             self.step()
-            started |= bool(self.clocks)
+            if not started and self.clocks:  # the mission began: the watch starts now
+                started, self.last_act = True, time.monotonic()
             if started and time.monotonic() - self.last_clock > WORLD_SILENCE_S:
                 log.error("agent %d: no clock from the world for %.0f s", self.id, WORLD_SILENCE_S)
                 return 3
-            if started and time.monotonic() - self.last_world > RESUBSCRIBE_S:
+            if started and time.monotonic() - self.last_act > RESUBSCRIBE_S:
                 return RECONNECT
         return 0
 
@@ -325,8 +334,7 @@ def run(cfg: AgentConfig) -> int:
             if code != RECONNECT:
                 log.info("agent %d done: last tick %d, %d messages rejected", cfg.agent_id, node.k, node.rej.count)
                 return code
-            # Our state stopped coming (seen after a router restart: the route to our key was not restored)
-            # while the mission goes on: a new session re-declares everything, with the same knowledge.
-            log.warning("agent %d: no state from the world for %.0f s: opening a new session", cfg.agent_id,
-                        RESUBSCRIBE_S)
+            # We stopped acting although the mission goes on (seen after a router restart: a route to one of
+            # our keys was not restored): a new session re-declares everything, with the same knowledge.
+            log.warning("agent %d: no command for %.0f s: opening a new session", cfg.agent_id, RESUBSCRIBE_S)
             brain = node.brain
