@@ -81,6 +81,7 @@ class AgentNode(Member):
         self.state_at: dict[int, float] = {}  # wall time each tick's state arrived (while waiting for the rest)
         self._linked: tuple[int, dict[int, int]] = (-1, {})  # (tick, linked peer -> its set's revision)
         self.beacon_again = 0.0
+        self.told_waiting = 0.0
         block = zenoh.CongestionControl.BLOCK
         k = self.keys
         z = session
@@ -259,6 +260,25 @@ class AgentNode(Member):
         if k % 20 == 0:
             self._prune(k)
 
+    def _waiting_for(self) -> str:
+        """What the next tick still lacks (for the log while we wait)."""
+        k = self.k + 1
+        if k not in self.states:
+            newest = max(self.states, default=None), max(self.clocks, default=None)
+            return f"tick {k}: no state yet (newest state {newest[0]}, newest clock {newest[1]})"
+        clock = self.clocks.get(k)
+        missing = [] if clock is not None else ["clock"]
+        if self.states[k].scan_n > 0 and k not in self.scans:
+            missing.append("scan")
+        fresh = self.beacons.get(k, {})
+        peers = sorted(a for a in (clock.alive if clock else ()) if a != self.id and a in self.alive and a not in fresh)
+        if peers:
+            missing.append(f"beacons of {peers}")
+        sets = sorted(a for a, rev in self._linked[1].items() if rev and rev not in self.sets.get(a, ()))
+        if sets:
+            missing.append(f"obstacle sets of {sets}")
+        return f"tick {k}: waiting for {', '.join(missing) or 'nothing'}"
+
     def _obstacles_wire(self, k: int) -> bytes:
         sets = {oid: tuple(map(tuple, h.tolist())) for oid, h in self.brain.obstacle_sets().items()}
         return wire.obstacles_to_wire(wire.ObstacleSet(self.id, k, self.brain.rev, sets))
@@ -316,6 +336,9 @@ class AgentNode(Member):
                 return 3
             if started and time.monotonic() - self.last_act > RESUBSCRIBE_S:
                 return RECONNECT
+            if started and time.monotonic() - self.last_act > 1.0 and time.monotonic() > self.told_waiting + 1.0:
+                self.told_waiting = time.monotonic()
+                log.info("agent %d: %s", self.id, self._waiting_for())
         return 0
 
 def run(cfg: AgentConfig) -> int:
