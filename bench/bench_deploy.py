@@ -126,7 +126,7 @@ def main() -> int:
         for n in args.realtime_agents:
             out = tmp / f"rt{n}"
             port = free_port()
-            stop, rtt = threading.Event(), []
+            stop, rtt = threading.Event(), list[float]()
             th = threading.Thread(target=zenoh_rtt, args=(port, stop, rtt), daemon=True)
             th.start()
             try:

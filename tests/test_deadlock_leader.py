@@ -138,7 +138,7 @@ def test_virtual_leader_without_obstacles_goes_straight_at_bounded_speed():
         rel = pos[0] - np.array([8.0, 10.0])
         assert abs(rel[0] * direction[1] - rel[1] * direction[0]) < 1e-8  # on the straight line to p*
         prev = (pos, vel)
-    assert np.hypot(*(prev[0][0] - target)) < 1e-2  # and converges to p*
+    assert prev is not None and np.hypot(*(prev[0][0] - target)) < 1e-2  # and converges to p*
 
 
 def test_virtual_leader_is_repelled_by_known_obstacles_as_a_body_of_radius_rc():

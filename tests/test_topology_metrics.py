@@ -68,7 +68,7 @@ def test_labels_are_connected_components(n, seed):
     edges = graph_edges(p, active, np.zeros((0, 2), np.int64), LINK)
     lab = labels(n, edges, active)
     # Reference: flood fill over the same edges.
-    adj = {i: set() for i in range(n)}
+    adj: dict[int, set[int]] = {i: set() for i in range(n)}
     for a, b in edges.tolist():
         adj[a].add(b)
         adj[b].add(a)

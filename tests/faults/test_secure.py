@@ -274,7 +274,7 @@ def test_agent_credentials_cannot_impersonate_another_agent(live: Live) -> None:
         for n in range(20):  # valid-looking messages for the ticks to come
             send(f"{RUN}/agent/5/beacon", wire.beacon_to_wire(wire.Beacon(5, k + n, 0.0, 123.0, 45.0, 2.6)))
             send(f"{RUN}/agent/5/cmd", wire.cmd_to_wire(wire.Cmd(5, k + n, 100.0, 0.0)))
-            hull = {"fake": ((0.0, 0.0), (10.0, 0.0), (0.0, 10.0))}
+            hull: dict[str, tuple[tuple[float, float], ...]] = {"fake": ((0.0, 0.0), (10.0, 0.0), (0.0, 10.0))}
             send(f"{RUN}/agent/5/obstacles", wire.obstacles_to_wire(wire.ObstacleSet(5, k + n, 99, hull)), fake_set)
             # the control: the same session on agent 3's own keys
             send(f"{RUN}/agent/3/beacon", wire.beacon_to_wire(wire.Beacon(3, 0, 0.0, -77.0, 0.0, 2.6)))
