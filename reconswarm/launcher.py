@@ -73,7 +73,7 @@ class Fleet:
     env: dict[str, str]
     procs: list[Proc] = field(default_factory=list)
     zopt: Any = None  # (role, id) -> (command prefix, zenoh args), set by run()
-    router_env: dict[str, str] = field(default_factory=dict)
+    router_env: dict[str, str] | None = None  # the routers' environment, when it differs from env
 
     def start(self, role: str, ident: str, args: list[str], prefix: list[str] | None = None) -> Proc:
         logs = self.out / "logs"
@@ -83,7 +83,8 @@ class Fleet:
         fh = log_path.open("ab")
         popen = subprocess.Popen([*(prefix or []), sys.executable, "-m", "reconswarm.cli", *args], stdout=fh,
                                  stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                 env=self.router_env if role == "router" else self.env, cwd=str(ROOT))
+                                 env=self.router_env if role == "router" and self.router_env else self.env,
+                                 cwd=str(ROOT))
         fh.close()
         proc = Proc(role, ident, args, popen, log_path, list(prefix or []))
         self.procs.append(proc)
