@@ -133,3 +133,17 @@ def tick_count(db: Path) -> int:
             return int(c.execute("SELECT COUNT(*) FROM ticks").fetchone()[0])
     except sqlite3.Error:
         return 0
+
+
+def restart_and_rejoin(out: Path, agent: int, at_s: float, after_s: float) -> list[str]:
+    """Run the paper mission with `agent` restarted at `at_s` (`after_s` wall seconds later); check the mission
+    completed without contact or loss and that the agent was lost and joined again. Returns the agent's
+    "joining at tick" log lines (which name the obstacle sets it got from its peers' caches)."""
+    p = run_launcher(out, "--fault", f"restart:agent:{agent}@{at_s:g}+{after_s:g}", "--json")
+    assert p.returncode == 0, p.stderr[-3000:]
+    s = json.loads(p.stdout)
+    assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
+    ev = [e["kind"] for e in events(out / "run.db") if e.get("agent") == agent]
+    assert ev == ["agent_lost", "agent_joined"]
+    log = (out / "logs" / f"agent-{agent}.log").read_text().splitlines()
+    return [ln for ln in log if "joining at tick" in ln]

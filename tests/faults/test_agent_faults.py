@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from tests.deploy_util import events, faults_log, positions, run_launcher
+from tests.deploy_util import events, faults_log, positions, restart_and_rejoin, run_launcher
 
 
 def test_agent_killed(out: Path) -> None:
@@ -38,11 +38,5 @@ def test_agent_frozen_then_rejoins(out: Path) -> None:
 
 
 def test_agent_restarted_rejoins_with_shared_obstacles(out: Path) -> None:
-    p = run_launcher(out, "--fault", "restart:agent:4@70+1", "--json")
-    assert p.returncode == 0, p.stderr[-3000:]
-    s = json.loads(p.stdout)
-    assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
-    ev = [e["kind"] for e in events(out / "run.db") if e.get("agent") == 4]
-    assert ev == ["agent_lost", "agent_joined"]
-    joined = [ln for ln in (out / "logs" / "agent-4.log").read_text().splitlines() if "joining at tick" in ln]
+    joined = restart_and_rejoin(out, agent=4, at_s=70, after_s=1)
     assert joined and "'diamond'" in joined[-1]  # its peers' cached obstacle sets
