@@ -1,7 +1,7 @@
 """One agent's planning state and its tick, with no transport: what an agent process runs.
 
-It calls the same pure functions as the in-process engine (agent.planner, agent.knowledge,
-agent.deadlock, agent.leader) with N = 1 and its neighbours, in the engine's order, so a lockstep run
+It calls the same pure functions as the in-process engine (reconswarm.paper: planner, knowledge, deadlock,
+leader) with N = 1 and its neighbours, in the engine's order, so a lockstep run
 reproduces `reconswarm sim` (see reconswarm/engine.py for the tick order).
 """
 
@@ -12,11 +12,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from agent.deadlock import StallState, generator, stall_step, window_ticks
-from agent.knowledge import KnownObstacles, view_of_edges
-from agent.leader import VirtualLeader
-from agent.planner import Neighbours, ObstacleView, command, errors, repulsion
 from reconswarm.geometry import Edges, norm2
+from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
+from reconswarm.paper.knowledge import KnownObstacles, view_of_edges
+from reconswarm.paper.leader import VirtualLeader
+from reconswarm.paper.planner import Neighbours, ObstacleView, command, errors, repulsion
 from reconswarm.scenario import Scenario
 
 Array = NDArray[np.float64]

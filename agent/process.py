@@ -22,10 +22,10 @@ import numpy as np
 import zenoh
 
 from agent.brain import AgentBrain, Peer
-from reconswarm import wire
 from reconswarm.errors import BadInput
+from reconswarm.net import wire
+from reconswarm.net.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
 from reconswarm.scenario import Scenario, load
-from reconswarm.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
 
 log = logging.getLogger("reconswarm.agent")
 WORLD_SILENCE_S = 30.0  # exit 3 if the world says nothing for this long after the mission began

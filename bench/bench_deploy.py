@@ -51,9 +51,9 @@ def scenario(tmp: Path, n: int, sim_s: float, seed: int = 1) -> Path:
 
 
 def launch(out: Path, scen: Path, port: int, *extra: str, timeout: float = 1800) -> dict:
-    p = subprocess.run([sys.executable, "-m", "reconswarm.launcher", "--router", f"tcp/127.0.0.1:{port}", "-o",
-                        str(out), "-s", str(scen), "--no-progress", "--json", *extra], capture_output=True, text=True,
-                       timeout=timeout, cwd=ROOT)
+    p = subprocess.run([sys.executable, "-m", "reconswarm_bringup.cli_launch", "--router", f"tcp/127.0.0.1:{port}",
+                        "-o", str(out), "-s", str(scen), "--no-progress", "--json", *extra], capture_output=True,
+                       text=True, timeout=timeout, cwd=ROOT)
     if p.returncode not in (0, 1):
         raise RuntimeError(f"run failed ({p.returncode}): {p.stderr[-1500:]}")
     return json.loads(p.stdout)
@@ -72,7 +72,7 @@ def zenoh_rtt(port: int, stop: threading.Event, samples: list[float]) -> None:
     """Round trips through the run's router: ping on one session, echo on another."""
     import zenoh
 
-    from reconswarm.session import ZenohOptions, open_session
+    from reconswarm.net.session import ZenohOptions, open_session
 
     opts = ZenohOptions.build([f"tcp/127.0.0.1:{port}"], None, "client", None)
     time.sleep(3.0)  # let the run start

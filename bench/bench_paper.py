@@ -32,7 +32,7 @@ PAPER_S = {"reconfigurable": 200.0, "virtual-leader": 241.0}
 
 def sim(planner: str, out: Path) -> tuple[dict[str, Any], float]:
     """One `reconswarm sim` process: its summary and its CPU time (user + system, start-up included)."""
-    cmd = [sys.executable, "-m", "reconswarm.cli", "sim", str(SCENARIO), "--planner", planner, "-o", str(out),
+    cmd = [sys.executable, "-m", "reconswarm_bringup.cli", "sim", str(SCENARIO), "--planner", planner, "-o", str(out),
            "--json"]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     done = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, check=False)

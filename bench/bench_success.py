@@ -31,8 +31,8 @@ def params(seed: int) -> tuple[int, int]:
 
 
 def run_seed(job: tuple[int, str]) -> dict[str, Any]:
-    from reconswarm import engine
     from reconswarm.generate import generate
+    from reconswarm_bringup import engine
 
     seed, out = job
     n, m = params(seed)

@@ -19,8 +19,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import command_line, fmt_list, machine, median, with_ticks
 
-from reconswarm import engine
 from reconswarm.generate import generate
+from reconswarm_bringup import engine
 
 
 def run_once(n: int, obstacles: int, seed: int, ticks: int, out: Path) -> tuple[int, float, float]:

@@ -12,9 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.record import RunRecord
-from monitor.summary import convergence_time
-from monitor.topology import graph_edges, labels
+from reconswarm.errors import BadInput
+from reconswarm.paper.topology import graph_edges, labels
+from reconswarm.record.store import RunRecord
+from reconswarm.record.summary import convergence_time
 
 
 def _snapshot_rows(t: np.ndarray, conv_t: float | None) -> list[int]:
@@ -37,8 +38,6 @@ def plot_run(rec: RunRecord, out: Path) -> None:
     s = rec.scenario
     tk = rec.ticks()
     if tk.t.size == 0:
-        from reconswarm.errors import BadInput
-
         raise BadInput(f"{rec.path}: the record holds no ticks yet")
     events = rec.events()
     ids, radii = rec.ids, s.radii

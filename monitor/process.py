@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from monitor.record import RunWriter
-from monitor.recorder import Recorder
-from reconswarm import wire
+from reconswarm.net import wire
+from reconswarm.net.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
+from reconswarm.record.recorder import Recorder
+from reconswarm.record.store import RunWriter
 from reconswarm.scenario import Scenario, load
-from reconswarm.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
 
 log = logging.getLogger("reconswarm.monitor")
 END_GRACE_S = 3.0  # after the world's last clock, how long to wait for the last states

@@ -2,7 +2,7 @@
 
 import sys
 
-from reconswarm.cli import app
+from reconswarm_bringup.cli import app
 
 if __name__ == "__main__":
     app(args=["simworld", *sys.argv[1:]], prog_name="python -m simworld")

@@ -21,13 +21,13 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
-from agent.planner import errors
-from reconswarm import wire
 from reconswarm.errors import BadInput, ProcessFailure
+from reconswarm.net import wire
+from reconswarm.net.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
+from reconswarm.paper.planner import errors
 from reconswarm.scenario import Scenario, load
-from reconswarm.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
-from simworld import unicycle
-from simworld.sensing import ContourField
+from reconswarm.sim import unicycle
+from reconswarm.sim.sensing import ContourField
 
 log = logging.getLogger("reconswarm.simworld")
 CLOCKS = ("lockstep", "realtime")

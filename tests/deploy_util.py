@@ -27,7 +27,7 @@ def free_port() -> int:
 
 def launcher_cmd(out: Path, *args: str, port: int | None = None) -> list[str]:
     port = port or free_port()
-    return [sys.executable, "-m", "reconswarm.launcher", "--router", f"tcp/127.0.0.1:{port}", "-o", str(out),
+    return [sys.executable, "-m", "reconswarm_bringup.cli_launch", "--router", f"tcp/127.0.0.1:{port}", "-o", str(out),
             "--no-progress", *args]
 
 
@@ -36,7 +36,7 @@ def run_launcher(out: Path, *args: str, timeout: float = 600) -> subprocess.Comp
 
 
 def reconswarm(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "reconswarm.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "reconswarm_bringup.cli", *args], capture_output=True, text=True,
                           timeout=timeout, cwd=ROOT)
 
 

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from agent.deadlock import ESCAPE_WINDOWS, StallState, generator, stall_step, window_ticks
-from agent.leader import VirtualLeader
+from reconswarm.paper.deadlock import ESCAPE_WINDOWS, StallState, generator, stall_step, window_ticks
+from reconswarm.paper.leader import VirtualLeader
 from reconswarm.scenario import AgentSpec, PlannerConfig, Scenario, ScenarioMeta, WorldConfig
 
 K_ATT, R_C, TOL, DT = 0.08, 80.0, 0.5, 0.05

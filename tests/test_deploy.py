@@ -99,14 +99,14 @@ def test_simworld_exits_3_naming_who_is_missing(tmp_path: Path) -> None:
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
     env = dict(__import__("os").environ, PYTHONUNBUFFERED="1")
-    router = subprocess.Popen([sys.executable, "-m", "reconswarm.cli", "router", "--listen", ep], cwd=ROOT,
+    router = subprocess.Popen([sys.executable, "-m", "reconswarm_bringup.cli", "router", "--listen", ep], cwd=ROOT,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
     try:
-        agent = subprocess.Popen([sys.executable, "-m", "reconswarm.cli", "agent", "--id", "4", "--scenario",
+        agent = subprocess.Popen([sys.executable, "-m", "reconswarm_bringup.cli", "agent", "--id", "4", "--scenario",
                                   str(PAPER), "--connect", ep], cwd=ROOT, stdout=subprocess.DEVNULL,
                                  stderr=subprocess.DEVNULL, env=env)
         try:
-            p = subprocess.run([sys.executable, "-m", "reconswarm.cli", "simworld", "--scenario", str(PAPER),
+            p = subprocess.run([sys.executable, "-m", "reconswarm_bringup.cli", "simworld", "--scenario", str(PAPER),
                                 "--connect", ep, "--start-timeout", "4"], cwd=ROOT, capture_output=True, text=True,
                                timeout=60)
         finally:

@@ -16,7 +16,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
 _SCRIPT = Path(sys.executable).parent / "reconswarm"
-CLI = [str(_SCRIPT)] if _SCRIPT.exists() else [sys.executable, "-m", "reconswarm.cli"]
+CLI = [str(_SCRIPT)] if _SCRIPT.exists() else [sys.executable, "-m", "reconswarm_bringup.cli"]
 
 SUMMARY_FIELDS = ("scenario", "planner", "mode", "agents", "duration_s", "converged", "convergence_time_s",
                   "final_max_error_m", "min_agent_gap_m", "min_obstacle_gap_m", "collisions", "safety_violations",

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 from shapely.geometry import Point, Polygon
 
-from agent.knowledge import obstacle_view
-from agent.planner import Neighbours, command
-from monitor.record import RunRecord
-from reconswarm.engine import Engine, SimConfig, run
 from reconswarm.generate import generate
+from reconswarm.paper.knowledge import obstacle_view
+from reconswarm.paper.planner import Neighbours, command
+from reconswarm.record.store import RunRecord
 from reconswarm.scenario import load, parse, to_toml, warnings
+from reconswarm_bringup.engine import Engine, SimConfig, run
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"

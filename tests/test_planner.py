@@ -15,8 +15,9 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Point, Polygon
 
-from agent.knowledge import obstacle_view
-from agent.planner import (
+from reconswarm.geometry import pairs_within
+from reconswarm.paper.knowledge import obstacle_view
+from reconswarm.paper.planner import (
     Neighbours,
     ObstacleView,
     agent_repulsion,
@@ -28,7 +29,6 @@ from agent.planner import (
     obstacle_repulsion,
     repulsion_speed,
 )
-from reconswarm.geometry import pairs_within
 from reconswarm.scenario import PlannerConfig
 
 SETTINGS = settings(max_examples=120, deadline=None)

@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
 PAPER_TEXT = PAPER.read_text()
 _SCRIPT = Path(sys.executable).parent / "reconswarm"
-CLI = [str(_SCRIPT)] if _SCRIPT.exists() else [sys.executable, "-m", "reconswarm.cli"]
+CLI = [str(_SCRIPT)] if _SCRIPT.exists() else [sys.executable, "-m", "reconswarm_bringup.cli"]
 
 
 def cli(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
@@ -129,7 +129,7 @@ def test_cli_refuses_every_bad_file(bad_files, tmp_path, name, field, command):
     """The full table through the CLI in process (typer's runner: one import for every case)."""
     from typer.testing import CliRunner
 
-    from reconswarm.cli import app
+    from reconswarm_bringup.cli import app
 
     out = tmp_path / "run"
     args = ["scenario", "check", str(bad_files[name])] if command == "check" else [

@@ -10,10 +10,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Point, Polygon
 
-from agent.knowledge import KnownObstacles, SwarmKnowledge
 from reconswarm.geometry import convex_hull, merge_hull
+from reconswarm.paper.knowledge import KnownObstacles, SwarmKnowledge
 from reconswarm.scenario import AgentSpec, ObstacleSpec, PlannerConfig, Scenario, ScenarioMeta, WorldConfig
-from simworld.sensing import ContourField
+from reconswarm.sim.sensing import ContourField
 
 SETTINGS = settings(max_examples=60, deadline=None)
 

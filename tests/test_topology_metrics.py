@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from monitor.metrics import SafetyMonitor
-from monitor.topology import TopologyTracker, diff, graph_edges, groups_of, labels
+from reconswarm.paper.topology import TopologyTracker, diff, graph_edges, groups_of, labels
+from reconswarm.record.safety import SafetyMonitor
 
 DT = 0.05
 LINK = 40.0

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from reconswarm import wire
+from reconswarm.net import wire
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 ids = st.integers(min_value=0, max_value=2**31)

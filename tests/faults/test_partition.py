@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from reconswarm import netns
+from reconswarm_bringup import netns
 from tests.deploy_util import assert_all_gone, events, paper_with, run_launcher
 
 ok, why = netns.available()

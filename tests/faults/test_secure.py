@@ -23,8 +23,9 @@ import pytest
 import zenoh
 from zenoh import ext
 
-from reconswarm import secure, wire
+from reconswarm.net import wire
 from reconswarm.scenario import load
+from reconswarm_bringup import secure
 from tests.deploy_util import (
     PAPER,
     ROOT,

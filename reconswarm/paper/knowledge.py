@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from agent.planner import ObstacleView
 from reconswarm.geometry import Edges, convex_hull, merge_hull, signed_distance
+from reconswarm.paper.planner import ObstacleView
 
 Array = NDArray[np.float64]
 _NONE = np.zeros(0, dtype=np.int64)

@@ -1,6 +1,5 @@
 """The in-process engine: the whole mission in one process, every agent at once, same functions as the
-distributed deployment (agent.planner, agent.knowledge, agent.deadlock, agent.leader, simworld.*,
-monitor.*). Deterministic for a scenario and seed.
+distributed deployment (reconswarm.paper, reconswarm.sim, reconswarm.record). Deterministic for a scenario and seed.
 
 Tick k, in this order (the agent process follows the same order for its own row):
   1. sense: every agent's scan of contour points within R_v of p_i(k);
@@ -27,18 +26,18 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from agent.deadlock import StallState, generator, stall_step, window_ticks
-from agent.knowledge import SwarmKnowledge, view_of_edges
-from agent.leader import VirtualLeader
-from agent.planner import ObstacleView, command, errors, neighbour_table_d, repulsion
-from monitor.record import RunRecord, RunWriter
-from monitor.recorder import Recorder
-from monitor.summary import summarize
-from monitor.topology import HYSTERESIS_M
 from reconswarm.geometry import Edges, pairs_and_distances
+from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
+from reconswarm.paper.knowledge import SwarmKnowledge, view_of_edges
+from reconswarm.paper.leader import VirtualLeader
+from reconswarm.paper.planner import ObstacleView, command, errors, neighbour_table_d, repulsion
+from reconswarm.paper.topology import HYSTERESIS_M
+from reconswarm.record.recorder import Recorder
+from reconswarm.record.store import RunRecord, RunWriter
+from reconswarm.record.summary import summarize
 from reconswarm.scenario import Scenario
-from simworld import unicycle
-from simworld.sensing import ContourField
+from reconswarm.sim import unicycle
+from reconswarm.sim.sensing import ContourField
 
 Array = NDArray[np.float64]
 

@@ -10,6 +10,7 @@ from typing import Annotated, Any
 import typer
 
 from reconswarm.errors import BadInput, ReconswarmError
+from reconswarm_bringup.console import fail, print_json
 
 monitor_app = typer.Typer(no_args_is_help=True, help="Record runs and read run records (run.db).")
 
@@ -17,7 +18,7 @@ DbArg = Annotated[Path, typer.Argument(help="A run record (run.db).")]
 
 
 def _open(db: Path) -> Any:
-    from monitor.record import RunRecord
+    from reconswarm.record.store import RunRecord
 
     return RunRecord(db)
 
@@ -25,10 +26,8 @@ def _open(db: Path) -> Any:
 @monitor_app.command("summary")
 def summary_cmd(db: DbArg, as_json: Annotated[bool, typer.Option("--json")] = False) -> None:
     """The run summary (INTERFACES.md fields)."""
-    from reconswarm.cli import fail, print_json
-
     try:
-        from monitor.summary import render, summarize
+        from reconswarm.record.summary import render, summarize
 
         rec = _open(db)
         s = summarize(rec)
@@ -47,8 +46,6 @@ def summary_cmd(db: DbArg, as_json: Annotated[bool, typer.Option("--json")] = Fa
 @monitor_app.command("events")
 def events_cmd(db: DbArg, as_json: Annotated[bool, typer.Option("--json")] = False) -> None:
     """Topology (split, merge) and membership (agent_lost, agent_joined) events in time order."""
-    from reconswarm.cli import fail, print_json
-
     try:
         rec = _open(db)
         events = rec.events()
@@ -79,8 +76,6 @@ def export_cmd(
     out: Annotated[Path | None, typer.Option("-o", "--out", help="Write to a file instead of stdout.")] = None,
 ) -> None:
     """Trajectories as CSV: t_s,agent,px_m,py_m,theta_rad, one row per agent per tick."""
-    from reconswarm.cli import fail
-
     try:
         if fmt != "csv":
             raise BadInput(f"--format: unsupported format {fmt!r} (csv)")
@@ -118,8 +113,6 @@ def plot_cmd(
 ) -> None:
     """Trajectories with obstacles and slots coloured by group, snapshot panels (paper Fig. 4) and the
     tracking error of every agent over time (Fig. 5)."""
-    from reconswarm.cli import fail
-
     try:
         from monitor.plot import plot_run
 
@@ -144,11 +137,9 @@ def record_cmd(
     live: Annotated[bool | None, typer.Option("--live/--no-live", help="Live view (default: on a terminal).")] = None,
 ) -> None:
     """The monitor process: records states, beacons and topology events of a distributed run."""
-    from reconswarm.cli import fail
-
     try:
         from monitor.process import MonitorConfig, run
-        from reconswarm.session import ZenohOptions, bind_to_parent, setup_logging
+        from reconswarm.net.session import ZenohOptions, bind_to_parent, setup_logging
 
         setup_logging()
         bind_to_parent()

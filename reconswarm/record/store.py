@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from monitor.metrics import Episode
 from reconswarm.errors import BadInput
+from reconswarm.record.safety import Episode
 from reconswarm.scenario import Scenario, parse, to_toml
 
 SCHEMA_VERSION = "1"

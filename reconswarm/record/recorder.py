@@ -8,11 +8,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from monitor.metrics import SafetyMonitor
-from monitor.record import RunWriter
-from monitor.topology import TopologyTracker
+from reconswarm.paper.topology import TopologyTracker
+from reconswarm.record.safety import SafetyMonitor
+from reconswarm.record.store import RunWriter
 from reconswarm.scenario import Scenario
-from simworld.sensing import ContourField
+from reconswarm.sim.sensing import ContourField
 
 Array = NDArray[np.float64]
 

@@ -11,28 +11,26 @@ import logging
 import signal
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from pathlib import Path
+from typing import Any
 
-from reconswarm.faults import Fault
-
-if TYPE_CHECKING:
-    from reconswarm.launcher import Fleet, LaunchConfig
+from reconswarm_bringup import netns
+from reconswarm_bringup.faults import Fault
+from reconswarm_bringup.fleet import Fleet
 
 log = logging.getLogger("reconswarm.launch")
 Timer = tuple[float, Callable[[], Any]]
 
 
-def inject(f: Fault, fleet: Fleet, watch: Any, cfg: LaunchConfig) -> list[Timer]:
+def inject(f: Fault, fleet: Fleet, run: str, scenario_path: Path) -> list[Timer]:
     """Start fault f now; return the timers that finish it later (wall time, action)."""
     now = time.monotonic()
     if f.action == "flood":
-        args = ["flood", "--run", watch.keys.run, "--count", str(f.count), "--scenario", str(cfg.out / "scenario.toml")]
+        args = ["flood", "--run", run, "--count", str(f.count), "--scenario", str(scenario_path)]
         prefix, zargs = fleet.zopt("flood")
         fleet.start("flood", "-", [*args, *zargs], prefix)
         return []
     if f.action == "partition":
-        from reconswarm import netns
-
         netns.cut()
         return [(now + f.duration_s, netns.heal)]
     ident = str(f.agent_id) if f.agent_id is not None else "-"

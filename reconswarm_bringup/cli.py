@@ -7,45 +7,24 @@ traceback.
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import typer
 
 from reconswarm.errors import BadInput, ReconswarmError
+from reconswarm_bringup.console import fail, mission_exit_code, print_json, set_debug
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Multi-agent path planning with reconfigurable topology, over Eclipse Zenoh.")
 scenario_app = typer.Typer(no_args_is_help=True, help="Generate and validate scenario files.")
 app.add_typer(scenario_app, name="scenario")
 
-_debug = False
-
 
 @app.callback()
 def _root(debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False) -> None:
-    global _debug
-    _debug = debug
-
-
-def fail(exc: BaseException) -> None:
-    """Print one line and exit with the error's code."""
-    if _debug:
-        raise exc
-    code = exc.exit_code if isinstance(exc, ReconswarmError) else 1
-    typer.echo(f"reconswarm: error: {exc}", err=True)
-    raise typer.Exit(code)
-
-
-def print_json(obj: Any) -> None:
-    sys.stdout.write(json.dumps(obj, indent=2) + "\n")
-
-
-def mission_exit_code(summary: dict[str, Any]) -> int:
-    return 0 if summary.get("converged") and not summary.get("collisions") else 1
-
+    set_debug(debug)
 
 @app.command()
 def sim(
@@ -56,8 +35,8 @@ def sim(
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
 ) -> None:
     """Run the mission in one process, vectorized (same math as the distributed deployment)."""
-    from reconswarm import engine
     from reconswarm.scenario import load, warnings
+    from reconswarm_bringup import engine
 
     try:
         s = load(scenario)
@@ -78,7 +57,7 @@ def sim(
     else:
         from rich.console import Console
 
-        from monitor.summary import render
+        from reconswarm.record.summary import render
 
         Console().print(render(summary))
         typer.echo(f"record: {out / 'run.db'}")
@@ -123,14 +102,13 @@ def scenario_check(file: Annotated[Path, typer.Argument(help="Scenario TOML file
 
 
 def _register() -> None:
-    from monitor.cli import monitor_app
+    from reconswarm_bringup.cli_monitor import monitor_app
 
     app.add_typer(monitor_app, name="monitor")
-    try:
-        from reconswarm import processes
-    except ImportError:  # pragma: no cover - the distributed commands need zenoh
-        return
-    processes.register(app)
+    from reconswarm_bringup import cli_launch, cli_nodes
+
+    cli_nodes.register(app)
+    cli_launch.register(app)
 
 
 _register()

@@ -12,10 +12,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from agent.deadlock import LEADER_STREAM, StallState, generator, stall_step, window_ticks
-from agent.knowledge import obstacle_view
-from agent.planner import attraction, obstacle_repulsion
 from reconswarm.geometry import norm2
+from reconswarm.paper.deadlock import LEADER_STREAM, StallState, generator, stall_step, window_ticks
+from reconswarm.paper.knowledge import obstacle_view
+from reconswarm.paper.planner import attraction, obstacle_repulsion
 from reconswarm.scenario import PlannerConfig, Scenario
 
 Array = NDArray[np.float64]

@@ -42,8 +42,8 @@ from pathlib import Path
 from typing import Any
 
 from reconswarm.errors import BadInput
+from reconswarm.net.session import LEASE_MS, ZenohOptions
 from reconswarm.scenario import Scenario
-from reconswarm.session import LEASE_MS, ZenohOptions
 
 ROLES = ("monitor", "simworld", "agent")
 VALID_DAYS = 30

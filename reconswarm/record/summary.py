@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from monitor.record import RunRecord
+from reconswarm.record.store import RunRecord
 
 FIELDS = ("scenario", "planner", "mode", "agents", "duration_s", "converged", "convergence_time_s",
           "final_max_error_m", "min_agent_gap_m", "min_obstacle_gap_m", "collisions", "safety_violations",

@@ -16,7 +16,8 @@ from typing import Annotated
 import typer
 
 from reconswarm.errors import ReconswarmError
-from reconswarm.session import ZenohOptions, bind_to_parent, serving, setup_logging
+from reconswarm.net.session import ZenohOptions, bind_to_parent, serving, setup_logging
+from reconswarm_bringup.console import fail
 
 log = logging.getLogger("reconswarm.router")
 
@@ -28,8 +29,6 @@ RunId = Annotated[str | None, typer.Option("--run", help="Run name in key expres
 
 
 def _guard(fn: Callable[[], int]) -> None:
-    from reconswarm.cli import fail
-
     setup_logging()
     bind_to_parent()
     prof_dir = os.environ.get("RECONSWARM_PROFILE")  # a directory: dump cProfile stats per process
@@ -88,7 +87,7 @@ def router_cmd(
     listen: Listen = None, connect: Connect = None, zenoh_config: ZConfig = None,
 ) -> None:
     """A zenoh router (Python-hosted) for local and multi-host runs; default tcp/127.0.0.1:7447."""
-    from reconswarm.session import DEFAULT_ROUTER
+    from reconswarm.net.session import DEFAULT_ROUTER
 
     def go() -> int:
         opts = ZenohOptions.build(connect, listen or ([] if zenoh_config else [DEFAULT_ROUTER]), "router", zenoh_config)
@@ -108,7 +107,7 @@ def flood_cmd(
     connect: Connect = None, listen: Listen = None, mode: Mode = "client", zenoh_config: ZConfig = None,
 ) -> None:
     """Fault injection: publish malformed payloads on every key of a run (each must be dropped and counted)."""
-    from reconswarm.flood import FloodConfig, run
+    from reconswarm_bringup.flood import FloodConfig, run
 
     def go() -> int:
         run(FloodConfig(run_id, scenario, count, ZenohOptions.build(connect, listen, mode, zenoh_config)))

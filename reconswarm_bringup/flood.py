@@ -18,9 +18,9 @@ from typing import Any
 
 import msgpack
 
-from reconswarm import wire
+from reconswarm.net import wire
+from reconswarm.net.session import ZenohOptions, open_session
 from reconswarm.scenario import load
-from reconswarm.session import ZenohOptions, open_session
 
 
 def _pack(o: Any) -> bytes:

@@ -1,0 +1,82 @@
+"""`reconswarm launch` (what `deploy/run_local.sh` runs): the mission as separate processes over Zenoh."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from reconswarm.errors import BadInput, ReconswarmError
+from reconswarm_bringup.console import fail, set_debug
+from reconswarm_bringup.fleet import ROOT
+
+PROG = "run_local"
+
+
+def launch_cmd(
+    agents: Annotated[int | None, typer.Option("-n", "--agents",
+        help="Generate a scenario with N agents (instead of -s).")] = None,
+    scenario: Annotated[Path | None, typer.Option("-s", "--scenario",
+        help="Scenario TOML (default: the paper's).")] = None,
+    out: Annotated[Path, typer.Option("-o", "--out", help="Output directory.")] = ROOT / "runs" / "latest",
+    clock: Annotated[str, typer.Option("--clock", help="lockstep | realtime")] = "lockstep",
+    speed: Annotated[float, typer.Option("--speed", help="Realtime: simulated seconds per wall second.")] = 10.0,
+    planner: Annotated[str | None, typer.Option("--planner", help="reconfigurable | virtual-leader")] = None,
+    router: Annotated[str | None, typer.Option("--router", metavar="EP",
+        help="Router endpoint (default tcp/127.0.0.1:7447); one is started there unless one listens.")] = None,
+    secure: Annotated[bool, typer.Option("--secure",
+        help="Mutual TLS, per-process credentials and access control.")] = False,
+    fault: Annotated[list[str] | None, typer.Option("--fault", metavar="SPEC",
+        help="Inject a fault (repeatable), e.g. kill:agent:3@60; see the README.")] = None,
+    hosts: Annotated[int, typer.Option("--hosts",
+        help="2: two hosts as network namespaces, each with its own router (needs root).")] = 1,
+    timeout: Annotated[float | None, typer.Option("--timeout",
+        help="Give up after this many seconds of wall time (exit 3).")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress bar.")] = False,
+    debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False,
+) -> None:
+    """Run the mission as separate processes over Zenoh on this machine (router, simworld, monitor, agents)."""
+    from reconswarm_bringup import faults as faults_mod
+    from reconswarm_bringup.config import LaunchConfig
+    from reconswarm_bringup.launcher import run
+
+    set_debug(debug)
+    logging.basicConfig(level=logging.DEBUG if debug else logging.INFO, format=f"{PROG}: %(message)s")
+    try:
+        if agents is not None and agents < 1:
+            raise BadInput(f"-n: must be >= 1, got {agents}")
+        if not speed > 0:
+            raise BadInput(f"--speed: must be > 0, got {speed}")
+        if clock not in ("lockstep", "realtime"):
+            raise BadInput(f"--clock: expected lockstep or realtime, got {clock!r}")
+        if planner is not None and planner not in ("reconfigurable", "virtual-leader"):
+            raise BadInput(f"--planner: expected reconfigurable or virtual-leader, got {planner!r}")
+        if hosts not in (1, 2):
+            raise BadInput(f"--hosts: expected 1 or 2, got {hosts}")
+        cfg = LaunchConfig(out=out.resolve(), scenario=scenario, agents=agents, clock=clock, speed=speed,
+                           planner=planner, router=router, secure=secure,
+                           faults=tuple(faults_mod.parse(f) for f in fault or []), timeout_s=timeout,
+                           progress=not no_progress, as_json=as_json, hosts=hosts)
+        code = run(cfg)
+    except ReconswarmError as exc:
+        fail(exc, PROG)
+        return
+    raise typer.Exit(code)
+
+
+def register(app: typer.Typer) -> None:
+    app.command("launch")(launch_cmd)
+
+
+def main() -> None:
+    """`python -m reconswarm_bringup.cli_launch ARGS` = `reconswarm launch ARGS` (deploy/run_local.sh)."""
+    app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
+    app.command()(launch_cmd)
+    app(prog_name="deploy/run_local.sh")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,26 @@
+"""The launcher's configuration (what `deploy/run_local.sh` was asked to do)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from reconswarm_bringup.faults import Fault
+
+
+@dataclass(frozen=True)
+class LaunchConfig:
+    out: Path
+    scenario: Path | None = None
+    agents: int | None = None
+    clock: str = "lockstep"
+    speed: float = 10.0
+    planner: str | None = None
+    router: str | None = None
+    secure: bool = False
+    faults: tuple[Fault, ...] = ()
+    timeout_s: float | None = None
+    progress: bool = True
+    as_json: bool = False
+    start_timeout_s: float = 120.0
+    hosts: int = 1

@@ -1,0 +1,36 @@
+"""Console conventions shared by every command: one-line errors, JSON output, the mission's exit code."""
+
+from __future__ import annotations
+
+import json
+import sys
+from typing import Any
+
+import typer
+
+from reconswarm.errors import ReconswarmError
+
+_debug = False
+
+
+def set_debug(on: bool) -> None:
+    """`--debug`: errors raise (traceback) instead of printing one line."""
+    global _debug
+    _debug = on
+
+
+def fail(exc: BaseException, prog: str = "reconswarm") -> None:
+    """Print one line and exit with the error's code."""
+    if _debug:
+        raise exc
+    code = exc.exit_code if isinstance(exc, ReconswarmError) else 1
+    typer.echo(f"{prog}: error: {exc}", err=True)
+    raise typer.Exit(code)
+
+
+def print_json(obj: Any) -> None:
+    sys.stdout.write(json.dumps(obj, indent=2) + "\n")
+
+
+def mission_exit_code(summary: dict[str, Any]) -> int:
+    return 0 if summary.get("converged") and not summary.get("collisions") else 1

@@ -1,0 +1,84 @@
+"""The run's processes: started with subprocess (no fork of a zenoh-holding process), logged, tracked, stopped."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@dataclass
+class Proc:
+    role: str
+    id: str
+    args: list[str]
+    popen: subprocess.Popen[bytes]
+    log_path: Path
+    prefix: list[str] = field(default_factory=list)  # e.g. `ip netns exec NS` for host B
+    expected_exit: bool = False  # stopped on purpose (a fault or the end of the run)
+
+
+@dataclass
+class Fleet:
+    """The run's processes: started with subprocess (no fork of a zenoh-holding process), logged, tracked."""
+
+    out: Path
+    env: dict[str, str]
+    procs: list[Proc] = field(default_factory=list)
+    zopt: Any = None  # (role, id) -> (command prefix, zenoh args), set by run()
+    router_env: dict[str, str] | None = None  # the routers' environment, when it differs from env
+
+    def start(self, role: str, ident: str, args: list[str], prefix: list[str] | None = None) -> Proc:
+        logs = self.out / "logs"
+        logs.mkdir(parents=True, exist_ok=True)
+        name = role if ident == "-" else f"{role}-{ident}"
+        log_path = logs / f"{name}.log"
+        fh = log_path.open("ab")
+        popen = subprocess.Popen([*(prefix or []), sys.executable, "-m", "reconswarm_bringup.cli", *args], stdout=fh,
+                                 stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                 env=self.router_env if role == "router" and self.router_env else self.env,
+                                 cwd=str(ROOT))
+        fh.close()
+        proc = Proc(role, ident, args, popen, log_path, list(prefix or []))
+        self.procs.append(proc)
+        with (self.out / "processes.tsv").open("a") as tsv:
+            tsv.write(f"{role}\t{ident}\t{popen.pid}\n")
+        return proc
+
+    def find(self, role: str, ident: str = "-") -> Proc | None:
+        live = [p for p in self.procs if p.role == role and p.id == ident]
+        return live[-1] if live else None
+
+    def restart(self, proc: Proc) -> Proc:
+        return self.start(proc.role, proc.id, proc.args, proc.prefix)
+
+    def signal(self, proc: Proc, sig: int) -> None:
+        if proc.popen.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(proc.popen.pid, sig)
+
+    def stop_all(self, grace_s: float = 3.0) -> None:
+        """SIGCONT (frozen ones), SIGTERM, then SIGKILL what is still there; reap everything."""
+        order = ["simworld", "agent", "monitor", "flood", "router"]
+        for role in order:
+            for p in self.procs:
+                if p.role == role and p.popen.poll() is None:
+                    p.expected_exit = True
+                    self.signal(p, signal.SIGCONT)
+                    self.signal(p, signal.SIGTERM)
+            deadline = time.monotonic() + grace_s
+            for p in self.procs:
+                if p.role == role:
+                    try:
+                        p.popen.wait(timeout=max(0.0, deadline - time.monotonic()))
+                    except subprocess.TimeoutExpired:
+                        self.signal(p, signal.SIGKILL)
+                        p.popen.wait()

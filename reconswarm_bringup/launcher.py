@@ -1,0 +1,252 @@
+"""The main job behind `deploy/run_local.sh`: one run of the mission as separate processes.
+
+Starts a zenoh router (unless --router names one), the monitor, one process per agent and simworld,
+each with its log in OUTDIR/logs/ and a line in OUTDIR/processes.tsv (role, id, pid) as it starts;
+follows the clock to show progress and to fire faults at simulated times; restarts the monitor if it
+dies; when the world ends the mission it lets everyone finish, stops what is left, prints the summary
+and returns the documented exit code. SIGINT / SIGTERM stop everything; every child is also bound to
+this process (PR_SET_PDEATHSIG) so none outlives it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import zenoh
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+from reconswarm.errors import BadInput, ProcessFailure
+from reconswarm.generate import generate
+from reconswarm.net import wire
+from reconswarm.net.session import ZenohOptions, open_session
+from reconswarm.record.store import RunRecord
+from reconswarm.record.summary import render, summarize
+from reconswarm.scenario import Scenario, load, to_toml
+from reconswarm_bringup import chaos, netns
+from reconswarm_bringup.config import LaunchConfig
+from reconswarm_bringup.console import mission_exit_code
+from reconswarm_bringup.fleet import ROOT, Fleet, Proc
+from reconswarm_bringup.network import Net, plan_network
+
+log = logging.getLogger("reconswarm.launch")
+PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
+ZENOH_RUNTIME = "(" + ", ".join(f"{pool}: (worker_threads: 1)" for pool in ("app", "acc", "tx", "rx", "net")) + ")"
+
+
+def prepare_scenario(cfg: LaunchConfig) -> tuple[Scenario, Path]:
+    """The scenario of the run, written to OUTDIR/scenario.toml so every process reads the same file."""
+    if cfg.scenario is not None and cfg.agents is not None:
+        raise BadInput("-n/--agents and -s/--scenario: give one (-n generates a scenario)")
+    if cfg.agents is not None:
+        s = generate(cfg.agents, max(1, min(10, cfg.agents // 5 + 2)), 0)
+    else:
+        s = load(cfg.scenario or PAPER)
+    if cfg.planner is not None:
+        s = s.with_planner(cfg.planner)
+    path = cfg.out / "scenario.toml"
+    path.write_text(to_toml(s))
+    return s, path
+
+
+class ClockWatch:
+    """Follows the run's clock (and events) on its own zenoh session: progress and fault timing.
+
+    The clock lands in a one-slot ring (only the latest matters), events in a queue; both are read when
+    the launcher polls, so this process does not wake for every tick.
+    """
+
+    def __init__(self, run: str, zopts: ZenohOptions) -> None:
+        self.keys = wire.Keys(run)
+        self.session = open_session(zopts, "run_local")
+        self.clock_sub = self.session.declare_subscriber(self.keys.clock, zenoh.handlers.RingChannel(1))
+        self.event_sub = self.session.declare_subscriber(self.keys.event, zenoh.handlers.FifoChannel(10_000))
+        self.t = 0.0
+        self.k = -1
+        self.alive = 0
+        self.end: wire.Clock | None = None
+        self.events: list[wire.Event] = []
+
+    def poll(self) -> None:
+        with contextlib.suppress(wire.WireError):
+            sample = self.clock_sub.try_recv()
+            if sample is not None:
+                c = wire.clock_from_wire(sample.payload.to_bytes())
+                if c.k >= self.k:
+                    self.t, self.k, self.alive = c.t, c.k, len(c.alive)
+                if c.end:
+                    self.end = c
+        while (sample := self.event_sub.try_recv()) is not None:
+            with contextlib.suppress(wire.WireError):
+                self.events.append(wire.event_from_wire(sample.payload.to_bytes()))
+
+    def close(self) -> None:
+        self.session.close()
+
+
+def run(cfg: LaunchConfig) -> int:
+    cfg.out.mkdir(parents=True, exist_ok=True)
+    for stale in ("processes.tsv", "faults.tsv", "run.db", "run.db-wal", "run.db-shm"):
+        (cfg.out / stale).unlink(missing_ok=True)
+    s, scen_path = prepare_scenario(cfg)
+    if cfg.clock not in ("lockstep", "realtime"):
+        raise BadInput(f"--clock: expected lockstep or realtime, got {cfg.clock!r}")
+    if any(f.action == "partition" for f in cfg.faults) and cfg.hosts != 2:
+        raise BadInput("--fault partition@...: needs --hosts 2 (two hosts to cut apart)")
+    router_env = dict(os.environ, RECONSWARM_DIE_WITH_PARENT=str(os.getpid()), PYTHONUNBUFFERED="1")
+    env = dict(router_env)
+    # One worker thread per zenoh runtime pool in the clients: a process here handles a few hundred messages
+    # a second, and fewer threads mean fewer hand-offs (measured ~3 % less CPU on the paper mission). Not in
+    # routers: a router whose one tx thread waits on a dead link (a partition, until the lease runs out and
+    # after) stops forwarding for everyone else too; measured: the whole of host A stalled for the 10 s cut.
+    env.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)
+    fleet = Fleet(cfg.out, env, router_env=router_env)
+    stop_sig: list[int] = []
+
+    def on_signal(signum: int, _frame: Any) -> None:
+        stop_sig.append(signum)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, on_signal)
+
+    net: Net | None = None
+    watch: ClockWatch | None = None
+    code = 3
+    try:
+        net = plan_network(cfg, s)
+        fleet.zopt = net.zopt
+        for ident, args, prefix in net.routers:
+            fleet.start("router", ident, args, prefix)
+        prefix, zargs = net.zopt("monitor")
+        mon = fleet.start("monitor", "-", ["monitor", "record", "--scenario", str(scen_path), "--db",
+                                           str(cfg.out / "run.db"), "--no-live", *zargs], prefix)
+        for a in s.agents:
+            prefix, zargs = net.zopt("agent", str(a.id))
+            fleet.start("agent", str(a.id), ["agent", "--id", str(a.id), "--scenario", str(scen_path), *zargs], prefix)
+        prefix, zargs = net.zopt("simworld")
+        world = fleet.start("simworld", "-", ["simworld", "--scenario", str(scen_path), "--clock", cfg.clock,
+                                              "--speed", str(cfg.speed), "--start-timeout", str(cfg.start_timeout_s),
+                                              *zargs], prefix)
+        watch = ClockWatch(s.meta.name, net.watch)
+        code = _supervise(cfg, s, fleet, world, mon, watch, stop_sig)
+    finally:
+        if watch is not None:
+            watch.close()
+        fleet.stop_all()
+        if net is not None and net.hosts is not None:
+            net.hosts.delete()
+            netns.ACTIVE.clear()
+    if stop_sig:
+        log.warning("stopped by signal %d", stop_sig[0])
+        return 128 + stop_sig[0]
+    return code
+
+
+def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: Proc, watch: ClockWatch,
+               stop_sig: list[int]) -> int:
+    pending = sorted(cfg.faults, key=lambda f: f.at_s)
+    timers: list[tuple[float, Any]] = []  # (wall time, action)
+    wall0 = time.monotonic()
+    bar = _Progress(cfg.progress and sys.stderr.isatty() and not cfg.as_json, s.meta.duration_s)
+    crashed: list[str] = []
+    try:
+        while not stop_sig:
+            watch.poll()
+            now = time.monotonic()
+            while pending and watch.k >= 0 and watch.t >= pending[0].at_s and watch.end is None:
+                f = pending.pop(0)
+                log.warning("fault: %s", f.describe())
+                with (cfg.out / "faults.tsv").open("a") as tsv:
+                    tsv.write(f"{time.time():.6f}\t{watch.t:.3f}\t{f.describe()}\n")
+                timers += chaos.inject(f, fleet, watch.keys.run, cfg.out / "scenario.toml")
+            for item in [x for x in timers if x[0] <= now]:
+                timers.remove(item)
+                item[1]()
+            for p in fleet.procs:
+                rc = p.popen.poll()
+                if rc is not None and not p.expected_exit and p.role in ("agent", "router", "monitor"):
+                    p.expected_exit = True
+                    if p.role == "monitor" and rc == 0:
+                        continue  # it saw the end of the mission and closed the record
+                    if p.role == "monitor" and world.popen.poll() is None:
+                        log.warning("monitor died (exit %s): restarting it", rc)
+                        mon = fleet.restart(p)
+                    elif rc != 0 and watch.end is None:
+                        crashed.append(f"{p.role} {p.id} exited {rc}")
+                        log.warning("%s %s exited with %s", p.role, p.id, rc)
+            bar.update(watch.t, watch.alive, len(s.agents))
+            if world.popen.poll() is not None:
+                break
+            if cfg.timeout_s is not None and now - wall0 > cfg.timeout_s:
+                log.error("timeout after %.0f s of wall time", cfg.timeout_s)
+                return 3
+            time.sleep(0.05)
+        if stop_sig:
+            return 128 + stop_sig[0]
+        rc = world.popen.returncode
+        if rc != 0:
+            tail = world.log_path.read_text(errors="replace").strip().splitlines()[-1:]
+            raise ProcessFailure(f"simworld exited {rc}: {tail[0] if tail else ''} (see {world.log_path})")
+        try:  # the monitor writes the last ticks and closes the record
+            mon.popen.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            log.warning("monitor did not finish in time")
+        deadline = time.monotonic() + 5
+        for p in fleet.procs:
+            if p.role == "agent" and p.popen.poll() is None:
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    p.popen.wait(timeout=max(0.1, deadline - time.monotonic()))
+    finally:
+        bar.close()
+    return _report(cfg, crashed)
+
+
+def _report(cfg: LaunchConfig, crashed: list[str]) -> int:
+    db = cfg.out / "run.db"
+    rec = RunRecord(db)
+    summary = summarize(rec)
+    rec.close()
+    if cfg.as_json:
+        sys.stdout.write(json.dumps(summary, indent=2) + "\n")
+    else:
+        Console().print(render(summary))
+        print(f"record: {db}\nlogs:   {cfg.out / 'logs'}")
+    if crashed:
+        log.error("processes failed: %s", "; ".join(crashed))
+        return 3
+    return mission_exit_code(summary)
+
+
+class _Progress:
+    def __init__(self, enabled: bool, total_s: float) -> None:
+        self.enabled = enabled
+        self.last = 0.0
+        self.wall0 = time.monotonic()
+        self.bar: Any = None
+        if enabled:
+            self.bar = Progress(TextColumn("mission"), BarColumn(), TextColumn("t = {task.completed:.1f} s"),
+                                TextColumn("{task.fields[info]}"), TimeElapsedColumn(), transient=True)
+            self.task = self.bar.add_task("mission", total=total_s, info="")
+            self.bar.start()
+
+    def update(self, t: float, alive: int, n: int) -> None:
+        wall = time.monotonic() - self.wall0
+        info = f"{alive}/{n} agents, {t / wall:.1f}x real time" if wall > 0 and t > 0 else "starting"
+        if self.bar is not None:
+            self.bar.update(self.task, completed=t, info=info)
+        elif time.monotonic() - self.last > 5.0:
+            self.last = time.monotonic()
+            log.info("t = %.1f s (%s)", t, info)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()

@@ -1,0 +1,85 @@
+"""Where a run's routers go and how each process reaches one: plain, secure (mutual TLS) or two hosts."""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+from dataclasses import dataclass
+from typing import Any
+
+from reconswarm.errors import BadInput, ProcessFailure
+from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions
+from reconswarm.scenario import Scenario
+from reconswarm_bringup import netns, secure
+from reconswarm_bringup.config import LaunchConfig
+
+log = logging.getLogger("reconswarm.launch")
+
+
+def _port_free(endpoint: str) -> bool:
+    proto, _, addr = endpoint.partition("/")
+    if proto not in ("tcp", "tls"):
+        return True
+    host, _, port = addr.rpartition(":")
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((host.strip("[]"), int(port)))
+        except OSError:
+            return False
+    return True
+
+
+@dataclass
+class Net:
+    """Where the routers run and how each process reaches one."""
+
+    watch: ZenohOptions  # the launcher's own session (progress, fault timing)
+    routers: list[tuple[str, list[str], list[str]]]  # (id, router args, command prefix) to start
+    reach: dict[tuple[str, str], tuple[list[str], list[str]]]  # (role, id) -> (prefix, zenoh args)
+    default: list[str]
+    hosts: Any = None
+
+    def zopt(self, role: str, ident: str = "-") -> tuple[list[str], list[str]]:
+        return self.reach.get((role, ident), ([], self.default))
+
+
+def plan_network(cfg: LaunchConfig, s: Scenario) -> Net:
+    endpoint = cfg.router or DEFAULT_ROUTER
+    if cfg.secure and cfg.hosts > 1:
+        raise BadInput("--secure with --hosts 2 is not supported")
+    if cfg.secure:
+        sec = secure.create(cfg.out / "secrets", s, endpoint)
+        reach: dict[tuple[str, str], tuple[list[str], list[str]]] = {
+            ("monitor", "-"): ([], ["--zenoh-config", str(sec.config_for("monitor", "-"))]),
+                 ("simworld", "-"): ([], ["--zenoh-config", str(sec.config_for("simworld", "-"))]),
+                 ("flood", "-"): ([], ["--zenoh-config", str(cfg.out / "secrets" / "intruder.json5")])}
+        reach |= {("agent", str(a.id)): ([], ["--zenoh-config", str(sec.config_for("agent", str(a.id)))])
+                  for a in s.agents}
+        if not _port_free(sec.endpoint):  # a router already there holds another run's CA: it cannot serve us
+            raise ProcessFailure(f"router: {sec.endpoint} is in use; secure mode starts its own router")
+        routers: list[tuple[str, list[str], list[str]]] = [
+            ("-", ["router", "--zenoh-config", str(sec.router_config)], [])]
+        return Net(sec.observer_options(), routers, reach, [])
+    if cfg.hosts == 2:
+        hosts = netns.TwoHosts.for_run(os.getpid())
+        hosts.create()
+        netns.ACTIVE.append(hosts)
+        port = endpoint.rpartition(":")[2]
+        ep_a, ep_b = f"tcp/{hosts.ip_a}:{port}", f"tcp/{hosts.ip_b}:{port}"
+        on_b = [a.id for a in s.agents][len(s.agents) // 2:]
+        reach = {("agent", str(a)): (hosts.exec_prefix(), ["--connect", ep_b]) for a in on_b}
+        routers = [("A", ["router", "--listen", ep_a], []),
+                   ("B", ["router", "--listen", ep_b, "--connect", ep_a], hosts.exec_prefix())]
+        log.info("two hosts: A (this namespace, router %s: simworld, monitor, agents %s) and B (%s, router %s: "
+                 "agents %s)", ep_a, [a.id for a in s.agents if a.id not in on_b], hosts.ns_b, ep_b, on_b)
+        return Net(ZenohOptions.build([ep_a], None, "client", None), routers, reach, ["--connect", ep_a], hosts)
+    if _port_free(endpoint):
+        routers = [("-", ["router", "--listen", endpoint], [])]
+    elif cfg.router is None:
+        raise ProcessFailure(f"router: {endpoint} is in use (another run?); stop it or pass --router EP")
+    else:
+        log.info("using the router already listening on %s", endpoint)
+        routers = []
+    return Net(ZenohOptions.build([endpoint], None, "client", None), routers, {}, ["--connect", endpoint])
