@@ -1,4 +1,7 @@
-"""Shared fixtures."""
+"""Tests in two folders: tests/unit (no processes, seconds) and tests/system (real processes on 127.0.0.1).
+
+Every test under tests/system is marked `system`, so `pytest -m "not system"` runs the unit suite alone.
+"""
 
 from __future__ import annotations
 
@@ -6,12 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from tests.deploy_util import assert_all_gone
+_SYSTEM = Path(__file__).parent / "system"
 
 
-@pytest.fixture
-def out(tmp_path: Path):
-    """A run's output directory; afterwards every process the run started must be gone (killed by PID if not)."""
-    d = tmp_path / "run"
-    yield d
-    assert_all_gone(d)
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        if _SYSTEM in Path(str(item.fspath)).parents:
+            item.add_marker(pytest.mark.system)

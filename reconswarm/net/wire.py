@@ -1,4 +1,4 @@
-"""The wire protocol, in one place: key expressions and msgpack schemas (INTERFACES.md).
+"""The wire protocol: msgpack schemas (INTERFACES.md); the key expressions are in reconswarm.net.keys.
 
 Every message is a frozen dataclass with a paired `<name>_to_wire` / `<name>_from_wire`. Decoding
 validates everything a hostile or broken peer could get wrong (size, msgpack, schema version, types,
@@ -13,6 +13,9 @@ from typing import Any
 
 import msgpack
 
+from reconswarm.net.keys import Keys as Keys
+from reconswarm.net.keys import WireError as WireError
+
 VERSION = 1
 MAX_PAYLOAD_BYTES = 1 << 20  # 1 MiB: larger payloads are rejected before decoding
 MAX_POINTS = 50_000  # contour points in a scan
@@ -20,110 +23,6 @@ MAX_OBSTACLES = 4_096  # obstacle ids in one obstacle set
 MAX_VERTICES = 4_096  # vertices of one shared hull
 MAX_IDS = 100_000  # agent ids in a clock's alive list
 MAX_STR = 128
-
-
-class WireError(ValueError):
-    """A payload that must be dropped (and counted)."""
-
-
-# ---------------------------------------------------------------------------------------- key expressions
-
-
-@dataclass(frozen=True)
-class Keys:
-    """All key expressions of one run (`swarm/<run>/...`)."""
-
-    run: str
-    _parsed: dict[str, tuple[str, int | None, str]] = field(default_factory=dict, compare=False, repr=False)
-
-    @property
-    def prefix(self) -> str:
-        return f"swarm/{self.run}"
-
-    def agent(self, agent_id: int, leaf: str) -> str:
-        return f"{self.prefix}/agent/{agent_id}/{leaf}"
-
-    def state(self, agent_id: int) -> str:
-        return self.agent(agent_id, "state")
-
-    def scan(self, agent_id: int) -> str:
-        return self.agent(agent_id, "scan")
-
-    def cmd(self, agent_id: int) -> str:
-        return self.agent(agent_id, "cmd")
-
-    def beacon(self, agent_id: int) -> str:
-        return self.agent(agent_id, "beacon")
-
-    def obstacles(self, agent_id: int) -> str:
-        return self.agent(agent_id, "obstacles")
-
-    def all_agents(self, leaf: str) -> str:
-        return f"{self.prefix}/agent/*/{leaf}"
-
-    @property
-    def clock(self) -> str:
-        return f"{self.prefix}/clock"
-
-    @property
-    def event(self) -> str:
-        return f"{self.prefix}/event"
-
-    @property
-    def alive_all(self) -> str:
-        return f"{self.prefix}/alive/**"
-
-    def alive_agent(self, agent_id: int) -> str:
-        return f"{self.prefix}/alive/agent/{agent_id}"
-
-    @property
-    def alive_simworld(self) -> str:
-        return f"{self.prefix}/alive/simworld"
-
-    @property
-    def alive_monitor(self) -> str:
-        return f"{self.prefix}/alive/monitor"
-
-    @property
-    def truth(self) -> str:
-        return f"{self.prefix}/truth"
-
-    def parse(self, key: str) -> tuple[str, int | None, str]:
-        """Classify a key: ("agent", id, leaf) | ("clock", None, "") | ("event", None, "") |
-        ("truth", None, "") | ("alive", id or None, "agent" | "simworld" | "monitor").
-        Raises WireError for anything else."""
-        hit = self._parsed.get(key)
-        if hit is not None:
-            return hit
-        out = self._parse(key)
-        if len(self._parsed) < 100_000:
-            self._parsed[key] = out
-        return out
-
-    def _parse(self, key: str) -> tuple[str, int | None, str]:
-        pre = self.prefix + "/"
-        if not key.startswith(pre):
-            raise WireError(f"key {key!r} outside {self.prefix}")
-        parts = key[len(pre):].split("/")
-        if parts == ["clock"]:
-            return "clock", None, ""
-        if parts == ["event"]:
-            return "event", None, ""
-        if parts == ["truth"]:
-            return "truth", None, ""
-        if len(parts) == 3 and parts[0] == "agent":
-            return "agent", _key_id(parts[1], key), parts[2]
-        if len(parts) == 3 and parts[:2] == ["alive", "agent"]:
-            return "alive", _key_id(parts[2], key), "agent"
-        if len(parts) == 2 and parts[0] == "alive" and parts[1] in ("simworld", "monitor"):
-            return "alive", None, parts[1]
-        raise WireError(f"unexpected key {key!r}")
-
-
-def _key_id(text: str, key: str) -> int:
-    if not text.isdigit() or len(text) > 10:
-        raise WireError(f"bad agent id in key {key!r}")
-    return int(text)
 
 
 # ---------------------------------------------------------------------------------------------- messages

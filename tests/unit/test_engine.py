@@ -18,7 +18,7 @@ from reconswarm.record.store import RunRecord
 from reconswarm.scenario import load, parse, to_toml, warnings
 from reconswarm_bringup.engine import Engine, SimConfig, run
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
 
 

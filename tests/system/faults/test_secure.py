@@ -26,7 +26,7 @@ from zenoh import ext
 from reconswarm.net import wire
 from reconswarm.scenario import load
 from reconswarm_bringup import secure
-from tests.deploy_util import (
+from tests.support import (
     PAPER,
     ROOT,
     assert_all_gone,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from tests.deploy_util import events, faults_log, positions, restart_and_rejoin, run_launcher
+from tests.support import events, faults_log, positions, restart_and_rejoin, run_launcher
 
 
 def test_agent_killed(out: Path) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from tests.deploy_util import faults_log, run_launcher, summary
+from tests.support import faults_log, run_launcher, summary
 
 
 def test_monitor_killed_is_restarted_and_appends(out: Path) -> None:

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from reconswarm_bringup import netns
-from tests.deploy_util import assert_all_gone, events, paper_with, run_launcher
+from tests.support import assert_all_gone, events, paper_with, run_launcher
 
 ok, why = netns.available()
 pytestmark = pytest.mark.skipif(not ok, reason=f"network namespaces are not permitted here: {why}")

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.deploy_util import (
+from tests.support import (
     PAPER,
     ROOT,
     assert_all_gone,

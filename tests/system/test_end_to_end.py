@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
 _SCRIPT = Path(sys.executable).parent / "reconswarm"
 CLI = [str(_SCRIPT)] if _SCRIPT.exists() else [sys.executable, "-m", "reconswarm_bringup.cli"]

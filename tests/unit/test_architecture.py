@@ -1,0 +1,54 @@
+"""The layers hold: no import cycles between files, no project imports hidden inside functions (except in
+command-line entry files, where lazy imports keep start-up fast), and modules one can read in one sitting.
+The layer contract itself is checked by `lint-imports` (pyproject.toml), which .ci/run runs."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import grimp
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+PACKAGES = ("reconswarm", "agent", "simworld", "monitor", "reconswarm_bringup")
+ENTRY_FILES = ("cli.py", "__main__.py")
+
+
+def _sources() -> list[Path]:
+    return sorted(p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py"))
+
+
+def test_no_import_cycles_between_files():
+    g = grimp.build_graph(*PACKAGES)
+    cycles = sorted({tuple(sorted((a, b))) for a in g.modules for b in g.find_modules_directly_imported_by(a)
+                     if g.chain_exists(importer=b, imported=a)})
+    assert cycles == []
+
+
+def _nested_project_imports(path: Path) -> list[str]:
+    tree = ast.parse(path.read_text())
+    found = []
+    for fn in ast.walk(tree):
+        if not isinstance(fn, ast.FunctionDef | ast.AsyncFunctionDef):
+            continue
+        for node in ast.walk(fn):
+            if isinstance(node, ast.ImportFrom) and node.level == 0:
+                names = [node.module or ""]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            else:
+                continue
+            found += [f"{path.relative_to(ROOT)}:{node.lineno} {n}" for n in names if n.split(".")[0] in PACKAGES]
+    return found
+
+
+def test_no_function_level_project_imports_outside_entry_files():
+    hidden = [hit for p in _sources() if not p.name.startswith(ENTRY_FILES) and not p.name.startswith("cli_")
+              for hit in _nested_project_imports(p)]
+    assert hidden == []
+
+
+@pytest.mark.parametrize("path", _sources(), ids=lambda p: str(p.relative_to(ROOT)))
+def test_modules_are_readable_in_one_sitting(path: Path):
+    assert len(path.read_text().splitlines()) < 400
