@@ -17,6 +17,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from reconswarm.errors import BadInput
 from reconswarm.net import ros2
+from reconswarm.net import ros2_graph as graph
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
 T: Any = STORE.types
@@ -107,19 +108,19 @@ def test_domain_id_from_option_then_environment_then_zero():
 
 
 def test_tokens_built_as_in_the_design_document():
-    assert ros2.node_token(2, SESSION, 0, "listener") == DOC_LISTENER_NODE
-    sub = ros2.endpoint_token(ros2.EntityKind.SUBSCRIPTION, 2, SESSION, 0, 10, "listener", "/chatter",
-                              "std_msgs/msg/String", ros2.QoS(depth=10))
+    assert graph.node_token(2, SESSION, 0, "listener") == DOC_LISTENER_NODE
+    sub = graph.endpoint_token(graph.EntityKind.SUBSCRIPTION, 2, SESSION, 0, 10, "listener", "/chatter",
+                           "std_msgs/msg/String", graph.QoS(depth=10))
     assert sub == DOC_LISTENER_SUB
-    pub = ros2.endpoint_token(ros2.EntityKind.PUBLISHER, 2, "8b20917502ee955ac4476e0266340d5c", 0, 10, "talker",
-                              "/chatter", "std_msgs/msg/String", ros2.QoS(depth=7))
+    pub = graph.endpoint_token(graph.EntityKind.PUBLISHER, 2, "8b20917502ee955ac4476e0266340d5c", 0, 10, "talker",
+                           "/chatter", "std_msgs/msg/String", graph.QoS(depth=7))
     assert pub == DOC_TALKER_PUB
 
 
 @pytest.mark.parametrize("line", [DOC_LISTENER_NODE, DOC_LISTENER_SUB, DOC_TALKER_PUB, DOC_SERVICE_SERVER,
                                   DOC_SERVICE_CLIENT])
 def test_tokens_of_the_design_document_parse_and_rebuild(line):
-    entity = ros2.parse_token(line)
+    entity = graph.parse_token(line)
     assert entity.keyexpr() == line
     parts = line.split("/")
     assert (entity.domain_id, entity.session_id, entity.node_id, entity.entity_id) == (
@@ -131,24 +132,24 @@ def test_tokens_of_the_design_document_parse_and_rebuild(line):
 
 
 def test_token_of_a_namespaced_robot_topic():
-    key = ros2.endpoint_token(ros2.EntityKind.PUBLISHER, 0, "1f", 3, 4, "simworld", "/robot_2/odom", ros2.ODOMETRY,
-                              ros2.QoS(depth=10), namespace="/swarm")
+    key = graph.endpoint_token(graph.EntityKind.PUBLISHER, 0, "1f", 3, 4, "simworld", "/robot_2/odom", ros2.ODOMETRY,
+                           graph.QoS(depth=10), namespace="/swarm")
     assert key == (f"@ros2_lv/0/1f/3/4/MP/%/%swarm/simworld/%robot_2%odom/nav_msgs::msg::dds_::Odometry_/"
                    f"{PUBLISHED_ODOMETRY_HASH}/::,10:,:,:,,")
-    e = ros2.parse_token(key)
+    e = graph.parse_token(key)
     assert e.namespace == "/swarm" and e.topic is not None and e.topic.name == "/robot_2/odom"
 
 
 def test_qos_compact_form():
     # rmw_zenoh's qos_to_keyexpr: defaults (reliable, volatile, keep_last, depth 42) are left empty
-    assert ros2.QoS().to_keyexpr() == "::,:,:,:,,"
-    q = ros2.QoS(ros2.Reliability.BEST_EFFORT, ros2.Durability.TRANSIENT_LOCAL, ros2.History.KEEP_ALL, 5)
+    assert graph.QoS().to_keyexpr() == "::,:,:,:,,"
+    q = graph.QoS(graph.Reliability.BEST_EFFORT, graph.Durability.TRANSIENT_LOCAL, graph.History.KEEP_ALL, 5)
     assert q.to_keyexpr() == "2:1:2,5:,:,:,,"
-    assert ros2.QoS.from_keyexpr("2:1:2,5:,:,:,,") == q
-    assert ros2.QoS.from_keyexpr("::,10:,:,:,,") == ros2.QoS(depth=10)
+    assert graph.QoS.from_keyexpr("2:1:2,5:,:,:,,") == q
+    assert graph.QoS.from_keyexpr("::,10:,:,:,,") == graph.QoS(depth=10)
     for bad in ("::,10", "9::,:,:,:,,", "::,x:,:,:,,", "::,:,:,:,", "a:b:c:d:e:f"):
         with pytest.raises(ros2.Ros2Error):
-            ros2.QoS.from_keyexpr(bad)
+            graph.QoS.from_keyexpr(bad)
 
 
 @pytest.mark.parametrize("bad", [
@@ -163,7 +164,7 @@ def test_qos_compact_form():
 ])
 def test_malformed_tokens_are_rejected(bad):
     with pytest.raises(ros2.Ros2Error):
-        ros2.parse_token(bad)
+        graph.parse_token(bad)
 
 
 # ------------------------------------------------------------------------------------------ attachment
@@ -193,8 +194,9 @@ def test_publication_numbers_its_samples_with_one_random_gid():
     assert [x.sequence_number for x in atts] == [1, 2, 3]
     assert [x.source_timestamp_ns for x in atts] == [1000, 1001, 1002]
     assert {x.gid for x in atts} == {a.gid}
-    with pytest.raises(ValueError):
-        ros2.pack_attachment(ros2.Attachment(1, 1, bytes(15)))
+    for bad in (ros2.Attachment(1, 1, bytes(15)), ros2.Attachment(2**63, 1, bytes(16))):
+        with pytest.raises(ValueError):
+            ros2.pack_attachment(bad)
 
 
 # ------------------------------------------------------------------------------------------ CDR payloads
