@@ -83,3 +83,19 @@ def _step_limited(p: Array, theta: Array, u: Array, l: Array, dt: float, max_spe
         th = th + w * h
     th = wrap(th)
     return head_point(s, th, l), th
+
+
+def step_vw(p: Array, theta: Array, v: Array, w: Array, l: Array, dt: float, max_speed: float = 0.0,
+            max_turn_rate: float = 0.0) -> tuple[Array, Array, Array, Array]:
+    """ROS 2 mode: the body's (v, ω) held over the step, as a robot base holds its last cmd_vel, saturated
+    to the limits (0: none). The body moves on the exact arc. Returns the new (p, θ) and the applied (v, ω)."""
+    if max_speed > 0.0:
+        v = np.clip(v, -max_speed, max_speed)
+    if max_turn_rate > 0.0:
+        w = np.clip(w, -max_turn_rate, max_turn_rate)
+    half = w * dt / 2
+    chord = v * dt * np.sinc(half / np.pi)
+    mid = theta + half
+    s = body_centre(p, theta, l) + np.stack([chord * np.cos(mid), chord * np.sin(mid)], axis=1)
+    th = wrap(theta + w * dt)
+    return head_point(s, th, l), th, v, w
