@@ -17,8 +17,8 @@ from rosbags.typesys import Stores, get_typestore
 
 from reconswarm.net import ros2
 from reconswarm.net import ros2_graph as graph
-from reconswarm.session import ZenohOptions, open_session
-from tests.deploy_util import ROOT, free_port
+from reconswarm.net.session import ZenohOptions, open_session
+from tests.support import ROOT, free_port
 
 SAMPLES = 20
 
@@ -42,7 +42,7 @@ def _publish_until(
 
 def test_outside_tools_see_our_ros2_face(tmp_path):
     ep = f"tcp/127.0.0.1:{free_port()}"
-    router = subprocess.Popen([sys.executable, "-m", "reconswarm.cli", "router", "--listen", ep], cwd=ROOT,
+    router = subprocess.Popen([sys.executable, "-m", "reconswarm_bringup.cli", "router", "--listen", ep], cwd=ROOT,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     sessions: list[Any] = []
     echo = None
