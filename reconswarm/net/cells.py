@@ -1,0 +1,90 @@
+"""Spatial cells of the key space: who an agent needs to hear, independent of N.
+
+The law is local: an agent uses a peer only within `reach_m` (link range + hysteresis for sharing, or
+2 r_max + d_max for repulsion). Beacons and obstacle sets are published under the cell of the sender's
+position (`swarm/<run>/cell/<cx>_<cy>/agent/<id>/...`); an agent subscribes to the cells that intersect
+the disk around its position of radius reach + 3 V dt, where V bounds any robot's speed, so every peer
+that can matter at the next two ticks publishes in a cell it already hears. Pure: no zenoh.
+
+Geometry (all lengths in metres):
+    width_m = link_range_m + hysteresis_m + 2 V dt    (no robot crosses a cell in one tick)
+    cell_of(p) = (floor(px / width), floor(py / width))
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from reconswarm.paper.topology import HYSTERESIS_M
+from reconswarm.scenario import Scenario
+
+Cell = tuple[int, int]
+
+
+def speed_bound_mps(s: Scenario) -> float:
+    """V: no head point moves faster. The world's limit if it has one; else the planner's bound: the
+    attraction is at most R_c k_att (eq. 9), each repulsion term at most |Ψ| (eq. 11, bounded at d_min),
+    and a robot between two neighbours and an obstacle meets at most a few of them at full strength, so
+    2 |Ψ| plus the stall push is a generous bound in practice. A violation is detected, not assumed away:
+    a beacon from outside the expected set within reach is reported (lockstep's determinism)."""
+    p = s.planner
+    if s.world.max_speed_mps > 0:
+        return s.world.max_speed_mps
+    return p.target_radius_m * p.k_att + 2.0 * abs(p.psi_mps) + p.perturbation_mps
+
+
+@dataclass(frozen=True)
+class CellGrid:
+    width_m: float
+    reach_m: float  # a peer beyond this centre distance contributes nothing to an agent's tick
+    step_m: float  # V dt: the most any robot moves in one tick
+
+    @classmethod
+    def for_scenario(cls, s: Scenario) -> CellGrid:
+        p = s.planner
+        step = speed_bound_mps(s) * s.meta.dt_s
+        reach = max(p.link_range_m + HYSTERESIS_M, 2.0 * float(s.radii.max()) + p.d_max_m)
+        return cls(width_m=reach + 2.0 * step, reach_m=reach, step_m=step)
+
+    def cell_of(self, x: float, y: float) -> Cell:
+        return math.floor(x / self.width_m), math.floor(y / self.width_m)
+
+    def listen_cells(self, x: float, y: float) -> frozenset[Cell]:
+        """Every cell that intersects the disk of radius reach + 3 V dt around (x, y)."""
+        rad = self.reach_m + 3.0 * self.step_m
+        w = self.width_m
+        x0, x1 = math.floor((x - rad) / w), math.floor((x + rad) / w)
+        y0, y1 = math.floor((y - rad) / w), math.floor((y + rad) / w)
+        out = set()
+        for cx in range(x0, x1 + 1):
+            for cy in range(y0, y1 + 1):
+                # nearest point of the cell's square to (x, y)
+                nx = min(max(x, cx * w), (cx + 1) * w)
+                ny = min(max(y, cy * w), (cy + 1) * w)
+                if (nx - x) ** 2 + (ny - y) ** 2 <= rad * rad:
+                    out.add((cx, cy))
+        return frozenset(out)
+
+    def may_matter(self, own: tuple[float, float], peer: tuple[float, float]) -> bool:
+        """Can a peer at `peer` at tick k-1 be within reach of us at tick k (we at `own` at k-1)?"""
+        limit = self.reach_m + 2.0 * self.step_m
+        return (own[0] - peer[0]) ** 2 + (own[1] - peer[1]) ** 2 <= limit * limit
+
+
+def cell_chunk(c: Cell) -> str:
+    """The key chunk of a cell: "<cx>_<cy>" (integers, may be negative)."""
+    return f"{c[0]}_{c[1]}"
+
+
+def chunk_cell(chunk: str) -> Cell:
+    """Inverse of cell_chunk; ValueError for anything else."""
+    a, sep, b = chunk.partition("_")
+    if not sep or not _is_int(a) or not _is_int(b):
+        raise ValueError(f"bad cell {chunk!r}")
+    return int(a), int(b)
+
+
+def _is_int(t: str) -> bool:
+    body = t[1:] if t.startswith("-") else t
+    return body.isdigit() and len(body) <= 9

@@ -1,0 +1,64 @@
+"""Cells of the key space: a peer that can matter is always in a cell the agent listens to."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from reconswarm.net.cells import CellGrid, cell_chunk, chunk_cell, speed_bound_mps
+from reconswarm.scenario import load
+
+PAPER = Path(__file__).resolve().parents[2] / "deploy" / "scenarios" / "paper.toml"
+GRID = CellGrid.for_scenario(load(PAPER))
+coord = st.floats(-5000, 5000, allow_nan=False)
+
+
+def test_paper_grid_is_wider_than_reach_plus_two_steps():
+    s = load(PAPER)
+    v = speed_bound_mps(s)
+    assert v == pytest.approx(80 * 0.08 + 2 * 65.0)
+    assert GRID.width_m == pytest.approx(GRID.reach_m + 2 * v * 0.05)
+    assert GRID.reach_m == pytest.approx(42.0)
+
+
+@settings(max_examples=400, deadline=None)
+@given(coord, coord, st.floats(0, 1), st.floats(0, 2 * math.pi), st.floats(0, 1), st.floats(0, 2 * math.pi),
+       st.floats(0, 1), st.floats(0, 2 * math.pi))
+def test_a_peer_that_can_matter_publishes_in_a_listened_cell(x, y, r1, a1, r2, a2, r3, a3):
+    """Peer j within reach + 2 V dt of us at k-1 (so it may matter at k); both move at most V dt per tick for
+    two ticks: its cell at k and k+1 is among the cells we listen to since k-1."""
+    g = GRID
+    d = (g.reach_m + 2 * g.step_m) * r1
+    px, py = x + d * math.cos(a1), y + d * math.sin(a1)
+    listen = g.listen_cells(x, y)
+    for r, a in ((r2, a2), (2 * r3, a3)):  # its position one and two ticks later
+        qx, qy = px + g.step_m * r * math.cos(a), py + g.step_m * r * math.sin(a)
+        assert g.cell_of(qx, qy) in listen
+
+
+@settings(max_examples=200, deadline=None)
+@given(coord, coord)
+def test_listen_set_is_small(x, y):
+    assert 1 <= len(GRID.listen_cells(x, y)) <= 16
+
+
+def test_may_matter_is_the_two_step_bound():
+    g = GRID
+    lim = g.reach_m + 2 * g.step_m
+    assert g.may_matter((0, 0), (lim, 0))
+    assert not g.may_matter((0, 0), (lim + 1e-6, 0))
+
+
+@pytest.mark.parametrize("c", [(0, 0), (-3, 4), (12, -7), (-1, -1)])
+def test_chunk_round_trip(c):
+    assert chunk_cell(cell_chunk(c)) == c
+
+
+@pytest.mark.parametrize("bad", ["", "3", "3_", "_4", "a_b", "3_4_5", "--3_4", "1e3_2", "9999999999_1"])
+def test_bad_chunks_are_refused(bad):
+    with pytest.raises(ValueError):
+        chunk_cell(bad)
