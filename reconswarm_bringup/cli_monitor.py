@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import csv
 import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -72,21 +74,38 @@ def events_cmd(db: DbArg, as_json: Annotated[bool, typer.Option("--json")] = Fal
 @monitor_app.command("export")
 def export_cmd(
     db: DbArg,
-    fmt: Annotated[str, typer.Option("--format", help="Output format (csv).")] = "csv",
-    out: Annotated[Path | None, typer.Option("-o", "--out", help="Write to a file instead of stdout.")] = None,
+    fmt: Annotated[str, typer.Option("--format", help="csv | mcap")] = "csv",
+    out: Annotated[Path | None, typer.Option("-o", "--out", help="File to write (csv: default stdout).")] = None,
+    period_s: Annotated[float | None, typer.Option(
+        "--period", help="mcap: seconds of simulated time between scenes (default: every tick, or 0.1 s for "
+                         "runs with more than 500k agent-ticks).")] = None,
 ) -> None:
-    """Trajectories as CSV: t_s,agent,px_m,py_m,theta_rad, one row per agent per tick."""
+    """csv: trajectories t_s,agent,px_m,py_m,theta_rad, one row per agent per tick. mcap: the run for
+    Foxglove (a SceneUpdate scene, per-agent tracking error, events as Log, the scenario attached)."""
     try:
-        if fmt != "csv":
-            raise BadInput(f"--format: unsupported format {fmt!r} (csv)")
+        if fmt not in ("csv", "mcap"):
+            raise BadInput(f"--format: unsupported format {fmt!r} (csv or mcap)")
+        if fmt == "mcap":
+            if out is None:
+                raise BadInput("--format mcap: give the file to write with -o FILE.mcap")
+            from monitor.mcap_export import export_mcap
+
+            rec = _open(db)
+            with _progress_bar("export") as progress:
+                stats = export_mcap(rec, out, period_s, progress)
+            rec.close()
+            every = "every tick" if stats.period_s is None else f"every {stats.period_s:g} s"
+            typer.echo(f"wrote {out}: {stats.bytes / 1e6:.1f} MB, {stats.scene_messages} scenes ({every}), "
+                       f"{stats.events} events")
+            return
         rec = _open(db)
         tk = rec.ticks()
         ids = rec.ids
         rec.close()
+        stream = sys.stdout if out is None else _open_out(out)
     except ReconswarmError as exc:
         fail(exc)
         return
-    stream = sys.stdout if out is None else out.open("w", newline="")
     try:
         w = csv.writer(stream, lineterminator="\n")
         w.writerow(["t_s", "agent", "px_m", "py_m", "theta_rad"])
@@ -100,6 +119,61 @@ def export_cmd(
     finally:
         if out is not None:
             stream.close()
+
+
+def _open_out(out: Path) -> Any:
+    try:
+        return out.open("w", newline="")
+    except OSError as exc:
+        raise BadInput(f"{out}: cannot write ({exc.strerror})") from None
+
+
+@contextmanager
+def _progress_bar(label: str) -> Iterator[Callable[[int, int], None] | None]:
+    """A rich progress bar on a terminal (stderr), else nothing: yields progress(done, total) or None."""
+    if not sys.stderr.isatty():
+        yield None
+        return
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    bar = Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                   console=Console(stderr=True), transient=True)
+    task = bar.add_task(label, total=None)
+    with bar:
+        yield lambda done, total: bar.update(task, completed=done, total=total)
+
+
+@monitor_app.command("animate")
+def animate_cmd(
+    db: DbArg,
+    out: Annotated[Path, typer.Option("-o", "--out", help="FILE.gif (Pillow) or FILE.mp4 (needs ffmpeg).")],
+    fps: Annotated[int, typer.Option("--fps", help="Frames per second of the animation (1..50).")] = 10,
+    speed: Annotated[float, typer.Option("--speed", help="Simulated seconds per second of animation.")] = 20.0,
+    dpi: Annotated[float, typer.Option("--dpi", help="Resolution (the frame is 8 x 6.2 inches).")] = 72.0,
+    at_s: Annotated[float | None, typer.Option(
+        "--at", help="Write only the frame at this simulated time, as a PNG (-o FILE.png).")] = None,
+) -> None:
+    """The run as an animation (paper Fig. 4 in motion): the mission with every track, and a window that
+    follows the swarm with agents to scale coloured by group, links, slots and obstacles."""
+    try:
+        from monitor.animate import animate_run, check_request
+
+        if at_s is None:
+            check_request(out, fps, speed)  # before opening the record: bad requests fail fast
+        elif out.suffix.lower() != ".png":
+            raise BadInput(f"{out}: --at writes one frame as a PNG (-o FILE.png)")
+        rec = _open(db)
+        with _progress_bar("animate") as progress:
+            stats = animate_run(rec, out, fps, speed, dpi, progress, still_at_s=at_s)
+        rec.close()
+    except ReconswarmError as exc:
+        fail(exc)
+        return
+    if at_s is None:
+        typer.echo(f"wrote {out}: {stats.frames} frames at {fps:g} fps ({speed:g}x), {stats.bytes / 1e6:.2f} MB")
+    else:
+        typer.echo(f"wrote {out}")
 
 
 def np_isfinite(v: float) -> bool:

@@ -1,0 +1,157 @@
+"""`monitor export --format mcap`: a run record as an MCAP file for Foxglove (channels in monitor/scene.py).
+
+Written with the Foxglove SDK on a private Context (so nothing else in the process logs into the file);
+message times are the run's wall-clock start plus simulated time. The scenario TOML is attached and the
+run's summary is the file's `run` metadata.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import foxglove
+import numpy as np
+from foxglove.channels import LogChannel, SceneUpdateChannel
+
+from monitor import scene
+from reconswarm.errors import BadInput
+from reconswarm.record.store import RunRecord
+from reconswarm.record.summary import summarize
+
+TICKS_BUDGET = 500_000  # agents x ticks drawn at every tick; beyond it the scene is sampled every 0.1 s
+SAMPLED_PERIOD_S = 0.1
+
+
+@dataclass(frozen=True)
+class ExportStats:
+    path: Path
+    bytes: int
+    scene_messages: int
+    period_s: float | None  # None: every tick
+    events: int
+
+
+def choose_period(n_agents: int, n_ticks: int, period_s: float | None) -> float | None:
+    """The scene's sampling period: the caller's (0 < period <= 1 s), else every tick if agents x ticks
+    stays within TICKS_BUDGET (the paper run: 10 x 4446), else every SAMPLED_PERIOD_S."""
+    if period_s is not None:
+        if not (0.0 < period_s <= 1.0):
+            raise BadInput(f"--period: {period_s} s is not in (0, 1] (at least one scene per simulated second)")
+        return period_s
+    return None if n_agents * n_ticks <= TICKS_BUDGET else SAMPLED_PERIOD_S
+
+
+def sampled_rows(t: np.ndarray, period_s: float | None) -> np.ndarray:
+    """Indices of the ticks drawn: all, or the first tick of every period (t >= 0, sorted)."""
+    if period_s is None or t.size == 0:
+        return np.arange(t.size)
+    bucket = np.floor(t / period_s + 1e-9)
+    return np.flatnonzero(np.concatenate(([True], bucket[1:] != bucket[:-1])))
+
+
+def _time_base(rec: RunRecord, t_end: float) -> tuple[int, str]:
+    started = rec.meta.get("started_unix")
+    if started is not None:
+        try:
+            return scene.start_ns(started), "started_unix"
+        except ValueError:
+            pass
+    # A record without its start: the file's last change is about the end of the run.
+    return round((os.path.getmtime(rec.path) - t_end) * 1e9), "record file mtime - duration"
+
+
+def _metadata(rec: RunRecord, summary: dict[str, Any], start: int, base: str) -> dict[str, str]:
+    out = {k: ("" if v is None else v if isinstance(v, str) else json.dumps(v)) for k, v in summary.items()}
+    out.update(started_unix=rec.meta.get("started_unix", ""), start_time_ns=str(start), time_base=base,
+               scenario_source=rec.meta.get("scenario_source", ""), record=str(rec.path),
+               record_schema=rec.meta.get("schema", ""))
+    return out
+
+
+def _check_output(out: Path) -> None:
+    parent = out.parent if str(out.parent) else Path(".")
+    if out.is_dir():
+        raise BadInput(f"{out}: is a directory")
+    if not parent.is_dir():
+        raise BadInput(f"{out}: cannot write (no directory {parent})")
+    if not os.access(parent, os.W_OK) or (out.exists() and not os.access(out, os.W_OK)):
+        raise BadInput(f"{out}: cannot write (permission denied)")
+
+
+def export_mcap(rec: RunRecord, out: Path, period_s: float | None = None,
+                progress: Callable[[int, int], None] | None = None) -> ExportStats:
+    """Write rec as MCAP to out (replaced if it exists). progress(done, total) is called now and then."""
+    _check_output(out)
+    s = rec.scenario
+    tk = rec.ticks()
+    if tk.t.size == 0:
+        raise BadInput(f"{rec.path}: the record holds no ticks yet")
+    events = rec.events()
+    summary = summarize(rec)
+    ids, radii = rec.ids, s.radii
+    slots = np.asarray(s.target_m) + s.offsets
+    period = choose_period(len(ids), int(tk.t.size), period_s)
+    drawn = np.zeros(tk.t.size, dtype=bool)
+    drawn[sampled_rows(tk.t, period)] = True
+    start, base = _time_base(rec, float(tk.t[-1]))
+
+    ctx = foxglove.Context()
+    try:
+        writer = foxglove.open_mcap(out, allow_overwrite=True, context=ctx)
+    except Exception as exc:  # the SDK's own error type for I/O failures
+        raise BadInput(f"{out}: cannot write ({exc})") from None
+    scene_messages = 0
+    try:
+        world = SceneUpdateChannel(scene.TOPIC_WORLD, context=ctx)
+        swarm = SceneUpdateChannel(scene.TOPIC_SWARM, context=ctx)
+        log = LogChannel(scene.TOPIC_EVENTS, context=ctx)
+        err_ch = foxglove.Channel(scene.TOPIC_TRACKING_ERROR, schema=scene.tracking_error_schema(ids), context=ctx)
+        met_ch = foxglove.Channel(scene.TOPIC_METRICS, schema=scene.METRICS_SCHEMA, context=ctx)
+        writer.write_metadata("run", _metadata(rec, summary, start, base))
+        toml = rec.meta["scenario_toml"].encode()
+        writer.attach(log_time=start, create_time=start, name="scenario.toml", media_type="application/toml",
+                      data=toml)
+        graph = scene.SwarmGraph(s.planner.link_range_m)
+        next_world = -np.inf
+        ev = 0
+        for row in range(tk.t.size):
+            t = float(tk.t[row])
+            p = np.stack([tk.px[row], tk.py[row]], axis=1)
+            links, group = graph.step(p, tk.alive[row])  # every tick: the links' hysteresis needs each one
+            while ev < len(events) and float(events[ev]["t"]) <= t:
+                ns = scene.stamp_ns(start, float(events[ev]["t"]))
+                log.log(scene.event_log(events[ev], ns), log_time=ns)
+                ev += 1
+            if not drawn[row]:
+                continue
+            ns = scene.stamp_ns(start, t)
+            if t >= next_world - 1e-9:
+                world.log(scene.world_update(s, ns), log_time=ns)
+                next_world = t + 1.0
+            frame = scene.SwarmFrame(t, ids, p, tk.theta[row], tk.alive[row], radii, group, links)
+            swarm.log(scene.swarm_update(frame, ns), log_time=ns)
+            scene_messages += 1
+            err_ch.log(scene.tracking_errors(t, ids, p, slots), log_time=ns)
+            met_ch.log({"t_s": t, "max_error_m": _num(tk.max_error_m[row]),
+                        "min_agent_gap_m": _num(tk.min_agent_gap_m[row]),
+                        "min_obstacle_gap_m": _num(tk.min_obstacle_gap_m[row]),
+                        "groups": int(group.max()) + 1}, log_time=ns)
+            if progress is not None and scene_messages % 100 == 0:
+                progress(row + 1, int(tk.t.size))
+        for e in events[ev:]:  # events after the last tick (a run stopped right after one)
+            ns = scene.stamp_ns(start, float(e["t"]))
+            log.log(scene.event_log(e, ns), log_time=ns)
+    finally:
+        writer.close()
+    if progress is not None:
+        progress(int(tk.t.size), int(tk.t.size))
+    return ExportStats(out, out.stat().st_size, scene_messages, period, len(events))
+
+
+def _num(v: float) -> float | None:
+    return float(v) if np.isfinite(v) else None
