@@ -53,7 +53,9 @@ def read_all(path: Path):
             if channel.message_encoding == "json":
                 body = json.loads(msg.data)
             else:
-                body = dec.decoder_for(channel.message_encoding, schema)(msg.data)
+                decode = dec.decoder_for(channel.message_encoding, schema)
+                assert decode is not None, channel.topic
+                body = decode(msg.data)
             by_topic.setdefault(channel.topic, []).append((msg.log_time, msg.publish_time, body))
         attachments = list(reader.iter_attachments())
         metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
@@ -174,7 +176,8 @@ def test_animation_frame_count(short_run, tmp_path):
     assert r.exit_code == 0, r.output
     with Image.open(out) as im:
         assert im.format == "GIF"
-        assert im.n_frames == math.floor(DURATION_S * 4 / 10) + 1  # frames every speed/fps simulated seconds
+        # a frame every speed / fps simulated seconds
+        assert getattr(im, "n_frames", 1) == math.floor(DURATION_S * 4 / 10) + 1
         assert im.info["duration"] == 250  # 1 / fps
 
 
