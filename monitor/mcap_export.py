@@ -16,7 +16,6 @@ from typing import Any
 
 import foxglove
 import numpy as np
-from foxglove.channels import LogChannel, SceneUpdateChannel
 
 from monitor import scene
 from reconswarm.errors import BadInput
@@ -94,7 +93,6 @@ def export_mcap(rec: RunRecord, out: Path, period_s: float | None = None,
     events = rec.events()
     summary = summarize(rec)
     ids, radii = rec.ids, s.radii
-    slots = np.asarray(s.target_m) + s.offsets
     period = choose_period(len(ids), int(tk.t.size), period_s)
     drawn = np.zeros(tk.t.size, dtype=bool)
     drawn[sampled_rows(tk.t, period)] = True
@@ -107,51 +105,31 @@ def export_mcap(rec: RunRecord, out: Path, period_s: float | None = None,
         raise BadInput(f"{out}: cannot write ({exc})") from None
     scene_messages = 0
     try:
-        world = SceneUpdateChannel(scene.TOPIC_WORLD, context=ctx)
-        swarm = SceneUpdateChannel(scene.TOPIC_SWARM, context=ctx)
-        log = LogChannel(scene.TOPIC_EVENTS, context=ctx)
-        err_ch = foxglove.Channel(scene.TOPIC_TRACKING_ERROR, schema=scene.tracking_error_schema(ids), context=ctx)
-        met_ch = foxglove.Channel(scene.TOPIC_METRICS, schema=scene.METRICS_SCHEMA, context=ctx)
+        channels = scene.SceneChannels(ctx, s, ids)
         writer.write_metadata("run", _metadata(rec, summary, start, base))
-        toml = rec.meta["scenario_toml"].encode()
         writer.attach(log_time=start, create_time=start, name="scenario.toml", media_type="application/toml",
-                      data=toml)
+                      data=rec.meta["scenario_toml"].encode())
         graph = scene.SwarmGraph(s.planner.link_range_m)
-        next_world = -np.inf
         ev = 0
         for row in range(tk.t.size):
             t = float(tk.t[row])
             p = np.stack([tk.px[row], tk.py[row]], axis=1)
             links, group = graph.step(p, tk.alive[row])  # every tick: the links' hysteresis needs each one
             while ev < len(events) and float(events[ev]["t"]) <= t:
-                ns = scene.stamp_ns(start, float(events[ev]["t"]))
-                log.log(scene.event_log(events[ev], ns), log_time=ns)
+                channels.event(events[ev], scene.stamp_ns(start, float(events[ev]["t"])))
                 ev += 1
             if not drawn[row]:
                 continue
-            ns = scene.stamp_ns(start, t)
-            if t >= next_world - 1e-9:
-                world.log(scene.world_update(s, ns), log_time=ns)
-                next_world = t + 1.0
             frame = scene.SwarmFrame(t, ids, p, tk.theta[row], tk.alive[row], radii, group, links)
-            swarm.log(scene.swarm_update(frame, ns), log_time=ns)
+            channels.tick(frame, scene.stamp_ns(start, t), float(tk.max_error_m[row]),
+                          float(tk.min_agent_gap_m[row]), float(tk.min_obstacle_gap_m[row]))
             scene_messages += 1
-            err_ch.log(scene.tracking_errors(t, ids, p, slots), log_time=ns)
-            met_ch.log({"t_s": t, "max_error_m": _num(tk.max_error_m[row]),
-                        "min_agent_gap_m": _num(tk.min_agent_gap_m[row]),
-                        "min_obstacle_gap_m": _num(tk.min_obstacle_gap_m[row]),
-                        "groups": int(group.max()) + 1}, log_time=ns)
             if progress is not None and scene_messages % 100 == 0:
                 progress(row + 1, int(tk.t.size))
         for e in events[ev:]:  # events after the last tick (a run stopped right after one)
-            ns = scene.stamp_ns(start, float(e["t"]))
-            log.log(scene.event_log(e, ns), log_time=ns)
+            channels.event(e, scene.stamp_ns(start, float(e["t"])))
     finally:
         writer.close()
     if progress is not None:
         progress(int(tk.t.size), int(tk.t.size))
     return ExportStats(out, out.stat().st_size, scene_messages, period, len(events))
-
-
-def _num(v: float) -> float | None:
-    return float(v) if np.isfinite(v) else None

@@ -1,8 +1,10 @@
-"""The run as Foxglove messages: pure functions from one instant of the swarm to `foxglove.messages`.
+"""The run as Foxglove messages: pure functions from one instant of the swarm to `foxglove.messages`, and
+`SceneChannels`, which logs them on the channels below of a foxglove Context.
 
-Used by `monitor export --format mcap` on a recorded run and meant for the monitor process to serve the
-same channels live through the SDK's WebSocket server. No file, no clock, no zenoh here: the caller
-gives the times (integer ns since the epoch) and logs the messages on its channels.
+Used by `monitor export --format mcap` on a recorded run (an MCAP writer on the Context) and meant for the
+monitor process to serve the same channels live (the SDK's WebSocket server on the same Context; both
+sinks can share it). No file, no clock, no zenoh here: the caller gives the times (integer ns since the
+epoch).
 
 Channels (topic, schema):
 - `/world` `foxglove.SceneUpdate`: the true obstacles (filled polygons), the target slots p* + Δ_i
@@ -26,7 +28,9 @@ from dataclasses import dataclass
 from decimal import Decimal, InvalidOperation
 from typing import Any
 
+import foxglove
 import numpy as np
+from foxglove.channels import LogChannel, SceneUpdateChannel
 from foxglove.messages import (
     ArrowPrimitive,
     Color,
@@ -239,3 +243,37 @@ def event_log(ev: dict[str, Any], ns: int) -> Log:
     level = LogLevel.Warning if kind == "agent_lost" else LogLevel.Info
     name = "membership" if kind.startswith("agent_") else "topology"
     return Log(timestamp=timestamp(ns), level=level, message=text, name=name)
+
+
+class SceneChannels:
+    """The channels above on one Context; the caller feeds instants in time order and the events."""
+
+    def __init__(self, ctx: foxglove.Context, s: Scenario, ids: NDArray[np.int64], world_period_s: float = 1.0):
+        self.s, self.ids = s, ids
+        self.slots = np.asarray(s.target_m) + s.offsets
+        self.world_period_s = world_period_s
+        self._next_world = -math.inf
+        self.world = SceneUpdateChannel(TOPIC_WORLD, context=ctx)
+        self.swarm = SceneUpdateChannel(TOPIC_SWARM, context=ctx)
+        self.events = LogChannel(TOPIC_EVENTS, context=ctx)
+        self.errors = foxglove.Channel(TOPIC_TRACKING_ERROR, schema=tracking_error_schema(ids), context=ctx)
+        self.metrics = foxglove.Channel(TOPIC_METRICS, schema=METRICS_SCHEMA, context=ctx)
+
+    def tick(self, f: SwarmFrame, ns: int, max_error_m: float, min_agent_gap_m: float,
+             min_obstacle_gap_m: float) -> None:
+        """One instant: the swarm, the tracking errors, the metrics, and the world when it is due."""
+        if f.t_s >= self._next_world - 1e-9:
+            self.world.log(world_update(self.s, ns), log_time=ns)
+            self._next_world = f.t_s + self.world_period_s
+        self.swarm.log(swarm_update(f, ns), log_time=ns)
+        self.errors.log(tracking_errors(f.t_s, self.ids, f.p, self.slots), log_time=ns)
+        self.metrics.log({"t_s": f.t_s, "max_error_m": _num(max_error_m), "min_agent_gap_m": _num(min_agent_gap_m),
+                          "min_obstacle_gap_m": _num(min_obstacle_gap_m), "groups": int(f.group.max()) + 1},
+                         log_time=ns)
+
+    def event(self, ev: dict[str, Any], ns: int) -> None:
+        self.events.log(event_log(ev, ns), log_time=ns)
+
+
+def _num(v: float) -> float | None:
+    return float(v) if math.isfinite(v) else None
