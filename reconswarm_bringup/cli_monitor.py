@@ -77,8 +77,8 @@ def export_cmd(
     fmt: Annotated[str, typer.Option("--format", help="csv | mcap")] = "csv",
     out: Annotated[Path | None, typer.Option("-o", "--out", help="File to write (csv: default stdout).")] = None,
     period_s: Annotated[float | None, typer.Option(
-        "--period", help="mcap: seconds of simulated time between scenes (default: every tick, or 0.1 s for "
-                         "runs with more than 500k agent-ticks).")] = None,
+        "--period", help="mcap: seconds of simulated time between scenes, at most 1 (default: every tick "
+                         "if that draws at most 500k agents in all, else 0.1, 0.2, 0.5 or 1 s).")] = None,
 ) -> None:
     """csv: trajectories t_s,agent,px_m,py_m,theta_rad, one row per agent per tick. mcap: the run for
     Foxglove (a SceneUpdate scene, per-agent tracking error, events as Log, the scenario attached)."""

@@ -204,3 +204,16 @@ def test_bad_requests_exit_2_with_one_line(short_run, tmp_path, monkeypatch, arg
     assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
     assert says in lines[0], lines[0]
     assert not list(tmp_path.glob("a.*"))  # nothing written
+
+
+def test_scene_sampling_stays_within_budget_and_at_least_once_a_second():
+    from monitor.mcap_export import AGENT_SCENES_BUDGET, choose_period, sampled_rows
+
+    t = np.arange(11629) * 0.05  # a generated 100-agent mission of 581.4 s
+    assert choose_period(10, t[:4446], None) is None  # the paper run: every tick
+    # 0.1 s would draw 100 x 5815 agents, over the budget; 0.2 s draws 100 x 2908.
+    assert 100 * (math.floor(581.4 / 0.1) + 1) > AGENT_SCENES_BUDGET >= 100 * (math.floor(581.4 / 0.2) + 1)
+    assert choose_period(100, t, None) == 0.2
+    assert sampled_rows(t, 0.2).size == math.floor(581.4 / 0.2) + 1
+    assert choose_period(100_000, t, None) == 1.0  # never sparser than once a simulated second
+    assert choose_period(100_000, t, 0.05) == 0.05  # the caller's choice wins
