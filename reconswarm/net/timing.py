@@ -1,0 +1,69 @@
+"""Every protocol timing constant of the three roles (agent, simworld, monitor), in one place.
+
+All of them are wall-clock durations (the adapters measure them with `time.monotonic()`), except where
+the name says simulated time (`_sim_s`) or a fraction of the realtime period. The defaults are the values
+the processes have always used; a test can build a `Timing` with shorter ones.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Timing:
+    # ---------------------------------------------------------------------------------------- agent
+    # Lockstep: longest wait for a peer's beacon or obstacle set (and for a tick's lost clock or scan).
+    agent_wait_timeout_s: float = 1.0
+    # A peer whose beacons stopped this long ago (alive by its token, but silent) is not waited for.
+    peer_silent_s: float = 2.0
+    # Lockstep: while stuck on a tick, announce the beacon (and obstacle set) again this often.
+    beacon_again_s: float = 0.5
+    # No command for this long (though the world re-sends a waiting tick every `republish_s`): the agent
+    # opens a new zenoh session (its node, and so its knowledge and peers, are kept).
+    resubscribe_s: float = 5.0
+    # Exit 3 if the world sends no clock for this long after the mission began.
+    world_silence_s: float = 30.0
+    # Realtime: act this fraction of a period after a new state, with whatever has arrived by then.
+    realtime_act_fraction: float = 0.25
+    # While not commanding for more than `waiting_log_s`, log what the next tick lacks, this often.
+    waiting_log_s: float = 1.0
+    # With nothing queued, the agent looks again after this long.
+    agent_poll_s: float = 0.05
+    # After the world's end of mission, keep the token this long so the monitor sees the end first.
+    agent_end_linger_s: float = 0.5
+
+    # -------------------------------------------------------------------------------------- simworld
+    # Wait this long for every agent's and the monitor's liveliness token (the readiness barrier).
+    start_timeout_s: float = 60.0
+    # Lockstep: longest wait for a live agent's command at one tick.
+    step_timeout_s: float = 5.0
+    # Lockstep: re-publish a tick that has waited this long for commands.
+    republish_s: float = 0.5
+    # A missing command is held this long (simulated time), then the robot stops.
+    hold_sim_s: float = 0.2
+    # With no agent reachable, hold the world this long before ending the mission.
+    no_agents_grace_s: float = 30.0
+    # After the last clock, keep the session this long so the last messages reach the monitor.
+    world_end_linger_s: float = 0.3
+
+    # --------------------------------------------------------------------------------------- monitor
+    # After the world's last clock, how long to wait for the last states.
+    end_grace_s: float = 3.0
+    # With nothing queued, the monitor looks again after this long.
+    monitor_poll_s: float = 0.002
+    # Agents lost (or back) within this much wall time of each other count as one network event.
+    burst_s: float = 1.0
+    # Commit the record at least every this much simulated time ...
+    commit_sim_s: float = 0.5
+    # ... and every this much wall time (also how often the rejection counters are refreshed).
+    commit_wall_s: float = 0.5
+
+    # --------------------------------------------------------------------------------------- session
+    # A frozen process is declared gone after this (zenoh's default 10 s is too slow for robots).
+    lease_ms: int = 2000
+    # Opening a session retries until the router answers or this passes.
+    session_open_timeout_s: float = 20.0
+
+
+TIMING = Timing()  # the defaults every process runs with
