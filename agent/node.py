@@ -1,0 +1,355 @@
+"""One agent's protocol logic as a pure state machine: decoded messages and `now` in, what to publish out.
+
+No transport and no clock of its own: `AgentNode.step(batch, now_s)` takes the messages that arrived
+(wire dataclasses and membership changes) and the adapter's wall time, and returns what to publish (a
+beacon, an obstacle set, a command) or to do (open a new session, exit). The AgentBrain is the math it
+calls. agent/process.py moves the bytes between zenoh and this class.
+
+Lockstep (the clock says so): at tick k the agent waits for its state (and scan), announces its beacon
+(with the revision of its obstacle set at k-1), waits for the beacons of every live agent and the
+obstacle sets of those within link range (all of them for the virtual leader), then plans and
+commands. Realtime: it acts shortly after each new state on whatever it has (latest beacons, sets).
+A peer whose beacon is missing is kept where it was last seen (a static obstacle).
+
+The node outlives the adapter's zenoh sessions: after a new session (`reconnected`) it still knows its
+peers' last positions and radii, lost peers, its knowledge, revisions and escape state.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent.brain import AgentBrain, Peer
+from reconswarm.net import wire
+from reconswarm.net.timing import TIMING, Timing
+from reconswarm.scenario import Scenario
+
+log = logging.getLogger("reconswarm.agent")
+
+
+# ------------------------------------------------------------------------------------------ inputs
+@dataclass(frozen=True)
+class Joined:
+    """An agent's liveliness token appeared."""
+
+    agent: int
+
+
+@dataclass(frozen=True)
+class Left:
+    """An agent's liveliness token went away."""
+
+    agent: int
+
+
+@dataclass(frozen=True)
+class Invalid:
+    """A message the adapter dropped (undecodable, or on our own key from another session): counted."""
+
+    key: str
+    reason: str
+
+
+Input = wire.State | wire.Scan | wire.Clock | wire.Beacon | wire.ObstacleSet | Joined | Left | Invalid
+
+
+# ----------------------------------------------------------------------------------------- outputs
+@dataclass(frozen=True)
+class Reconnect:
+    """No command for `resubscribe_s` though the mission goes on: open a new session (keep this node)."""
+
+
+@dataclass(frozen=True)
+class Exit:
+    """Leave the loop with this exit code (0: the world ended the mission; 3: the world went silent)."""
+
+    code: int
+
+
+Output = wire.Beacon | wire.ObstacleSet | wire.Cmd | Reconnect | Exit
+
+ObstacleSets = dict[str, np.ndarray]
+
+
+class AgentNode:
+    def __init__(self, s: Scenario, agent_id: int, now_s: float, timing: Timing = TIMING) -> None:
+        self.s, self.id, self.timing = s, agent_id, timing
+        self.brain = AgentBrain(s, agent_id)
+        self.radius = float(self.brain.r[0])
+        self.rejected = 0  # messages dropped so far (announced in our beacons)
+        self.states: dict[int, wire.State] = {}
+        self.scans: dict[int, wire.Scan] = {}
+        self.clocks: dict[int, wire.Clock] = {}
+        self.beacons: dict[int, dict[int, wire.Beacon]] = {}  # tick -> peer -> its beacon at that tick
+        self.last_seen: dict[int, wire.Beacon] = {}  # peer -> its newest beacon (a lost peer stays there)
+        self.sets: dict[int, dict[int, ObstacleSets]] = {}  # peer -> rev -> obstacle sets
+        # Revisions already merged (into the brain's own set / the leader's union): merging a set again
+        # cannot change a hull, so it is skipped.
+        self.merged: dict[int, int] = {}
+        self.merged_union: dict[int, int] = {}
+        self.alive: set[int] = set()
+        self.k = -1  # last tick commanded
+        self.beacon_sent = -1
+        self.wait_since: float | None = None
+        self.mode = "lockstep"
+        self.period_s = 0.0
+        self.act_at: float | None = None
+        self.last_clock = now_s
+        self.ended = False
+        self.started = False  # the mission began (first clock): the watches run from then on
+        self.last_cmd: wire.Cmd | None = None
+        self.heard: dict[int, float] = {}  # wall time of each peer's latest beacon (or of its token)
+        self.last_act = now_s  # wall time of our latest command (or of the latest new session)
+        self.state_at: dict[int, float] = {}  # wall time each tick's state arrived (while waiting for the rest)
+        self._linked: tuple[int, dict[int, int]] = (-1, {})  # (tick, linked peer -> its set's revision)
+        self.beacon_again = 0.0
+        self.told_waiting = 0.0
+        self._out: list[Output] = []
+
+    # ------------------------------------------------------------------------------------- interface
+
+    def step(self, batch: Iterable[Input], now_s: float) -> list[Output]:
+        """Take the messages that arrived, advance as far as the data allows, watch the world and our
+        own progress. Returns what to publish or do, in order."""
+        self._out = []
+        for m in batch:
+            self._take(m, now_s)
+        self._advance(now_s)
+        self._watch(now_s)
+        out, self._out = self._out, []
+        return out
+
+    def reconnected(self, now_s: float) -> None:
+        """The adapter opened a new session: give it `resubscribe_s` to bring the commands back."""
+        self.last_act = now_s
+
+    def wake_at_s(self) -> float | None:
+        """Realtime: when to step at the latest even if nothing arrives (None: no deadline)."""
+        return self.act_at
+
+    # ----------------------------------------------------------------------------------------- input
+
+    def _take(self, m: Input, now: float) -> None:
+        if isinstance(m, Joined):
+            self.alive.add(m.agent)
+            self.heard.setdefault(m.agent, now)
+        elif isinstance(m, Left):
+            self.alive.discard(m.agent)
+        elif isinstance(m, Invalid):
+            self.rejected += 1
+        elif isinstance(m, wire.Clock):
+            self.clocks[m.k] = m
+            self.last_clock = now
+            self.mode = m.mode
+            self.period_s = self.s.meta.dt_s / m.speed if m.speed > 0 else 0.0
+            if m.end:
+                self.ended = True
+        elif isinstance(m, wire.State):
+            if m.id != self.id:
+                return
+            if m.k == self.k and self.last_cmd is not None:  # the world missed our command: again
+                self._out.append(self.last_cmd)
+                return
+            self.states[m.k] = m
+            if self.mode == "realtime":
+                self.act_at = now + self.timing.realtime_act_fraction * self.period_s
+        elif isinstance(m, wire.Scan):
+            if m.id == self.id:
+                self.scans[m.k] = m
+        elif isinstance(m, wire.Beacon):
+            self.beacons.setdefault(m.k, {})[m.id] = m
+            self.heard[m.id] = now
+            if m.id not in self.last_seen or m.k >= self.last_seen[m.id].k:
+                self.last_seen[m.id] = m
+        else:  # wire.ObstacleSet
+            self.sets.setdefault(m.id, {})[m.rev] = {oid: np.array(v, dtype=np.float64)
+                                                     for oid, v in m.obstacles.items()}
+
+    # --------------------------------------------------------------------------------------- planning
+
+    def _scan_sets(self, k_from: int, k_to: int) -> ObstacleSets:
+        pts: dict[str, list[tuple[float, float]]] = {}
+        for kk in range(k_from, k_to + 1):
+            sc = self.scans.pop(kk, None)
+            if sc is not None:
+                for x, y, oid in sc.points:
+                    pts.setdefault(oid, []).append((x, y))
+        return {oid: np.array(v, dtype=np.float64) for oid, v in pts.items()}
+
+    def _peers(self, k: int) -> list[wire.Beacon]:
+        fresh = self.beacons.get(k, {})
+        return [fresh.get(a, b) for a, b in self.last_seen.items()]
+
+    def _beacon(self, st: wire.State) -> wire.Beacon:
+        return wire.Beacon(self.id, st.k, st.t, st.px, st.py, self.radius, self.brain.rev, self.rejected)
+
+    def _link(self, k: int, p: np.ndarray) -> None:
+        """Which peers' sets tick k merges: those within link range of p by their beacons at k."""
+        fresh = self.beacons.get(k, {})
+        fresh_peers = [Peer(a, b.px, b.py, b.radius) for a, b in fresh.items()]
+        self._linked = (k, {a: fresh[a].rev for a in self.brain.linked(p, fresh_peers)})
+
+    def _ready_lockstep(self, k: int, now: float) -> bool:
+        """True once everything tick k needs is in (or the wait timed out)."""
+        t = self.timing
+        st, clock = self.states.get(k), self.clocks.get(k)
+        if st is None:
+            return False
+        if clock is None or (st.scan_n > 0 and k not in self.scans):
+            # The tick's clock or scan may have been lost (an outage): after a while, go on without it
+            # (the newest clock's list of agents; the next scan sees the same contour again).
+            first = self.state_at.setdefault(k, now)
+            if now - first < t.agent_wait_timeout_s or not self.clocks:
+                return False
+            clock = self.clocks[max(self.clocks)]
+        if self.beacon_sent < k or now > self.beacon_again:  # (again if peers may have lost it)
+            self._out.append(self._beacon(st))
+            if self.beacon_sent < k:
+                self.wait_since = now
+            elif self.brain.rev:  # stuck on this tick: peers may have lost our obstacle set too
+                self._out.append(self._obstacle_set(k))
+            self.beacon_sent = k
+            self.beacon_again = now + t.beacon_again_s
+        if self.wait_since is not None and now - self.wait_since > t.agent_wait_timeout_s:
+            log.warning("agent %d: tick %d: gave up waiting for peers' data", self.id, k)
+            return True
+        fresh = self.beacons.get(k, {})
+        # A peer silent for peer_silent_s (alive by its token, but saying nothing) is not waited for.
+        if any(a not in fresh and now - self.heard.get(a, now) < t.peer_silent_s
+               for a in clock.alive if a != self.id and a in self.alive):
+            return False
+        if self._linked[0] != k:
+            self._link(k, np.array([st.px, st.py]))
+        need = {a: b.rev for a, b in fresh.items()} if self.brain.leader is not None else self._linked[1]
+        # A set is there, or nothing to wait for: an empty set (rev 0), or a revision we merged already (a
+        # peer that reconnected keeps counting; one restarted counts again from 1, and what it knew is
+        # static knowledge we hold anyway).
+        merged = self.merged_union if self.brain.leader is not None else self.merged
+        return all(rev == 0 or rev in self.sets.get(a, ()) or rev <= merged.get(a, 0) for a, rev in need.items())
+
+    def _unmerged(self, wanted: dict[int, int], merged: dict[int, int]) -> list[ObstacleSets]:
+        """The sets at the wanted revisions that are not merged yet (and mark them merged)."""
+        out = []
+        for a in sorted(wanted):
+            rev = wanted[a]
+            if rev == 0 or merged.get(a, 0) >= rev:
+                continue
+            out.append(self._latest_set(a, rev))
+            merged[a] = rev
+        return out
+
+    def _latest_set(self, peer: int, rev: int | None) -> ObstacleSets:
+        revs = self.sets.get(peer, {})
+        if rev is not None and rev in revs:
+            return revs[rev]
+        usable = [r for r in revs if rev is None or r <= rev]
+        return revs[max(usable)] if usable else {}
+
+    def _act(self, k: int, now: float) -> None:
+        st = self.states[k]
+        p = np.array([st.px, st.py])
+        peers = [Peer(b.id, b.px, b.py, b.radius) for b in self._peers(k)]
+        if self.mode == "lockstep":  # exactly the peers' sets at k-1, as their beacons at k announce
+            if self._linked[0] != k:  # (the wait gave up before all beacons came)
+                self._link(k, p)
+            linked = self._linked[1]
+            every = {a: b.rev for a, b in self.beacons.get(k, {}).items()}
+        else:  # realtime: whatever is latest
+            linked = {a: max(self.sets.get(a, {0: {}})) for a in self.brain.linked(p, peers)}
+            every = {a: max(revs) for a, revs in self.sets.items() if revs}
+        if self.k < 0 and k > 0:  # joining a mission under way: catch up on everything peers have cached
+            linked = {a: max(revs) for a, revs in self.sets.items() if revs}
+            log.info("agent %d: joining at tick %d; cached obstacle sets from agents %s: %s", self.id, k,
+                     sorted(linked), sorted({o for revs in self.sets.values() for v in revs.values() for o in v}))
+        shared = self._unmerged(linked, self.merged)
+        swarm = self._unmerged(every, self.merged_union) if self.brain.leader is not None else None
+        scan = self._scan_sets(self.k + 1 if self.k >= 0 else k, k)
+        u, grew = self.brain.tick(k, p, scan, peers, shared, swarm)
+        if grew:
+            self._out.append(self._obstacle_set(k))
+        self.last_cmd = wire.Cmd(self.id, k, float(u[0]), float(u[1]))
+        self._out.append(self.last_cmd)
+        self.last_act = now
+        self.k = k
+        self.wait_since = None
+        if k % 20 == 0:
+            self._prune(k)
+
+    def waiting_for(self) -> str:
+        """What the next tick still lacks (for the log while we wait)."""
+        k = self.k + 1
+        if k not in self.states:
+            newest = max(self.states, default=None), max(self.clocks, default=None)
+            return f"tick {k}: no state yet (newest state {newest[0]}, newest clock {newest[1]})"
+        clock = self.clocks.get(k)
+        missing = [] if clock is not None else ["clock"]
+        if self.states[k].scan_n > 0 and k not in self.scans:
+            missing.append("scan")
+        fresh = self.beacons.get(k, {})
+        peers = sorted(a for a in (clock.alive if clock else ()) if a != self.id and a in self.alive and a not in fresh)
+        if peers:
+            missing.append(f"beacons of {peers}")
+        sets = sorted(a for a, rev in self._linked[1].items() if rev and rev not in self.sets.get(a, ()))
+        if sets:
+            missing.append(f"obstacle sets of {sets}")
+        return f"tick {k}: waiting for {', '.join(missing) or 'nothing'}"
+
+    def _obstacle_set(self, k: int) -> wire.ObstacleSet:
+        sets = {oid: tuple((float(x), float(y)) for x, y in h.tolist())
+                for oid, h in self.brain.obstacle_sets().items()}
+        return wire.ObstacleSet(self.id, k, self.brain.rev, sets)
+
+    def _prune(self, k: int) -> None:
+        for store in (self.states, self.clocks, self.beacons, self.scans, self.state_at):
+            for kk in [x for x in store if x < k - 2]:
+                del store[kk]
+        for a, revs in self.sets.items():  # keep the newest merged revision and everything after it
+            done = min(self.merged.get(a, 0), self.merged_union.get(a, 0) if self.brain.leader else 2**62)
+            for r in [r for r in revs if r < done]:
+                del revs[r]
+
+    def _advance(self, now: float) -> None:
+        """Act on every tick the data allows."""
+        if self.mode == "realtime":  # act on the newest state once the peers' beacons for it are in, or
+            if not self.states:      # at the deadline a fraction of a period after it arrived
+                return
+            k = max(self.states)
+            if k <= self.k:
+                return
+            if self.beacon_sent < k:
+                self._out.append(self._beacon(self.states[k]))
+                self.beacon_sent = k
+            fresh = self.beacons.get(k, {})
+            due = self.act_at is not None and now >= self.act_at
+            if due or all(a in fresh for a in self.alive if a != self.id):
+                self.act_at = None
+                self._act(k, now)
+            return
+        while self.states:
+            newest = max(self.states)
+            k = self.k + 1 if self.k >= 0 and (self.k + 1) in self.states else newest
+            if k <= self.k or not self._ready_lockstep(k, now):
+                return
+            self._act(k, now)
+
+    def _watch(self, now: float) -> None:
+        """The safety nets: a silent world (exit 3), no command for long (a new session), the waiting log."""
+        t = self.timing
+        if not self.started and self.clocks:  # the mission began: the watch starts now
+            self.started, self.last_act = True, now
+        if self.started and now - self.last_clock > t.world_silence_s:
+            log.error("agent %d: no clock from the world for %.0f s", self.id, t.world_silence_s)
+            self._out.append(Exit(3))
+            return
+        if self.started and now - self.last_act > t.resubscribe_s:
+            self._out.append(Reconnect())
+            return
+        if self.started and now - self.last_act > t.waiting_log_s and now > self.told_waiting + t.waiting_log_s:
+            self.told_waiting = now
+            log.info("agent %d: %s", self.id, self.waiting_for())
+        if self.ended:
+            self._out.append(Exit(0))
