@@ -1,0 +1,283 @@
+"""The agent's protocol logic (agent/node.py) driven by hand: decoded messages and a fake clock, no processes.
+
+Each command the node sends is compared with what the real AgentBrain computes from the inputs the
+protocol says it must use (its state at k, every peer's latest announcement, the linked peers' sets).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+import pytest
+
+from agent.brain import AgentBrain, Peer
+from agent.node import AgentNode, Exit, Invalid, Joined, Left, Output, Reconnect
+from reconswarm.net import wire
+from reconswarm.net.timing import Timing
+from reconswarm.scenario import Scenario, load
+from tests.support import PAPER
+
+S = load(PAPER)
+DT = S.meta.dt_s
+T = Timing()
+A, B, C = 1, 2, 3  # the node under test and two peers
+RADIUS = {a.id: a.radius_m for a in S.agents}
+
+
+def state(k: int, px: float, py: float, aid: int = A, scan_n: int = 0) -> wire.State:
+    return wire.State(aid, k, k * DT, px, py, 0.0, px, py, scan_n)
+
+
+def clock(k: int, alive: tuple[int, ...] = (A, B, C), **kw: object) -> wire.Clock:
+    return wire.Clock(k, k * DT, alive, **kw)  # type: ignore[arg-type]
+
+
+def beacon(aid: int, k: int, px: float, py: float, rev: int = 0) -> wire.Beacon:
+    return wire.Beacon(aid, k, k * DT, px, py, RADIUS[aid], rev)
+
+
+def cmds(out: list[Output]) -> list[wire.Cmd]:
+    return [o for o in out if isinstance(o, wire.Cmd)]
+
+
+def beacons(out: list[Output]) -> list[wire.Beacon]:
+    return [o for o in out if isinstance(o, wire.Beacon)]
+
+
+def reference(k: int, p: tuple[float, float], peers: list[Peer], brain: AgentBrain | None = None,
+              scan: dict[str, np.ndarray] | None = None, shared: list[dict[str, np.ndarray]] | None = None,
+              s: Scenario = S) -> tuple[float, float]:
+    brain = brain or AgentBrain(s, A)
+    u, _ = brain.tick(k, np.array(p), scan or {}, peers, shared or [])
+    return float(u[0]), float(u[1])
+
+
+def started(node_s: Scenario = S, peers: tuple[int, ...] = (B, C), timing: Timing = T) -> AgentNode:
+    node = AgentNode(node_s, A, 0.0, timing)
+    node.step([Joined(A), *(Joined(p) for p in peers)], 0.0)
+    return node
+
+
+# --------------------------------------------------------------------------------------------- lockstep
+
+def test_lockstep_waits_for_every_live_peer_then_acts_once() -> None:
+    node = started()
+    out = node.step([clock(0), state(0, 100.0, 0.0)], 0.01)
+    assert beacons(out) == [wire.Beacon(A, 0, 0.0, 100.0, 0.0, RADIUS[A], 0, 0)] and not cmds(out)
+    assert not cmds(node.step([beacon(B, 0, 200.0, 0.0)], 0.02))  # C is still missing
+    assert "beacons of [3]" in node.waiting_for()
+    out = node.step([beacon(C, 0, 300.0, 0.0)], 0.03)
+    want = reference(0, (100.0, 0.0), [Peer(B, 200.0, 0.0, RADIUS[B]), Peer(C, 300.0, 0.0, RADIUS[C])])
+    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(0, *want)]
+    assert node.step([], 0.04) == []  # nothing new: no second command, no second beacon
+
+
+def test_lockstep_waits_for_the_scan_the_state_announces() -> None:
+    node = started(peers=())
+    pts = ((130.0, 0.0, "diamond"), (131.0, 1.0, "diamond"))
+    assert node.step([clock(0, (A,)), state(0, 100.0, 0.0, scan_n=2)], 0.0) == []  # not even the beacon
+    out = node.step([wire.Scan(A, 0, 0.0, pts)], 0.1)
+    scan = {"diamond": np.array([[130.0, 0.0], [131.0, 1.0]])}
+    assert [(c.ux, c.uy) for c in cmds(out)] == [reference(0, (100.0, 0.0), [], scan=scan)]
+    assert isinstance(out[-2], wire.ObstacleSet) and out[-2].rev == 1  # its knowledge grew: announced
+    assert node.brain.rev == 1
+
+
+def test_lockstep_goes_on_without_a_lost_clock_after_the_wait_timeout() -> None:
+    node = started(peers=())
+    node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
+    assert node.k == 0
+    assert node.step([state(1, 100.1, 0.0)], 0.1) == []  # clock 1 lost
+    assert "clock" in node.waiting_for()
+    out = node.step([], 0.1 + T.agent_wait_timeout_s + 0.01)
+    assert [c.k for c in cmds(out)] == [1]
+
+
+def test_a_late_peer_is_waited_for_and_the_node_acts_when_it_arrives() -> None:
+    node = started(peers=(B,))
+    node.step([clock(0, (A, B)), state(0, 100.0, 0.0)], 0.0)
+    assert not cmds(node.step([], 0.9 * T.agent_wait_timeout_s))
+    out = node.step([beacon(B, 0, 110.0, 0.0)], 0.95 * T.agent_wait_timeout_s)
+    assert [(c.ux, c.uy) for c in cmds(out)] == [reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B])])]
+
+
+def test_a_peer_that_never_answers_is_given_up_after_the_wait_timeout() -> None:
+    node = started(peers=(B,))
+    node.step([clock(0, (A, B)), state(0, 100.0, 0.0)], 0.0)
+    assert not cmds(node.step([], T.agent_wait_timeout_s * 0.99))
+    out = node.step([], T.agent_wait_timeout_s + 0.01)
+    assert [(c.ux, c.uy) for c in cmds(out)] == [reference(0, (100.0, 0.0), [])]
+
+
+def test_a_stuck_tick_announces_beacon_and_obstacle_set_again() -> None:
+    node = started(peers=(B,))
+    pts = ((130.0, 0.0, "diamond"), (131.0, 1.0, "diamond"), (131.0, -1.0, "diamond"))
+    node.step([clock(0, (A, B)), state(0, 100.0, 0.0, scan_n=3), wire.Scan(A, 0, 0.0, pts),
+               beacon(B, 0, 400.0, 0.0)], 0.0)
+    assert node.k == 0 and node.brain.rev == 1
+    node.step([clock(1, (A, B)), state(1, 100.1, 0.0)], 1.0)
+    # B stays silent, but was heard 1 s ago (< peer_silent_s): after beacon_again_s both go out again.
+    out = node.step([], 1.0 + T.beacon_again_s + 0.01)
+    assert [type(o) for o in out] == [wire.Beacon, wire.ObstacleSet] and beacons(out)[0].rev == 1
+
+
+def test_a_lost_peer_is_not_waited_for_and_stays_a_static_obstacle() -> None:
+    node = started(peers=(B,))
+    node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 108.0, 0.0)], 0.0)
+    node.step([Left(B)], 0.01)  # B's token went away
+    out = node.step([clock(1, (A,)), state(1, 100.05, 0.0)], 0.05)  # acts at once: B is not waited for
+    ref = AgentBrain(S, A)
+    reference(0, (100.0, 0.0), [Peer(B, 108.0, 0.0, RADIUS[B])], brain=ref)
+    want = reference(1, (100.05, 0.0), [Peer(B, 108.0, 0.0, RADIUS[B])], brain=ref)
+    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(1, *want)]
+    assert want != reference(1, (100.05, 0.0), [])  # B's last position does push the agent away
+
+
+def test_a_repeated_tick_resends_the_same_command_without_planning_again() -> None:
+    node = started(peers=())
+    first = cmds(node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.0))
+    calls: list[int] = []
+    tick = node.brain.tick
+
+    def counted(k: int, *args: Any) -> Any:
+        calls.append(k)
+        return tick(k, *args)
+
+    node.brain.tick = counted  # type: ignore[method-assign, assignment]
+    again = node.step([state(0, 100.0, 0.0)], 0.5)  # the world re-publishes tick 0: it missed our command
+    assert again == first and calls == []
+
+
+def test_a_silent_peer_alive_by_its_token_is_not_waited_for() -> None:
+    node = started(peers=(B,))
+    node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 300.0, 0.0)], 0.0)
+    node.step([clock(1, (A, B)), state(1, 100.05, 0.0)], T.peer_silent_s + 0.1)
+    assert node.k == 1  # B's last beacon is older than peer_silent_s
+
+
+def test_pruning_keeps_only_recent_ticks_and_the_merged_revision() -> None:
+    node = started(peers=(B,))
+    sets = {r: wire.ObstacleSet(B, r, r, {"diamond": ((130.0 + r, 0.0), (131.0, 1.0), (131.0, -1.0))})
+            for r in (1, 2)}
+    for k in range(22):
+        rev = 1 if k < 10 else 2
+        batch: list = [clock(k, (A, B)), state(k, 100.0, 0.0), beacon(B, k, 105.0, 0.0, rev)]
+        if k in (0, 10):
+            batch.append(sets[rev])
+        assert cmds(node.step(batch, k * 0.01))[0].k == k
+    assert min(node.states) == 18 and list(node.sets[B]) == [2]
+
+
+# -------------------------------------------------------------------- restart, reconnect (issue 11 path 1)
+
+def test_after_a_new_session_a_dead_peer_is_still_an_obstacle_at_its_last_position() -> None:
+    """Kill an agent, stall the world: after resubscribe_s without commanding the agent opens a new session.
+    Its dead peer must still be avoided where it was last seen (issue 11: agent 10 hit dead robot 3)."""
+    node = started()
+    node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 400.0, 0.0), beacon(C, 0, 109.0, 0.0)], 0.0)
+    node.step([Left(C)], 0.5)  # C is killed
+    node.step([clock(1, (A, B)), state(1, 100.05, 0.0), beacon(B, 1, 400.0, 0.0)], 0.6)
+    assert node.k == 1
+    # The world stalls: no state for resubscribe_s, so the node asks for a new session, once.
+    assert node.step([], 0.6 + T.resubscribe_s - 0.01) == []
+    assert node.step([], 0.6 + T.resubscribe_s + 0.01) == [Reconnect()]
+    node.reconnected(0.6 + T.resubscribe_s + 0.02)
+    # The new session's liveliness history names the live agents only; then the world goes on.
+    now = 0.6 + T.resubscribe_s + 0.1
+    out = node.step([Joined(A), Joined(B), clock(2, (A, B)), state(2, 100.1, 0.0), beacon(B, 2, 400.0, 0.0)], now)
+    ref = AgentBrain(S, A)
+    peers = [Peer(B, 400.0, 0.0, RADIUS[B]), Peer(C, 109.0, 0.0, RADIUS[C])]
+    for k, px in ((0, 100.0), (1, 100.05)):
+        reference(k, (px, 0.0), peers, brain=ref)
+    want = reference(2, (100.1, 0.0), peers, brain=ref)
+    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(2, *want)]
+    assert want != reference(2, (100.1, 0.0), peers[:1])  # without C the command would differ
+
+
+def test_a_new_session_keeps_knowledge_revision_and_escape_state() -> None:
+    node = started(peers=())
+    pts = ((130.0, 0.0, "diamond"), (131.0, 1.0, "diamond"), (131.0, -1.0, "diamond"))
+    node.step([clock(0, (A,)), state(0, 100.0, 0.0, scan_n=3), wire.Scan(A, 0, 0.0, pts)], 0.0)
+    brain, known = node.brain, dict(node.brain.obstacle_sets())
+    assert node.step([], 10.0) == [Reconnect()]
+    node.reconnected(10.0)
+    assert node.brain is brain and node.brain.rev == 1 and node.brain.obstacle_sets() == known
+    out = node.step([clock(1, (A,)), state(1, 100.05, 0.0)], 10.1)
+    assert beacons(out)[0].rev == 1 and cmds(out)[0].k == 1  # tick 1 follows tick 0, nothing re-planned
+
+
+def test_a_restarted_agent_joining_late_merges_every_cached_obstacle_set() -> None:
+    node = started(peers=(B,))
+    far = wire.ObstacleSet(B, 300, 4, {"hexagon": ((600.0, 0.0), (601.0, 1.0), (601.0, -1.0))})
+    out = node.step([far, clock(300, (A, B)), state(300, 100.0, 0.0), beacon(B, 300, 900.0, 0.0, rev=4)], 0.0)
+    assert cmds(out)[0].k == 300 and "hexagon" in node.brain.obstacle_sets()  # B is far beyond link range
+    assert isinstance(out[-2], wire.ObstacleSet) and out[-2].rev == 1
+
+
+def test_the_virtual_leader_waits_for_every_set_and_merges_the_union() -> None:
+    s = dataclasses.replace(S, planner=dataclasses.replace(S.planner, kind="virtual-leader"))
+    node = started(node_s=s, peers=(B,))
+    hull: dict[str, tuple[tuple[float, float], ...]] = {"hexagon": ((600.0, 0.0), (601.0, 1.0), (601.0, -1.0))}
+    node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 900.0, 0.0)], 0.0)
+    assert node.k == 0
+    node.step([clock(1, (A, B)), state(1, 100.0, 0.0), beacon(B, 1, 900.0, 0.0, rev=1)], 0.01)
+    assert node.k == 0 and "obstacle" not in node.waiting_for()  # B's set is awaited though B is far
+    node.step([wire.ObstacleSet(B, 0, 1, hull)], 0.02)
+    assert node.k == 1 and node.merged_union == {B: 1} and node.merged == {}
+
+
+# -------------------------------------------------------------------------------------------- realtime
+
+def test_realtime_acts_on_the_newest_state_when_every_beacon_is_in() -> None:
+    node = started(peers=(B,))
+    rt = {"mode": "realtime", "speed": 10.0}
+    out = node.step([clock(4, (A, B), **rt), state(4, 99.0, 0.0), state(5, 100.0, 0.0)], 0.0)
+    assert [b.k for b in beacons(out)] == [5] and not cmds(out)  # tick 4 is stale: skipped
+    assert node.wake_at_s() == pytest.approx(T.realtime_act_fraction * DT / 10.0)
+    out = node.step([beacon(B, 5, 110.0, 0.0)], 0.001)
+    want = reference(5, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B])])
+    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(5, *want)]
+    assert node.wake_at_s() is None
+
+
+def test_realtime_acts_at_the_deadline_on_whatever_it_has() -> None:
+    node = started(peers=(B,))
+    rt = {"mode": "realtime", "speed": 10.0}
+    node.step([clock(0, (A, B), **rt), state(0, 100.0, 0.0), beacon(B, 0, 110.0, 0.0)], 0.0)
+    node.step([clock(1, (A, B), **rt), state(1, 100.05, 0.0)], 0.005)
+    deadline = node.wake_at_s()
+    assert deadline is not None and not cmds(node.step([], deadline - 1e-4))
+    out = node.step([], deadline)
+    assert [c.k for c in cmds(out)] == [1]  # B's beacon of tick 0 stands in for tick 1's
+
+
+# --------------------------------------------------------------------------------- the watches and input
+
+def test_world_silence_exits_3_and_the_end_of_mission_exits_0() -> None:
+    node = started(peers=())
+    node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
+    assert Exit(3) in node.step([], T.world_silence_s + 0.01)
+    node = started(peers=())
+    assert node.step([], 1000.0) == []  # before the first clock nothing is watched
+    assert node.step([clock(0, (A,), end=True, reason="converged")], 1000.1) == [Exit(0)]
+
+
+def test_while_waiting_the_node_logs_what_it_lacks(caplog: pytest.LogCaptureFixture) -> None:
+    node = started(peers=(B,))
+    node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 105.0, 0.0)], 0.0)
+    assert "no state yet" in node.waiting_for()
+    with caplog.at_level("INFO", logger="reconswarm.agent"):
+        node.step([], T.waiting_log_s + 0.1)
+    assert "tick 1: no state yet (newest state 0, newest clock 0)" in caplog.text
+    node.step([beacon(B, 1, 105.0, 0.0, rev=3), state(1, 100.0, 0.0)], T.waiting_log_s + 0.2)
+    assert node.waiting_for() == "tick 1: waiting for clock"
+    node.step([clock(1, (A, B))], T.waiting_log_s + 0.3)
+    assert node.k == 0 and node.waiting_for() == "tick 1: waiting for obstacle sets of [2]"
+
+
+def test_dropped_messages_are_counted_in_the_next_beacon() -> None:
+    node = started(peers=())
+    out = node.step([Invalid("k", "bad"), Invalid("k", "bad"), clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
+    assert beacons(out)[0].rejected == 2 and node.rejected == 2
