@@ -1,5 +1,5 @@
-"""The in-process engine (reconswarm/engine.py): Lyapunov decrease (Thm 4.1), determinism, and the claim that
-one agent's command computed alone equals its row in the vectorized engine."""
+"""The in-process engine (reconswarm_bringup/engine.py): Lyapunov decrease (Thm 4.1), determinism, knowledge.
+(That an agent's own AgentBrain.tick equals its engine row: tests/unit/test_agent_brain_vs_engine.py.)"""
 
 from __future__ import annotations
 
@@ -12,8 +12,6 @@ import pytest
 from shapely.geometry import Point, Polygon
 
 from reconswarm.generate import generate
-from reconswarm.paper.knowledge import obstacle_view
-from reconswarm.paper.planner import Neighbours, command
 from reconswarm.record.store import RunRecord
 from reconswarm.scenario import load, parse, to_toml, warnings
 from reconswarm_bringup.engine import Engine, SimConfig, run
@@ -95,35 +93,6 @@ def test_engine_is_deterministic_with_stalls_and_seeds_only_act_through_them():
         assert first is None
     else:
         assert first is not None and first >= 100  # a stall needs a full window (5 s) of history
-
-
-def test_agent_row_computed_alone_equals_the_engine_row():
-    """What an agent process computes from its neighbours and its own hulls (N = 1) is bit-identical to the
-    engine's row, on the paper scenario while the swarm meets the diamond."""
-    s = load(PAPER)
-    eng = Engine(s)
-    c = s.planner
-    checked = 0
-    for k in range(1000):
-        p = eng.p.copy()
-        u = eng.plan(k)
-        if k in (0, 700, 800, 900, 999):
-            for i in range(eng.n):
-                d = np.hypot(*(p - p[i]).T)
-                js = [j for j in range(eng.n) if j != i and d[j] <= eng.r[i] + eng.r[j] + c.d_max_m]
-                nb = Neighbours(p[js].reshape(1, -1, 2), eng.r[js].reshape(1, -1), np.ones((1, len(js)), bool))
-                known = [m for m in range(eng.field.n_obstacles) if eng.know.knows(m)[i]]
-                ob = obstacle_view(p[i:i + 1], 1, len(known),
-                                   [(0, col, eng.know.hull(i, m)) for col, m in enumerate(known)])
-                mine = command(c, p[i:i + 1], eng.r[i:i + 1], eng.offsets[i:i + 1], eng.target[None], nb, ob,
-                               np.zeros((1, 2)))
-                assert np.array_equal(mine[0], u[i]), (k, i, mine[0], u[i])
-                checked += 1
-        eng.advance(u)
-    assert checked == 50
-    # The check did cover obstacle repulsion: by tick 999 agents know the diamond and are close to it.
-    assert eng.know.knows(0).any()
-    assert np.min(eng.field.true_distances(eng.p)[:, 0] - eng.r) < c.d_max_m
 
 
 def test_knowledge_is_only_sensed_or_shared():

@@ -1,0 +1,63 @@
+"""The real AgentBrain.tick, fed what an agent process receives, equals the in-process engine's row bit for bit.
+
+The engine runs the paper mission; beside it every agent has its own AgentBrain, given at tick k exactly
+what the lockstep protocol hands an agent: its head point at k, the contour points the world's sensing
+gives it at k, every peer's beacon at k (head point, radius), and the obstacle sets at k-1 of the peers
+within link range, each revision merged once (the sets are the engine's own knowledge of those peers at
+k-1, announced with a revision that grows whenever that knowledge grew). Its command is compared with
+the engine's u row with `==`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agent.brain import AgentBrain, Peer
+from reconswarm.scenario import load
+from reconswarm_bringup.engine import Engine
+from tests.support import PAPER
+
+TICKS = 1000  # until the swarm is well into the diamond (knowledge sensed, shared and repelling)
+
+
+def test_agent_brain_tick_equals_the_engine_row_bit_for_bit() -> None:
+    s = load(PAPER)
+    eng = Engine(s)
+    c, f, n = s.planner, eng.field, eng.n
+    ids = [int(a) for a in s.ids]
+    brains = [AgentBrain(s, a) for a in ids]
+    rev = [0] * n  # revision of each agent's set, as its beacon would announce it
+    sets: list[dict[str, np.ndarray]] = [{} for _ in range(n)]  # each agent's set at k-1
+    merged = [[0] * n for _ in range(n)]  # merged[i][j]: j's revision that agent i merged last
+    bits = eng.know.bits.copy()
+    shared_grew = obstacle_rows = 0
+    for k in range(TICKS):
+        p = eng.p.copy()
+        for j in range(n):  # the sets at k-1 (the engine's knowledge before it plans tick k)
+            if not np.array_equal(eng.know.bits[j], bits[j]):
+                rev[j] += 1
+                sets[j] = {f.ids[m]: eng.know.hull(j, m) for m in range(f.n_obstacles) if eng.know.knows(m)[j]}
+        bits = eng.know.bits.copy()
+        u = eng.plan(k)
+        qa, qs = f.scan(p, c.sensing_range_m, eng.true_d)  # what the world senses for each agent at k
+        for i in range(n):
+            pts: dict[str, list[tuple[float, float]]] = {}
+            for q in qs[qa == i].tolist():
+                pts.setdefault(f.ids[int(f.owner[q])], []).append((float(f.samples[q, 0]), float(f.samples[q, 1])))
+            scan = {oid: np.array(v, dtype=np.float64) for oid, v in pts.items()}
+            peers = [Peer(ids[j], float(p[j, 0]), float(p[j, 1]), float(eng.r[j])) for j in range(n) if j != i]
+            shared = []
+            for a in sorted(brains[i].linked(p[i], peers)):
+                j = ids.index(a)
+                if rev[j] > merged[i][j]:
+                    shared.append(sets[j])
+                    merged[i][j] = rev[j]
+            before = brains[i].rev
+            ui, _grew = brains[i].tick(k, p[i].copy(), scan, peers, shared)
+            assert ui.tolist() == u[i].tolist(), (k, ids[i], ui, u[i])  # `==` on floats: bit for bit
+            shared_grew += bool(shared) and brains[i].rev > before and not scan
+            obstacle_rows += brains[i].rev > 0
+        eng.advance(u)
+    # The check covered knowledge received only from peers and commands with known obstacles around.
+    assert shared_grew > 0 and obstacle_rows > 1000
+    assert np.min(eng.field.true_distances(eng.p)[:, 0] - eng.r) < c.d_max_m
