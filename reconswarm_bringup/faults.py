@@ -6,6 +6,7 @@ T is simulated seconds (when the clock reaches T), DURATION wall seconds. Action
 
     kill:agent:3@60          SIGKILL agent 3
     freeze:agent:2@50+5      SIGSTOP agent 2, SIGCONT 5 s later
+    freeze:simworld@78+10    SIGSTOP the world, SIGCONT 10 s later (a stalled plant)
     restart:agent:4@70+1     SIGKILL agent 4, start it again 1 s later (default 1 s)
     kill:monitor@80          SIGKILL the monitor (run_local.sh restarts it; it appends to run.db)
     restart:router@90+2      SIGKILL the router, start it again 2 s later (default 1 s)
@@ -28,7 +29,7 @@ _SPEC = re.compile(r"^(?P<action>[a-z]+)(?::(?P<target>[a-z]+|\d+))?(?::(?P<id>\
 @dataclass(frozen=True)
 class Fault:
     action: str
-    target: str  # agent | monitor | router | world | "" (flood, partition)
+    target: str  # agent | monitor | router | simworld | "" (flood, partition)
     agent_id: int | None
     at_s: float  # simulated time
     duration_s: float  # wall seconds (freeze, restart delay, partition)
@@ -56,10 +57,12 @@ def parse(spec: str) -> Fault:
         if aid is None:
             raise BadInput(f"--fault {spec!r}: which agent? e.g. {action}:agent:3@{t:g}")
         agent_id: int | None = int(aid)
-    elif target in ("monitor", "router") and action in ("kill", "restart", "freeze"):
+    elif (target in ("monitor", "router") and action in ("kill", "restart", "freeze")) or (
+            target == "simworld" and action == "freeze"):
         agent_id = None
     else:
-        raise BadInput(f"--fault {spec!r}: {action} needs a target: agent:ID, monitor or router")
+        raise BadInput(f"--fault {spec!r}: {action} needs a target: agent:ID, monitor or router "
+                       "(or freeze:simworld)")
     if action == "freeze" and not dur:
         raise BadInput(f"--fault {spec!r}: freeze needs a duration, e.g. freeze:agent:2@{t:g}+5")
     if action == "restart" and not dur:
