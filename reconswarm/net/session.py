@@ -21,11 +21,12 @@ from pathlib import Path
 from typing import Any
 
 from reconswarm.errors import BadInput, ProcessFailure
+from reconswarm.net.timing import TIMING
 
 log = logging.getLogger("reconswarm")
 MODES = ("peer", "client", "router")
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
-LEASE_MS = 2000  # a frozen process is declared gone after this (the default 10 s is too slow for robots)
+LEASE_MS = TIMING.lease_ms  # a frozen process is declared gone after this (zenoh's 10 s is too slow for robots)
 
 
 @dataclass(frozen=True)
@@ -73,7 +74,8 @@ class ZenohOptions:
 
 
 @contextmanager
-def serving(opts: ZenohOptions, what: str, timeout_s: float = 20.0) -> Iterator[tuple[Any, Stopper]]:
+def serving(opts: ZenohOptions, what: str,
+            timeout_s: float = TIMING.session_open_timeout_s) -> Iterator[tuple[Any, Stopper]]:
     """A process's session and its SIGINT/SIGTERM flag; the session is closed however the body ends."""
     stop = Stopper()
     session = open_session(opts, what, timeout_s)
@@ -94,7 +96,7 @@ class Member:
             self.token.undeclare()
 
 
-def open_session(opts: ZenohOptions, what: str, timeout_s: float = 20.0) -> Any:
+def open_session(opts: ZenohOptions, what: str, timeout_s: float = TIMING.session_open_timeout_s) -> Any:
     """Open a session, retrying until the router answers or the timeout passes (then ProcessFailure)."""
     import zenoh
 
