@@ -109,6 +109,7 @@ class AgentNode:
         self.beacon_again = 0.0
         self.told_waiting = 0.0
         self._out: list[Output] = []
+        self._announce_set = False  # after a new session: publish our obstacle set again (its cache is new)
 
     # ------------------------------------------------------------------------------------- interface
 
@@ -116,6 +117,9 @@ class AgentNode:
         """Take the messages that arrived, advance as far as the data allows, watch the world and our
         own progress. Returns what to publish or do, in order."""
         self._out = []
+        if self._announce_set:
+            self._announce_set = False
+            self._out.append(self._obstacle_set(max(self.k, 0)))
         for m in batch:
             self._take(m, now_s)
         self._advance(now_s)
@@ -124,8 +128,10 @@ class AgentNode:
         return out
 
     def reconnected(self, now_s: float) -> None:
-        """The adapter opened a new session: give it `resubscribe_s` to bring the commands back."""
+        """The adapter opened a new session: give it `resubscribe_s` to bring the commands back, and put our
+        obstacle set in the new session's cache (for peers that join later) at the next step."""
         self.last_act = now_s
+        self._announce_set = self.brain.rev > 0
 
     def wake_at_s(self) -> float | None:
         """Realtime: when to step at the latest even if nothing arrives (None: no deadline)."""

@@ -205,7 +205,9 @@ def test_a_new_session_keeps_knowledge_revision_and_escape_state() -> None:
     node.reconnected(10.0)
     assert node.brain is brain and node.brain.rev == 1 and node.brain.obstacle_sets() == known
     out = node.step([clock(1, (A,)), state(1, 100.05, 0.0)], 10.1)
-    assert beacons(out)[0].rev == 1 and cmds(out)[0].k == 1  # tick 1 follows tick 0, nothing re-planned
+    # First our set again (the new session's cache starts empty), then tick 1 after tick 0.
+    assert isinstance(out[0], wire.ObstacleSet) and out[0].rev == 1 and set(out[0].obstacles) == {"diamond"}
+    assert beacons(out)[0].rev == 1 and cmds(out)[0].k == 1
 
 
 def test_a_restarted_agent_joining_late_merges_every_cached_obstacle_set() -> None:
