@@ -17,6 +17,7 @@ import typer
 
 from reconswarm.errors import ReconswarmError
 from reconswarm.net.session import ZenohOptions, bind_to_parent, serving, setup_logging
+from reconswarm.net.wire import ClockMode
 from reconswarm_bringup.console import fail
 
 log = logging.getLogger("reconswarm.router")
@@ -67,18 +68,18 @@ def agent_cmd(
 
 def simworld_cmd(
     scenario: Annotated[Path, typer.Option("--scenario", help="Scenario TOML file.")],
-    clock: Annotated[str, typer.Option("--clock", help="lockstep | realtime")] = "lockstep",
+    clock: Annotated[ClockMode, typer.Option("--clock", help="How the world advances.")] = ClockMode.LOCKSTEP,
     speed: Annotated[float, typer.Option("--speed", help="Realtime: simulated seconds per wall second.")] = 10.0,
     start_timeout: Annotated[float, typer.Option("--start-timeout", help="Seconds to wait for everyone.")] = 60.0,
     connect: Connect = None, listen: Listen = None, mode: Mode = "client", zenoh_config: ZConfig = None,
     run_id: RunId = None,
 ) -> None:
     """The world process: unicycle kinematics, range-limited sensing and the clock."""
-    from simworld.process import WorldConfig, run
+    from simworld.process import SimworldConfig, run
 
     def go() -> int:
-        return run(WorldConfig(scenario, ZenohOptions.build(connect, listen, mode, zenoh_config), clock, speed, run_id,
-                               start_timeout))
+        zopts = ZenohOptions.build(connect, listen, mode, zenoh_config)
+        return run(SimworldConfig(scenario, zopts, clock, speed, run_id, start_timeout))
 
     _guard(go)
 

@@ -44,6 +44,10 @@ class Timing:
     hold_sim_s: float = 0.2
     # With no agent reachable, hold the world this long before ending the mission.
     no_agents_grace_s: float = 30.0
+    # Lockstep: step timeouts in a row after which an agent is not waited for until it commands again.
+    strikes: int = 2
+    # Simworld itself not run for this long (SIGSTOP, a starved machine): its waits start afresh.
+    self_stall_s: float = 1.0
     # After the last clock, keep the session this long so the last messages reach the monitor.
     world_end_linger_s: float = 0.3
 
@@ -58,6 +62,8 @@ class Timing:
     commit_sim_s: float = 0.5
     # ... and every this much wall time (also how often the rejection counters are refreshed).
     commit_wall_s: float = 0.5
+    # The world's clock silent this long (or its token gone) is a world stall (one world_stalled event).
+    world_stall_s: float = 2.0
 
     # --------------------------------------------------------------------------------------- session
     # A frozen process is declared gone after this (zenoh's default 10 s is too slow for robots).

@@ -9,12 +9,15 @@ counts and drops, it never dies.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any
 
 import msgpack
 
 from reconswarm.net.keys import Keys as Keys
 from reconswarm.net.keys import WireError as WireError
+from reconswarm.paper.events import Event as Event
+from reconswarm.paper.events import EventKind as EventKind
 
 VERSION = 1
 MAX_PAYLOAD_BYTES = 1 << 20  # 1 MiB: larger payloads are rejected before decoding
@@ -26,6 +29,14 @@ MAX_STR = 128
 
 
 # ---------------------------------------------------------------------------------------------- messages
+
+
+class ClockMode(StrEnum):
+    """How simworld advances: on every live agent's command (deterministic) or on wall time."""
+
+    LOCKSTEP = "lockstep"
+    REALTIME = "realtime"
+
 
 
 @dataclass(frozen=True)
@@ -82,7 +93,7 @@ class Clock:
     k: int
     t: float
     alive: tuple[int, ...]
-    mode: str = "lockstep"  # lockstep | realtime
+    mode: ClockMode = ClockMode.LOCKSTEP
     speed: float = 0.0  # realtime: simulated seconds per wall second
     end: bool = False
     reason: str = ""
@@ -102,15 +113,6 @@ class Truth:
     theta: tuple[float, ...]
     px: tuple[float, ...]
     py: tuple[float, ...]
-
-
-@dataclass(frozen=True)
-class Event:
-    t: float
-    kind: str
-    before: tuple[tuple[int, ...], ...] = ()
-    after: tuple[tuple[int, ...], ...] = ()
-    agent: int | None = None
 
 
 # ------------------------------------------------------------------------------------------- encode
@@ -144,7 +146,7 @@ def obstacles_to_wire(m: ObstacleSet) -> bytes:
 
 
 def clock_to_wire(m: Clock) -> bytes:
-    return _pack({"k": m.k, "t": m.t, "alive": list(m.alive), "mode": m.mode, "speed": m.speed, "end": m.end,
+    return _pack({"k": m.k, "t": m.t, "alive": list(m.alive), "mode": str(m.mode), "speed": m.speed, "end": m.end,
                   "reason": m.reason, "rejected": m.rejected, "stats": m.stats})
 
 
@@ -154,11 +156,8 @@ def truth_to_wire(m: Truth) -> bytes:
 
 
 def event_to_wire(m: Event) -> bytes:
-    body: dict[str, Any] = {"t": m.t, "kind": m.kind, "before": [list(g) for g in m.before],
-                            "after": [list(g) for g in m.after]}
-    if m.agent is not None:
-        body["agent"] = m.agent
-    return _pack(body)
+    """The event exactly as the monitor records it (Event.to_dict), with the wire version."""
+    return _pack(m.to_dict())
 
 
 # ------------------------------------------------------------------------------------------- decode
@@ -286,9 +285,10 @@ def clock_from_wire(payload: bytes) -> Clock:
     if not isinstance(alive, list) or len(alive) > MAX_IDS:
         raise WireError("field 'alive': expected a list of agent ids")
     ids = tuple(_int({"id": a}, "id", 0, 2**31) for a in alive)
-    mode = o.get("mode", "lockstep")
-    if mode not in ("lockstep", "realtime"):
-        raise WireError(f"field 'mode': unknown clock mode {mode!r}")
+    try:
+        mode = ClockMode(o.get("mode", "lockstep"))
+    except ValueError:
+        raise WireError(f"field 'mode': unknown clock mode {o.get('mode')!r}") from None
     end = o.get("end", False)
     if not isinstance(end, bool):
         raise WireError("field 'end': expected a boolean")
@@ -322,13 +322,18 @@ def truth_from_wire(payload: bytes) -> Truth:
 
 def event_from_wire(payload: bytes) -> Event:
     o = _unpack(payload)
-    kind = _str(o.get("kind"), "field 'kind'")
-
-    def groups(key: str) -> tuple[tuple[int, ...], ...]:
+    o.pop("v", None)
+    _str(o.get("kind"), "field 'kind'")
+    for key in ("before", "after"):
         g = o.get(key, [])
         if not isinstance(g, list) or not all(isinstance(x, list) for x in g):
             raise WireError(f"field {key!r}: expected a list of groups")
-        return tuple(tuple(_int({"id": a}, "id", 0, 2**31) for a in grp) for grp in g)
-
-    agent = _int(o, "agent", 0, 2**31) if "agent" in o else None
-    return Event(_float(o, "t"), kind, groups("before"), groups("after"), agent)
+        for grp in g:
+            for a in grp:
+                _int({"id": a}, "id", 0, 2**31)
+    if "agent" in o:
+        _int(o, "agent", 0, 2**31)
+    try:
+        return Event.from_dict(o)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise WireError(f"event: {exc}") from None

@@ -3,11 +3,10 @@ metrics, the swarm graph's split / merge events and the row of run.db."""
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from numpy.typing import NDArray
 
+from reconswarm.paper.events import Event
 from reconswarm.paper.topology import TopologyTracker
 from reconswarm.record.safety import SafetyMonitor
 from reconswarm.record.store import RunWriter
@@ -27,7 +26,7 @@ class Recorder:
         self.slots = np.asarray(s.target_m) + s.offsets
         self.field = ContourField.from_scenario(s)
         self.topology = TopologyTracker(self.ids, s.planner.link_range_m)
-        self.events: list[dict[str, Any]] = []
+        self.events: list[Event] = []  # every event recorded, in order
         self.max_error_m = float("inf")
         p_cfg = s.planner
         # Pairs within this distance cover the swarm graph (link + hysteresis) and the safety reach.
@@ -37,8 +36,8 @@ class Recorder:
 
     def tick(self, k: int, t: float, p: Array, theta: Array, alive: NDArray[np.bool_],
              true_d: Array | None = None, cand: NDArray[np.int64] | None = None, *,
-             cand_d: Array | None = None, err: Array | None = None) -> list[dict[str, Any]]:
-        """Record the truth at tick k; returns the topology events confirmed now.
+             cand_d: Array | None = None, err: Array | None = None) -> list[Event]:
+        """Record the truth at tick k; returns the topology events confirmed now (already recorded).
 
         true_d (N, M) and cand (pairs within `self.reach_m`) may be passed when already computed, and with
         cand the pairs' norm2 distances cand_d (E,); err (N,) likewise norm2(p - slots).
@@ -56,18 +55,23 @@ class Recorder:
         else:
             self.max_error_m = float(err[alive].max()) if alive.any() else float("inf")
         gap_a, gap_o, started, ended = self.safety.step(t, p, true_d, cand, cand_d)
-        events = self.topology.step_pairs(t, p, alive, cand, cand_d)
-        self.events += events
+        events = [Event.from_dict(e) for e in self.topology.step_pairs(t, p, alive, cand, cand_d)]
+        for ev in events:
+            self.event(ev)
         if self.writer is not None:
             w = self.writer
             for ep in started:
                 w.episode(ep)
             for key in ended:
                 w.episode_end(key, t)
-            for ev in events:
-                w.event(ev)
             w.tick(k, t, p, theta, alive, self.max_error_m, gap_a, gap_o, self.topology.n_groups)
         return events
+
+    def event(self, ev: Event) -> None:
+        """The one way an event enters the record (the monitor publishes the same object after this)."""
+        self.events.append(ev)
+        if self.writer is not None:
+            self.writer.event(ev)
 
     def converged(self) -> bool:
         return self.max_error_m <= self.s.planner.converge_tol_m

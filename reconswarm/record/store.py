@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from reconswarm.errors import BadInput
+from reconswarm.paper.events import Event
 from reconswarm.record.safety import Episode
 from reconswarm.scenario import Scenario, parse, to_toml
 
@@ -116,8 +117,9 @@ class RunWriter:
         self.db.execute("INSERT OR REPLACE INTO beacons VALUES (?, ?, ?, ?)",
                         (k, t, _blob(p[:, 0], "<f8"), _blob(p[:, 1], "<f8")))
 
-    def event(self, ev: dict[str, Any]) -> None:
-        self.db.execute("INSERT INTO events(t, kind, data) VALUES (?, ?, ?)", (ev["t"], ev["kind"], json.dumps(ev)))
+    def event(self, ev: Event) -> None:
+        self.db.execute("INSERT INTO events(t, kind, data) VALUES (?, ?, ?)",
+                        (ev.t, ev.kind.value, json.dumps(ev.to_dict())))
 
     def episode(self, e: Episode) -> None:
         self.db.execute("INSERT INTO contacts(kind, a, b, t_start, gap_m) VALUES (?, ?, ?, ?, ?)",
@@ -143,6 +145,15 @@ class RunWriter:
             self.db.execute("COMMIT")
         self._last_commit = time.monotonic()
         self.db.execute("BEGIN")
+
+    def abort(self) -> None:
+        """Give up (the disk is full, say): drop what is not committed, keep what is, close."""
+        self._rows = []
+        try:
+            if self.db.in_transaction:
+                self.db.execute("ROLLBACK")
+        finally:
+            self.db.close()
 
     def close(self, **final_meta: Any) -> None:
         self._flush()
@@ -190,6 +201,12 @@ class RunRecord:
 
     def close(self) -> None:
         self.db.close()
+
+    def __enter__(self) -> RunRecord:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
 
     def meta_json(self, key: str, default: Any = None) -> Any:
         return json.loads(self.meta[key]) if key in self.meta else default

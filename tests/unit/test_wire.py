@@ -72,9 +72,9 @@ def test_truth_round_trip(k, t, rows):
 
 
 def test_event_round_trip():
-    m = wire.Event(12.5, "split", ((1, 2, 3),), ((1,), (2, 3)), None)
+    m = wire.Event(12.5, wire.EventKind.SPLIT, ((1, 2, 3),), ((1,), (2, 3)), None)
     assert wire.event_from_wire(wire.event_to_wire(m)) == m
-    lost = wire.Event(3.0, "agent_lost", ((1, 2),), ((1,),), 2)
+    lost = wire.Event(3.0, wire.EventKind.AGENT_LOST, ((1, 2),), ((1,),), 2)
     assert wire.event_from_wire(wire.event_to_wire(lost)) == lost
 
 

@@ -1,0 +1,303 @@
+"""The world's tick logic as a pure state machine: no zenoh, no clock of its own.
+
+`WorldNode` owns the plant (unicycles, contour sensing) and decides, from the messages it is handed
+and the time `now_s` it is told, what to publish and when to advance:
+
+- readiness barrier: the mission starts when every agent of the scenario and the monitor are up;
+  past `start_timeout_s` it fails naming who is missing;
+- lockstep: tick k advances when the command for k of every agent the clock announced is in; a tick
+  that has waited `republish_s` is published again (data lost in an outage is sent again); after
+  `step_timeout_s` the missing robots are held, and an agent that let the step time out `strikes`
+  times in a row is not waited for until it commands again;
+- realtime: tick k advances at t0 + (k+1) dt / speed on the latest commands (missed deadlines and
+  state-to-command latency are counted);
+- a robot whose command is missing is held (last command) for `hold_sim_s`, then stopped;
+- with no agent reachable the world holds for `no_agents_grace_s`, then ends the mission.
+
+The zenoh adapter (simworld/process.py) feeds `agent_up`, `monitor_up`, `command`, calls `step` and
+publishes what it returns.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from enum import Enum, auto
+
+import numpy as np
+
+from reconswarm.errors import ProcessFailure
+from reconswarm.net import wire
+from reconswarm.net.timing import TIMING, Timing
+from reconswarm.net.wire import ClockMode
+from reconswarm.paper.planner import errors
+from reconswarm.scenario import Scenario
+from reconswarm.sim import unicycle
+from reconswarm.sim.sensing import ContourField
+
+log = logging.getLogger("reconswarm.simworld")
+
+
+class Phase(Enum):
+    READY = auto()  # waiting for everyone (the readiness barrier)
+    TICK = auto()  # about to publish tick k
+    WAIT_COMMANDS = auto()  # lockstep: tick k published, waiting for its commands
+    WAIT_DUE = auto()  # realtime: tick k published, waiting for its deadline
+    NO_AGENTS = auto()  # nobody reachable: holding the world
+    DONE = auto()
+
+
+@dataclass
+class TickOut:
+    """Everything one tick publishes: the clock, the truth, every robot's state and the non-empty scans."""
+
+    clock: wire.Clock
+    truth: wire.Truth
+    states: list[wire.State]
+    scans: list[wire.Scan]
+
+
+@dataclass
+class Step:
+    """What `WorldNode.step` asks of the adapter: publish `out`, call again by `wake_s` (sooner if a message
+    comes), and stop once `ended` holds the mission's end reason."""
+
+    out: list[TickOut] = field(default_factory=list)
+    wake_s: float = 0.0
+    ended: str | None = None
+
+
+class WorldNode:
+    def __init__(self, s: Scenario, clock: ClockMode = ClockMode.LOCKSTEP, speed: float = 10.0,
+                 timing: Timing = TIMING) -> None:
+        self.s, self.clock, self.speed, self.timing = s, clock, speed, timing
+        self.ids = [a.id for a in s.agents]
+        self.index = {a: k for k, a in enumerate(self.ids)}
+        self.p = s.starts.copy()
+        self.theta = s.headings.copy()
+        self.l = s.head_offsets
+        self.field = ContourField.from_scenario(s)
+        n = len(self.ids)
+        self.u = np.zeros((n, 2))
+        self.u_k = np.full(n, -(10**9))  # tick of each robot's last command
+        self.cmds: dict[int, dict[int, np.ndarray]] = {}  # tick -> agent index -> u
+        self.alive: set[int] = set()
+        self.monitor: bool = False
+        self.strikes: dict[int, int] = {}  # lockstep: consecutive step timeouts of each agent
+        self.unresponsive: set[int] = set()  # not waited for until they command again
+        self.rejected = 0  # messages the adapter dropped (reported on the clock)
+        self.pub_time: dict[int, float] = {}
+        self.latency_ms: list[float] = []
+        self.missed = self.expected = self.overruns = 0
+        self.phase = Phase.READY
+        self.k = 0
+        self.n_ticks = round(s.meta.duration_s / s.meta.dt_s)
+        self.period_s = s.meta.dt_s / speed if clock == ClockMode.REALTIME else 0.0
+        self.t0 = 0.0
+        self.started = False  # the readiness barrier has passed
+        self.deadline_s: float | None = None  # of the phase in progress
+        self.again_s = 0.0
+        self.waiting_for: set[int] = set()
+
+    # ------------------------------------------------------------------------------------- inputs
+
+    def agent_up(self, aid: int, up: bool) -> None:
+        if aid not in self.index:
+            return
+        if up:
+            self.alive.add(aid)
+        elif aid in self.alive:
+            self.alive.discard(aid)
+            log.warning("agent %d is gone", aid)
+
+    def monitor_up(self, up: bool) -> None:
+        self.monitor = up
+
+    def command(self, c: wire.Cmd, now_s: float) -> None:
+        if c.id not in self.index:
+            raise wire.WireError(f"agent {c.id} is not in the scenario")
+        self.cmds.setdefault(c.k, {})[self.index[c.id]] = np.array([c.ux, c.uy])
+        if c.id in self.unresponsive:
+            self.unresponsive.discard(c.id)
+            self.strikes.pop(c.id, None)
+            log.info("agent %d commands again", c.id)
+        sent = self.pub_time.get(c.k)
+        if sent is not None and self.clock == ClockMode.REALTIME:
+            self.latency_ms.append((now_s - sent) * 1000.0)
+
+    def sent(self, k: int, now_s: float) -> None:
+        """The adapter put tick k's states on the wire at now_s (for state-to-command latency)."""
+        self.pub_time[k] = now_s
+        for kk in [x for x in self.pub_time if x < k - 1000]:
+            del self.pub_time[kk]
+
+    # ------------------------------------------------------------------------------------- the machine
+
+    def step(self, now_s: float, stopping: bool = False) -> Step:
+        """Advance as far as the messages received allow at now_s; at most one tick per call."""
+        if self.phase == Phase.READY:
+            return self._ready(now_s, stopping)
+        if self.phase == Phase.TICK:
+            return self._tick(now_s, stopping)
+        if self.phase == Phase.NO_AGENTS:
+            if self.alive:
+                log.info("agents reachable again: %s", sorted(self.alive))
+                return self._publish_tick(now_s, "")
+            if stopping or now_s >= self._deadline(now_s):
+                return self._publish_tick(now_s, "no agents")
+            return Step([], self._deadline(now_s))
+        if self.phase == Phase.WAIT_COMMANDS:
+            return self._wait_commands(now_s, stopping)
+        if self.phase == Phase.WAIT_DUE:
+            if stopping or now_s >= self._deadline(now_s):
+                return self._advance(now_s)
+            return Step([], self._deadline(now_s))
+        return Step([], now_s, "stopped")
+
+    def _deadline(self, now_s: float) -> float:
+        return now_s if self.deadline_s is None else self.deadline_s
+
+    def _ready(self, now_s: float, stopping: bool) -> Step:
+        if self.deadline_s is None:
+            self.deadline_s = now_s + self.timing.start_timeout_s
+        if stopping:
+            self.phase = Phase.DONE
+            return Step([], now_s, "stopped")
+        if self.monitor and set(self.ids) <= self.alive:
+            log.info("all up: mission starts")
+            self.phase, self.t0, self.deadline_s, self.started = Phase.TICK, now_s, None, True
+            return Step([], now_s)
+        if now_s > self.deadline_s:
+            missing = [f"agent {a}" for a in self.ids if a not in self.alive]
+            if not self.monitor:
+                missing.append("monitor")
+            raise ProcessFailure(f"simworld: not up after {self.timing.start_timeout_s:.0f} s: {', '.join(missing)}")
+        return Step([], self.deadline_s)
+
+    def _tick(self, now_s: float, stopping: bool) -> Step:
+        reason = ""
+        if self.converged():
+            reason = "converged"
+        elif self.k == self.n_ticks:
+            reason = "duration"
+        elif stopping:
+            reason = "stopped"
+        elif not self.alive:
+            log.warning("no agent is reachable: holding the world for up to %.0f s", self.timing.no_agents_grace_s)
+            self.phase, self.deadline_s = Phase.NO_AGENTS, now_s + self.timing.no_agents_grace_s
+            return Step([], self.deadline_s)
+        return self._publish_tick(now_s, reason)
+
+    def _publish_tick(self, now_s: float, reason: str) -> Step:
+        out = [self.tick_out(self.k, reason)]
+        if reason:
+            self.phase = Phase.DONE
+            return Step(out, now_s, reason)
+        if self.clock == ClockMode.LOCKSTEP:
+            self.waiting_for = set(self.alive) - self.unresponsive
+            self.phase, self.deadline_s = Phase.WAIT_COMMANDS, now_s + self.timing.step_timeout_s
+            self.again_s = now_s + self.timing.republish_s
+            return Step(out, min(self.deadline_s, self.again_s))
+        due = self.t0 + (self.k + 1) * self.period_s
+        if now_s > due:
+            self.overruns += 1
+        self.phase, self.deadline_s = Phase.WAIT_DUE, due
+        return Step(out, due)
+
+    def missing(self) -> list[int]:
+        """Lockstep: agents the current tick still waits for."""
+        got = self.cmds.get(self.k, {})
+        return sorted(a for a in self.waiting_for & self.alive if self.index[a] not in got)
+
+    def _wait_commands(self, now_s: float, stopping: bool) -> Step:
+        missing = self.missing()
+        if not missing:
+            self.strikes.clear()
+            return self._advance(now_s)
+        if stopping or now_s >= self._deadline(now_s):
+            log.warning("tick %d: no command from %s within %.1f s: holding their robots", self.k, missing,
+                        self.timing.step_timeout_s)
+            for a in missing:
+                self.strikes[a] = self.strikes.get(a, 0) + 1
+                if self.strikes[a] >= self.timing.strikes:
+                    self.unresponsive.add(a)
+                    log.warning("agent %d is unresponsive: not waiting for it until it commands again", a)
+            return self._advance(now_s)
+        out = []
+        if now_s >= self.again_s:
+            log.info("tick %d: still waiting for agents %s: publishing the tick again", self.k, missing)
+            out.append(self.tick_out(self.k, ""))
+            self.again_s = now_s + self.timing.republish_s
+        return Step(out, min(self._deadline(now_s), self.again_s))
+
+    def _advance(self, now_s: float) -> Step:
+        self.apply(self.k)
+        self.k += 1
+        self.phase, self.deadline_s = Phase.TICK, None
+        return Step([], now_s)
+
+    # ------------------------------------------------------------------------------------- the plant
+
+    def tick_out(self, k: int, reason: str) -> TickOut:
+        t = k * self.s.meta.dt_s
+        end = bool(reason)
+        clock = wire.Clock(k, t, tuple(sorted(self.alive)), self.clock,
+                           self.speed if self.clock == ClockMode.REALTIME else 0.0, end, reason, self.rejected,
+                           self.stats() if end else {})
+        true_d = self.field.true_distances(self.p, self.s.planner.sensing_range_m)
+        qa, qs = self.field.scan(self.p, self.s.planner.sensing_range_m, true_d)
+        counts = np.bincount(qa, minlength=len(self.ids))
+        c = unicycle.body_centre(self.p, self.theta, self.l)
+        truth = wire.Truth(k, t, tuple(self.ids), tuple(c[:, 0].tolist()), tuple(c[:, 1].tolist()),
+                           tuple(self.theta.tolist()), tuple(self.p[:, 0].tolist()), tuple(self.p[:, 1].tolist()))
+        states = [wire.State(a, k, t, float(c[i, 0]), float(c[i, 1]), float(self.theta[i]), float(self.p[i, 0]),
+                             float(self.p[i, 1]), int(counts[i])) for i, a in enumerate(self.ids)]
+        scans = []
+        if qa.size:
+            starts = np.searchsorted(qa, np.arange(len(self.ids)))
+            ends = np.searchsorted(qa, np.arange(len(self.ids)), side="right")
+            names = self.field.ids
+            for i in map(int, np.flatnonzero(counts)):
+                idx = qs[starts[i]:ends[i]]
+                pts = tuple(zip(*self.field.samples[idx].T.tolist(),
+                                [names[o] for o in self.field.owner[idx].tolist()], strict=True))
+                scans.append(wire.Scan(self.ids[i], k, t, pts))
+        return TickOut(clock, truth, states, scans)
+
+    def apply(self, k: int) -> None:
+        """Choose every robot's u for the step k -> k+1 and integrate."""
+        hold = max(1, round(self.timing.hold_sim_s / self.s.meta.dt_s))
+        got = self.cmds.pop(k, {})
+        for kk in sorted(x for x in self.cmds if x < k):  # late commands still count as the latest
+            for i, u in self.cmds.pop(kk).items():
+                if kk > self.u_k[i]:
+                    self.u[i], self.u_k[i] = u, kk
+        for i, u in got.items():
+            self.u[i], self.u_k[i] = u, k
+        if self.clock == ClockMode.REALTIME:
+            live = [self.index[a] for a in self.alive]
+            self.expected += len(live)
+            self.missed += sum(1 for i in live if i not in got)
+        stale = (k - self.u_k) > hold
+        u = np.where(stale[:, None], 0.0, self.u)
+        w = self.s.world
+        self.p, self.theta = unicycle.step(self.p, self.theta, u, self.l, self.s.meta.dt_s, w.max_speed_mps,
+                                           w.max_turn_rate_radps)
+
+    def stats(self) -> dict[str, float]:
+        out: dict[str, float] = {"world_overruns": float(self.overruns)}
+        if self.latency_ms:
+            lat = np.array(self.latency_ms)
+            out.update(latency_p50_ms=round(float(np.percentile(lat, 50)), 3),
+                       latency_p99_ms=round(float(np.percentile(lat, 99)), 3), latency_samples=float(lat.size))
+        if self.clock == ClockMode.REALTIME:
+            out.update(missed_deadlines=float(self.missed), deadlines=float(self.expected),
+                       missed_deadline_ratio=round(self.missed / self.expected, 5) if self.expected else 0.0)
+        return out
+
+    def converged(self) -> bool:
+        live = [self.index[a] for a in self.alive]
+        if not live:
+            return False
+        e = errors(self.p[live], np.asarray(self.s.target_m), self.s.offsets[live])
+        return bool(e.max() <= self.s.planner.converge_tol_m)
