@@ -1,0 +1,221 @@
+"""The world's tick logic (simworld/world.py) driven by hand: no zenoh, no processes, times given."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from reconswarm.errors import ProcessFailure
+from reconswarm.net import wire
+from reconswarm.net.timing import Timing
+from reconswarm.net.wire import ClockMode
+from reconswarm.scenario import load
+from reconswarm.sim import unicycle
+from simworld.world import Phase, WorldNode
+from tests.support import PAPER
+
+T = Timing(start_timeout_s=10.0, republish_s=0.5, step_timeout_s=5.0, strikes=2, hold_s=0.2, no_agents_grace_s=30.0)
+S = load(PAPER)
+IDS = [a.id for a in S.agents]
+
+
+def up(node: WorldNode, ids: list[int] | None = None) -> None:
+    for a in IDS if ids is None else ids:
+        node.agent_up(a, True)
+    node.monitor_up(True)
+
+
+def started(clock: ClockMode = ClockMode.LOCKSTEP, now: float = 0.0) -> WorldNode:
+    node = WorldNode(S, clock, 10.0, T)
+    up(node)
+    assert node.step(now).out == [] and node.started
+    return node
+
+
+def command_all(node: WorldNode, k: int, u: tuple[float, float], now: float, skip: tuple[int, ...] = ()) -> None:
+    for a in IDS:
+        if a not in skip:
+            node.command(wire.Cmd(a, k, *u), now)
+
+
+def test_barrier_waits_for_every_agent_and_the_monitor() -> None:
+    node = WorldNode(S, ClockMode.LOCKSTEP, 10.0, T)
+    up(node, IDS[:-1])
+    node.monitor_up(False)
+    st = node.step(0.0)
+    assert st.out == [] and st.ended is None and st.wake_s == pytest.approx(10.0) and not node.started
+    node.agent_up(IDS[-1], True)
+    assert not node.step(1.0).out and not node.started  # the monitor is still missing
+    node.monitor_up(True)
+    node.step(2.0)
+    assert node.started and node.phase == Phase.TICK
+
+
+def test_barrier_times_out_naming_who_is_missing() -> None:
+    node = WorldNode(S, ClockMode.LOCKSTEP, 10.0, T)
+    up(node, IDS[1:])
+    node.monitor_up(False)
+    node.step(0.0)
+    with pytest.raises(ProcessFailure, match=f"agent {IDS[0]}, monitor"):
+        node.step(10.5)
+
+
+def test_stopped_before_the_start() -> None:
+    node = WorldNode(S, ClockMode.LOCKSTEP, 10.0, T)
+    assert node.step(0.0, stopping=True).ended == "stopped" and not node.started
+
+
+def test_lockstep_waits_for_every_command_then_integrates() -> None:
+    node = started()
+    st = node.step(0.0)
+    (tick,) = st.out
+    assert tick.clock.k == 0 and tick.clock.alive == tuple(sorted(IDS)) and not tick.clock.end
+    assert [m.id for m in tick.states] == IDS and tick.truth.ids == tuple(IDS)
+    assert all(sc.points for sc in tick.scans)
+    p0, th0 = node.p.copy(), node.theta.copy()
+    command_all(node, 0, (0.5, 0.2), 0.01, skip=(IDS[3],))
+    assert node.step(0.02).out == [] and node.k == 0  # one command missing: no advance
+    node.command(wire.Cmd(IDS[3], 0, 0.5, 0.2), 0.03)
+    node.step(0.04)
+    assert node.k == 1
+    u = np.tile([0.5, 0.2], (len(IDS), 1))
+    p1, th1 = unicycle.step(p0, th0, u, S.head_offsets, S.meta.dt_s, S.world.max_speed_mps,
+                            S.world.max_turn_rate_radps)
+    assert np.array_equal(node.p, p1) and np.array_equal(node.theta, th1)
+    assert node.step(0.05).out[0].clock.k == 1
+
+
+def test_a_waiting_tick_is_published_again_every_republish_s() -> None:
+    node = started()
+    node.step(0.0)
+    assert node.step(0.4).out == []
+    again = node.step(0.5).out
+    assert [o.clock.k for o in again] == [0] and node.k == 0
+    assert node.step(0.9).out == []
+    assert [o.clock.k for o in node.step(1.0).out] == [0]
+
+
+def test_a_silent_robot_is_held_then_stopped_and_strikes_out() -> None:
+    node = started()
+    silent = IDS[2]
+    i = IDS.index(silent)
+    now = 0.0
+    node.step(now)
+    command_all(node, 0, (1.0, 0.0), now)
+    node.step(now)
+    trail = [node.p[i].copy()]
+    hold_ticks = round(T.hold_s / S.meta.dt_s)
+    for k in range(1, 3):
+        node.step(now)  # publish tick k
+        command_all(node, k, (1.0, 0.0), now, skip=(silent,))
+        assert node.missing() == [silent]
+        now += T.step_timeout_s  # the step times out: the robot is held
+        node.step(now)
+        assert node.k == k + 1
+        trail.append(node.p[i].copy())
+    assert node.strikes[silent] == 2 and silent in node.unresponsive
+    # Not waited for any more: the others' commands are enough.
+    for k in range(3, 3 + hold_ticks + 2):
+        node.step(now)
+        command_all(node, k, (1.0, 0.0), now, skip=(silent,))
+        node.step(now)
+        assert node.k == k + 1
+        trail.append(node.p[i].copy())
+    moved = [float(np.linalg.norm(b - a)) for a, b in zip(trail, trail[1:], strict=False)]
+    assert all(m > 0 for m in moved[:hold_ticks])  # the last command is held for hold_s
+    assert all(m == 0 for m in moved[hold_ticks:])  # then the robot stops
+    node.step(now)
+    node.command(wire.Cmd(silent, node.k, 0.0, 0.0), now)
+    assert silent not in node.unresponsive and silent not in node.strikes
+
+
+def test_late_commands_count_as_the_latest() -> None:
+    node = started()
+    node.step(0.0)
+    command_all(node, 0, (1.0, 0.0), 0.0, skip=(IDS[0],))
+    node.step(5.0)  # timed out without agent IDS[0]
+    node.command(wire.Cmd(IDS[0], 0, 0.3, 0.0), 5.1)  # tick 0's command, late
+    node.step(5.1)
+    command_all(node, 1, (1.0, 0.0), 5.2, skip=(IDS[0],))
+    node.step(10.2)
+    assert node.u[0].tolist() == [0.3, 0.0] and node.u_k[0] == 0
+
+
+def test_unknown_agent_command_is_refused() -> None:
+    node = started()
+    with pytest.raises(wire.WireError):
+        node.command(wire.Cmd(999, 0, 0.0, 0.0), 0.0)
+    node.agent_up(999, True)
+    assert 999 not in node.alive
+
+
+def test_no_agents_holds_then_ends_or_goes_on() -> None:
+    node = started()
+    for a in IDS:
+        node.agent_up(a, False)
+    st = node.step(0.0)
+    assert st.out == [] and node.phase == Phase.NO_AGENTS and st.wake_s == pytest.approx(30.0)
+    assert node.step(10.0).out == []
+    node.agent_up(IDS[0], True)
+    assert [o.clock.k for o in node.step(11.0).out] == [0]  # back: the tick goes out
+    node.agent_up(IDS[0], False)
+    node.cmds.clear()
+    node.step(16.0)  # the step times out (nobody left to wait for), next tick
+    node.step(16.0)
+    assert node.phase == Phase.NO_AGENTS
+    st = node.step(46.5)
+    assert st.ended == "no agents" and st.out[0].clock.end and st.out[0].clock.reason == "no agents"
+
+
+def test_end_of_duration_and_stop() -> None:
+    node = started()
+    node.n_ticks = 1
+    node.step(0.0)
+    command_all(node, 0, (0.0, 0.0), 0.0)
+    node.step(0.0)
+    st = node.step(0.0)
+    assert st.ended == "duration" and st.out[0].clock.end and "world_overruns" in st.out[0].clock.stats
+    node2 = started()
+    st2 = node2.step(0.0, stopping=True)
+    assert st2.ended == "stopped"
+    assert node2.step(1.0).ended == "stopped"  # done stays done
+
+
+def test_converged_ends_the_mission() -> None:
+    node = started()
+    node.p = np.asarray(S.target_m) + S.offsets
+    st = node.step(0.0)
+    assert st.ended == "converged" and st.out[0].clock.reason == "converged"
+
+
+def test_realtime_advances_on_wall_time_and_counts() -> None:
+    node = started(ClockMode.REALTIME, now=100.0)
+    period = S.meta.dt_s / 10.0
+    st = node.step(100.0)
+    assert st.out[0].clock.mode == ClockMode.REALTIME and st.wake_s == pytest.approx(100.0 + period)
+    node.sent(0, 100.0)
+    command_all(node, 0, (0.1, 0.0), 100.002, skip=(IDS[0],))
+    assert node.step(100.001).out == [] and node.k == 0
+    node.step(100.0 + period)
+    assert node.k == 1 and node.missed == 1 and node.expected == len(IDS)
+    node.step(100.0 + 5 * period)  # tick 1 goes out late
+    assert node.overruns == 1
+    stats = node.stats()
+    assert stats["latency_samples"] == len(IDS) - 1 and stats["latency_p50_ms"] == pytest.approx(2.0)
+    assert stats["missed_deadlines"] == 1
+    node.step(100.0 + 6 * period)
+    assert node.k == 2
+
+
+def test_a_robot_next_to_an_obstacle_gets_its_contour() -> None:
+    node = started()
+    ob = S.obstacles[0]
+    vx, vy = ob.vertices_m[0]
+    node.p[0] = (vx - 1.0, vy - 1.0)
+    (tick,) = node.step(0.0).out
+    mine = [sc for sc in tick.scans if sc.id == IDS[0]]
+    assert len(mine) == 1 and tick.states[0].scan_n == len(mine[0].points) > 0
+    assert all(o == ob.id or o in {x.id for x in S.obstacles} for _, _, o in mine[0].points)
+    near = min(np.hypot(x - (vx - 1.0), y - (vy - 1.0)) for x, y, _ in mine[0].points)
+    assert near <= np.sqrt(2.0) + 1e-9  # the vertex itself is within sqrt(2) m
+    assert max(np.hypot(x - (vx - 1.0), y - (vy - 1.0)) for x, y, _ in mine[0].points) <= S.planner.sensing_range_m
