@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -121,7 +123,7 @@ def test_a_silent_robot_is_held_then_stopped_and_strikes_out() -> None:
         node.step(now)
         assert node.k == k + 1
         trail.append(node.p[i].copy())
-    moved = [float(np.linalg.norm(b - a)) for a, b in zip(trail, trail[1:], strict=False)]
+    moved = [float(np.linalg.norm(b - a)) for a, b in itertools.pairwise(trail)]
     assert all(m > 0 for m in moved[:hold_ticks])  # the last command is held for hold_s
     assert all(m == 0 for m in moved[hold_ticks:])  # then the robot stops
     node.step(now)
