@@ -40,7 +40,7 @@ def inject(f: Fault, fleet: Fleet, run: str, scenario_path: Path) -> list[Timer]
         return []
     if f.action == "kill":
         # A killed agent or router stays dead; a killed monitor is restarted by the launcher's supervision.
-        proc.expected_exit = f.target != "monitor"
+        proc.expected_exit = f.target not in ("monitor", "simworld")  # the world's death ends the run (exit 3)
         fleet.signal(proc, signal.SIGKILL)
         return []
     if f.action == "freeze":

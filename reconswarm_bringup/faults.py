@@ -6,9 +6,10 @@ T is simulated seconds (when the clock reaches T), DURATION wall seconds. Action
 
     kill:agent:3@60          SIGKILL agent 3
     freeze:agent:2@50+5      SIGSTOP agent 2, SIGCONT 5 s later
-    freeze:simworld@78+10    SIGSTOP the world, SIGCONT 10 s later (a stalled plant)
     restart:agent:4@70+1     SIGKILL agent 4, start it again 1 s later (default 1 s)
     kill:monitor@80          SIGKILL the monitor (run_local.sh restarts it; it appends to run.db)
+    freeze:simworld@40+10    SIGSTOP the world, SIGCONT 10 s later (recorded as one world_stalled event)
+    kill:simworld@40         SIGKILL the world (the run ends: world_lost recorded and printed, exit 3)
     restart:router@90+2      SIGKILL the router, start it again 2 s later (default 1 s)
     flood@30                 10,000 malformed payloads on every key of the run (flood:N@T for N)
     partition@40+10          cut the link between the two hosts of a two-host run for 10 s
@@ -22,6 +23,8 @@ from dataclasses import dataclass
 from reconswarm.errors import BadInput
 
 ACTIONS = {"kill", "freeze", "restart", "flood", "partition"}
+_PROCESS_ACTIONS = {"monitor": ("kill", "restart", "freeze"), "router": ("kill", "restart", "freeze"),
+                    "simworld": ("kill", "freeze")}  # what may be done to the one process of each role
 _SPEC = re.compile(r"^(?P<action>[a-z]+)(?::(?P<target>[a-z]+|\d+))?(?::(?P<id>\d+))?@(?P<t>\d+(?:\.\d+)?)"
                    r"(?:\+(?P<dur>\d+(?:\.\d+)?))?$")
 
@@ -57,12 +60,11 @@ def parse(spec: str) -> Fault:
         if aid is None:
             raise BadInput(f"--fault {spec!r}: which agent? e.g. {action}:agent:3@{t:g}")
         agent_id: int | None = int(aid)
-    elif (target in ("monitor", "router") and action in ("kill", "restart", "freeze")) or (
-            target == "simworld" and action == "freeze"):
+    elif action in _PROCESS_ACTIONS.get(target, ()):
         agent_id = None
     else:
-        raise BadInput(f"--fault {spec!r}: {action} needs a target: agent:ID, monitor or router "
-                       "(or freeze:simworld)")
+        raise BadInput(f"--fault {spec!r}: {action} needs a target: agent:ID, monitor, router"
+                       + (" or simworld" if action in ("kill", "freeze") else ""))
     if action == "freeze" and not dur:
         raise BadInput(f"--fault {spec!r}: freeze needs a duration, e.g. freeze:agent:2@{t:g}+5")
     if action == "restart" and not dur:

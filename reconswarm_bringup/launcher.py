@@ -25,10 +25,11 @@ import zenoh
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-from reconswarm.errors import BadInput, ProcessFailure
+from reconswarm.errors import BadInput
 from reconswarm.generate import generate
 from reconswarm.net import wire
 from reconswarm.net.session import ZenohOptions, open_session
+from reconswarm.net.timing import TIMING
 from reconswarm.record.store import RunRecord
 from reconswarm.record.summary import render, summarize
 from reconswarm.scenario import Scenario, load, to_toml
@@ -40,6 +41,7 @@ from reconswarm_bringup.network import Net, plan_network
 
 log = logging.getLogger("reconswarm.launch")
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
+MONITOR_RESTARTS = 5  # a monitor that dies more often than this (restarted after 0.5, 1, 2, 4, 8 s) fails the run
 ZENOH_RUNTIME = "(" + ", ".join(f"{pool}: (worker_threads: 1)" for pool in ("app", "acc", "tx", "rx", "net")) + ")"
 
 
@@ -158,8 +160,10 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
     wall0 = time.monotonic()
     bar = _Progress(cfg.progress and sys.stderr.isatty() and not cfg.as_json, s.meta.duration_s)
     crashed: list[str] = []
+    fatal: str | None = None  # the run cannot go on: stop everything, print the summary, exit 3
+    restarts = 0
     try:
-        while not stop_sig:
+        while not stop_sig and fatal is None:
             watch.poll()
             now = time.monotonic()
             while pending and watch.k >= 0 and watch.t >= pending[0].at_s and watch.end is None:
@@ -178,8 +182,17 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
                     if p.role == "monitor" and rc == 0:
                         continue  # it saw the end of the mission and closed the record
                     if p.role == "monitor" and world.popen.poll() is None:
-                        log.warning("monitor died (exit %s): restarting it", rc)
-                        mon = fleet.restart(p)
+                        why = _last_line(p.log_path)
+                        if "disk full" in why:
+                            fatal = why
+                        elif restarts >= MONITOR_RESTARTS:
+                            fatal = f"the monitor died {restarts + 1} times (last: exit {rc}: {why})"
+                        else:
+                            delay = min(8.0, 0.5 * 2**restarts)
+                            restarts += 1
+                            log.warning("monitor died (exit %s: %s): restarting it in %.1f s (%d of %d)", rc, why,
+                                        delay, restarts, MONITOR_RESTARTS)
+                            timers.append((now + delay, lambda p=p: fleet.restart(p)))
                     elif rc != 0 and watch.end is None:
                         crashed.append(f"{p.role} {p.id} exited {rc}")
                         log.warning("%s %s exited with %s", p.role, p.id, rc)
@@ -193,33 +206,57 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
         if stop_sig:
             return 128 + stop_sig[0]
         rc = world.popen.returncode
-        if rc != 0:
-            tail = world.log_path.read_text(errors="replace").strip().splitlines()[-1:]
-            raise ProcessFailure(f"simworld exited {rc}: {tail[0] if tail else ''} (see {world.log_path})")
-        try:  # the monitor writes the last ticks and closes the record
-            mon.popen.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            log.warning("monitor did not finish in time")
-        deadline = time.monotonic() + 5
-        for p in fleet.procs:
-            if p.role == "agent" and p.popen.poll() is None:
-                with contextlib.suppress(subprocess.TimeoutExpired):
-                    p.popen.wait(timeout=max(0.1, deadline - time.monotonic()))
+        if fatal is None and rc is not None and rc != 0:
+            how = f"killed by {signal.Signals(-rc).name}" if rc < 0 else f"exit {rc}: {_last_line(world.log_path)}"
+            fatal = f"simworld died ({how}) at t = {watch.t:.2f} s: the mission ended without its world"
+            log.error("%s; stopping the run", fatal)
+            time.sleep(TIMING.world_stall_s + 0.5)  # the monitor notices the stall before the agents leave
+        if fatal is not None:
+            fleet.stop_all()  # the agents first, then the monitor (which closes the record)
+        else:
+            last = fleet.find("monitor") or mon
+            try:  # the monitor writes the last ticks and closes the record
+                last.popen.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                log.warning("monitor did not finish in time")
+            deadline = time.monotonic() + 5
+            for p in fleet.procs:
+                if p.role == "agent" and p.popen.poll() is None:
+                    with contextlib.suppress(subprocess.TimeoutExpired):
+                        p.popen.wait(timeout=max(0.1, deadline - time.monotonic()))
     finally:
         bar.close()
-    return _report(cfg, crashed)
+    return _report(cfg, crashed, fatal)
 
 
-def _report(cfg: LaunchConfig, crashed: list[str]) -> int:
+def _last_line(path: Path) -> str:
+    """The last line a process logged (its one-line error when it failed), without the log's time stamp."""
+    try:
+        lines = path.read_text(errors="replace").strip().splitlines()
+    except OSError:
+        return ""
+    return lines[-1].split(" ", 2)[-1] if lines and lines[-1][:2].isdigit() else (lines[-1] if lines else "")
+
+
+def _report(cfg: LaunchConfig, crashed: list[str], fatal: str | None = None) -> int:
     db = cfg.out / "run.db"
-    rec = RunRecord(db)
-    summary = summarize(rec)
-    rec.close()
+    try:
+        with RunRecord(db) as rec:
+            summary = summarize(rec)
+    except Exception as exc:  # the record itself may be what failed (disk full): say so, do not hide the cause
+        if fatal is None:
+            raise
+        log.error("no summary: the record cannot be read (%s)", exc)
+        log.error("%s", fatal)
+        return 3
     if cfg.as_json:
         sys.stdout.write(json.dumps(summary, indent=2) + "\n")
     else:
         Console().print(render(summary))
         print(f"record: {db}\nlogs:   {cfg.out / 'logs'}")
+    if fatal is not None:
+        log.error("%s", fatal)
+        return 3
     if crashed:
         log.error("processes failed: %s", "; ".join(crashed))
         return 3

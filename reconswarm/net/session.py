@@ -181,22 +181,35 @@ class Rejections:
             self._suppressed += 1
 
 
-def bind_to_parent() -> None:
-    """If started by run_local.sh, die with it (Linux PR_SET_PDEATHSIG): no orphan outlives a run."""
+def bind_to_parent(every_s: float = 0.2, grace_s: float = 10.0) -> None:
+    """If started by run_local.sh, die with it: no orphan outlives a run, not even a stopped one.
+
+    When the parent dies the kernel sends this process SIGCONT (Linux PR_SET_PDEATHSIG), which wakes it if a
+    fault froze it with SIGSTOP (a stopped process would never act on SIGTERM); a watcher thread then sees
+    the parent gone and stops the process cleanly (SIGTERM to itself), or kills it `grace_s` later."""
     import os
 
     parent = os.environ.get("RECONSWARM_DIE_WITH_PARENT")
     if not parent:
         return
-    try:
+    with suppress(OSError, AttributeError):
         import ctypes
 
         libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, signal.SIGTERM, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
-    except (OSError, AttributeError):
-        return
-    if str(os.getppid()) != parent:  # the parent died before the prctl took effect
-        os.kill(os.getpid(), signal.SIGTERM)
+        libc.prctl(1, signal.SIGCONT, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+    threading.Thread(target=_watch_parent, args=(int(parent), every_s, grace_s), daemon=True,
+                     name="watch-parent").start()
+
+
+def _watch_parent(parent: int, every_s: float, grace_s: float) -> None:
+    import os
+
+    while os.getppid() == parent:  # re-parented (to init or a subreaper) once the parent is gone
+        time.sleep(every_s)
+    log.warning("parent %d is gone: stopping", parent)
+    os.kill(os.getpid(), signal.SIGTERM)
+    time.sleep(grace_s)
+    os.kill(os.getpid(), signal.SIGKILL)
 
 
 def usage() -> dict[str, float]:

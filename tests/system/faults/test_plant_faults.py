@@ -1,0 +1,98 @@
+"""Faults of the plant and the launcher (issue 11): the world frozen or killed, the record's disk full, the
+launcher killed while an agent is frozen. Real processes, real signals, a real (small) filesystem."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.support import ROOT, alive, assert_all_gone, events, launcher_cmd, pids, run_launcher, tick_count
+
+pytestmark = pytest.mark.system
+
+
+def test_world_frozen_is_one_stall_not_ten_lost_agents(out: Path) -> None:
+    p = run_launcher(out, "--fault", "freeze:simworld@40+10", "--json")
+    assert p.returncode == 0, p.stderr[-3000:]
+    s = json.loads(p.stdout)
+    assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
+    ev = events(out / "run.db")
+    assert [e["kind"] for e in ev if e["kind"] not in ("split", "merge")] == ["world_stalled"], ev
+    (stall,) = [e for e in ev if e["kind"] == "world_stalled"]
+    assert 39.0 <= stall["t"] <= 41.0 and 8.0 <= stall["duration_s"] <= 14.0
+    # Every tick is in the record, or a gap row says which are not.
+    ticks = s["ticks"]
+    assert ticks == round(s["duration_s"] / 0.05) + 1 or s["record_gaps"], (ticks, s["record_gaps"])
+
+
+def test_world_killed_is_recorded_and_printed(out: Path) -> None:
+    p = run_launcher(out, "--fault", "kill:simworld@40", "--json")
+    assert p.returncode == 3, p.stderr[-3000:]
+    assert "simworld died (killed by SIGKILL) at t = 4" in p.stderr
+    s = json.loads(p.stdout)  # the summary is printed all the same
+    assert s["agents_lost"] == [] and s["end_reason"] == "world lost" and not s["converged"]
+    ev = events(out / "run.db")
+    (lost,) = [e for e in ev if e["kind"] not in ("split", "merge")]
+    assert lost["kind"] == "world_lost" and 39.0 <= lost["t"] <= 41.0
+    assert 39.0 <= s["duration_s"] <= 41.5
+
+
+def test_disk_full_fails_loudly_once_and_keeps_the_record(tmp_path: Path) -> None:
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=200k", "tmpfs", str(disk)], capture_output=True,
+                             text=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a 200 kB tmpfs: {mounted.stderr.strip()}")
+    out = disk / "run"
+    try:
+        t0 = time.monotonic()
+        p = run_launcher(out, "--json", timeout=300)
+        took = time.monotonic() - t0
+        assert p.returncode == 3, p.stderr[-3000:]
+        assert "disk full" in p.stderr, p.stderr[-3000:]
+        mon_log = (out / "logs" / "monitor.log").read_text()
+        assert mon_log.count("monitor up") == 1 and "disk full" in mon_log  # not restarted
+        assert took < 120
+        s = json.loads(p.stdout)  # the summary of what was recorded
+        assert s["ticks"] > 0
+        assert tick_count(out / "run.db") == s["ticks"]
+        assert_all_gone(out)
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], check=False)
+
+
+def test_launcher_killed_while_an_agent_is_frozen_leaves_no_orphan(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    launcher = subprocess.Popen(launcher_cmd(out, "--fault", "freeze:agent:2@5+600"), cwd=ROOT,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 180
+        while not (out / "faults.tsv").exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert (out / "faults.tsv").exists(), "the freeze never fired"
+        time.sleep(0.5)
+        frozen = [int(line.split("\t")[2]) for line in (out / "processes.tsv").read_text().splitlines()
+                  if line.startswith("agent\t2\t")]
+        assert Path(f"/proc/{frozen[0]}/stat").read_text().split()[2] == "T"  # stopped
+        launcher.send_signal(signal.SIGKILL)
+        launcher.wait()
+        deadline = time.monotonic() + 20
+        while any(alive(p) for p in pids(out)) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        left = [p for p in pids(out) if alive(p)]
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+            launcher.wait()
+        for p in pids(out):
+            if alive(p):
+                os.kill(p, signal.SIGCONT)
+                os.kill(p, signal.SIGKILL)
+    assert not left, f"orphans after the launcher was killed: {left}"
