@@ -98,6 +98,8 @@ class WorldNode:
         self.deadline_s: float | None = None  # of the phase in progress
         self.again_s = 0.0
         self.waiting_for: set[int] = set()
+        self.last_step_s: float | None = None
+        self.resumed = False  # the world itself was stalled during this tick's wait
 
     # ------------------------------------------------------------------------------------- inputs
 
@@ -135,6 +137,9 @@ class WorldNode:
 
     def step(self, now_s: float, stopping: bool = False) -> Step:
         """Advance as far as the messages received allow at now_s; at most one tick per call."""
+        if self.started and self.last_step_s is not None and now_s - self.last_step_s >= self.timing.self_stall_s:
+            self._own_stall(now_s, now_s - self.last_step_s)
+        self.last_step_s = now_s
         if self.phase == Phase.READY:
             return self._ready(now_s, stopping)
         if self.phase == Phase.TICK:
@@ -153,6 +158,17 @@ class WorldNode:
                 return self._advance(now_s)
             return Step([], self._deadline(now_s))
         return Step([], now_s, "stopped")
+
+    def _own_stall(self, now_s: float, gap_s: float) -> None:
+        """The world itself did not run for gap_s (SIGSTOP, a starved machine): nobody was late, so no step
+        times out for it. Lockstep waits afresh for the agents it waited for (whose tokens may be flapping while
+        the sessions reconnect) and publishes the tick again now; realtime shifts its schedule."""
+        log.warning("simworld itself was stalled for %.1f s at tick %d: waiting afresh", gap_s, self.k)
+        if self.phase == Phase.WAIT_COMMANDS:
+            self.deadline_s, self.again_s, self.resumed = now_s + self.timing.step_timeout_s, now_s, True
+        elif self.deadline_s is not None:
+            self.deadline_s += gap_s
+        self.t0 += gap_s
 
     def _deadline(self, now_s: float) -> float:
         return now_s if self.deadline_s is None else self.deadline_s
@@ -207,7 +223,8 @@ class WorldNode:
     def missing(self) -> list[int]:
         """Lockstep: agents the current tick still waits for."""
         got = self.cmds.get(self.k, {})
-        return sorted(a for a in self.waiting_for & self.alive if self.index[a] not in got)
+        live = self.waiting_for if self.resumed else self.waiting_for & self.alive
+        return sorted(a for a in live if self.index[a] not in got)
 
     def _wait_commands(self, now_s: float, stopping: bool) -> Step:
         missing = self.missing()
@@ -233,7 +250,7 @@ class WorldNode:
     def _advance(self, now_s: float) -> Step:
         self.apply(self.k)
         self.k += 1
-        self.phase, self.deadline_s = Phase.TICK, None
+        self.phase, self.deadline_s, self.resumed = Phase.TICK, None, False
         return Step([], now_s)
 
     # ------------------------------------------------------------------------------------- the plant

@@ -13,7 +13,7 @@ from reconswarm.net.timing import Timing
 from reconswarm.net.wire import ClockMode
 from reconswarm.scenario import load
 from reconswarm.sim import unicycle
-from simworld.world import Phase, WorldNode
+from simworld.world import Phase, Step, WorldNode
 from tests.support import PAPER
 
 T = Timing(start_timeout_s=10.0, republish_s=0.5, step_timeout_s=5.0, strikes=2, hold_s=0.2, no_agents_grace_s=30.0)
@@ -38,6 +38,19 @@ def command_all(node: WorldNode, k: int, u: tuple[float, float], now: float, ski
     for a in IDS:
         if a not in skip:
             node.command(wire.Cmd(a, k, *u), now)
+
+
+def advance(node: WorldNode, t0: float, t1: float, every_s: float = 0.5) -> Step:
+    """Call step every every_s from t0 to t1 (as the adapter would, so the world never looks stalled itself);
+    return the last step with every output in between."""
+    outs = []
+    t = t0
+    while True:
+        t = min(t1, t + every_s)
+        st = node.step(t)
+        outs += st.out
+        if t >= t1 or st.ended:
+            return Step(outs, st.wake_s, st.ended)
 
 
 def test_barrier_waits_for_every_agent_and_the_monitor() -> None:
@@ -111,8 +124,8 @@ def test_a_silent_robot_is_held_then_stopped_and_strikes_out() -> None:
         node.step(now)  # publish tick k
         command_all(node, k, (1.0, 0.0), now, skip=(silent,))
         assert node.missing() == [silent]
-        now += T.step_timeout_s  # the step times out: the robot is held
-        node.step(now)
+        advance(node, now, now + T.step_timeout_s)  # the step times out: the robot is held
+        now += T.step_timeout_s
         assert node.k == k + 1
         trail.append(node.p[i].copy())
     assert node.strikes[silent] == 2 and silent in node.unresponsive
@@ -135,11 +148,11 @@ def test_late_commands_count_as_the_latest() -> None:
     node = started()
     node.step(0.0)
     command_all(node, 0, (1.0, 0.0), 0.0, skip=(IDS[0],))
-    node.step(5.0)  # timed out without agent IDS[0]
+    advance(node, 0.0, 5.0)  # timed out without agent IDS[0]
     node.command(wire.Cmd(IDS[0], 0, 0.3, 0.0), 5.1)  # tick 0's command, late
     node.step(5.1)
     command_all(node, 1, (1.0, 0.0), 5.2, skip=(IDS[0],))
-    node.step(10.2)
+    advance(node, 5.2, 10.2)
     assert node.u[0].tolist() == [0.3, 0.0] and node.u_k[0] == 0
 
 
@@ -157,15 +170,13 @@ def test_no_agents_holds_then_ends_or_goes_on() -> None:
         node.agent_up(a, False)
     st = node.step(0.0)
     assert st.out == [] and node.phase == Phase.NO_AGENTS and st.wake_s == pytest.approx(30.0)
-    assert node.step(10.0).out == []
+    assert advance(node, 0.0, 10.0).out == []
     node.agent_up(IDS[0], True)
-    assert [o.clock.k for o in node.step(11.0).out] == [0]  # back: the tick goes out
+    assert [o.clock.k for o in node.step(10.5).out] == [0]  # back: the tick goes out
     node.agent_up(IDS[0], False)
-    node.cmds.clear()
-    node.step(16.0)  # the step times out (nobody left to wait for), next tick
-    node.step(16.0)
-    assert node.phase == Phase.NO_AGENTS
-    st = node.step(46.5)
+    advance(node, 10.5, 16.0)  # nobody left to wait for: next tick
+    assert node.k == 1 and node.phase == Phase.NO_AGENTS
+    st = advance(node, 16.0, 46.5)
     assert st.ended == "no agents" and st.out[0].clock.end and st.out[0].clock.reason == "no agents"
 
 
@@ -221,3 +232,22 @@ def test_a_robot_next_to_an_obstacle_gets_its_contour() -> None:
     near = min(np.hypot(x - (vx - 1.0), y - (vy - 1.0)) for x, y, _ in mine[0].points)
     assert near <= np.sqrt(2.0) + 1e-9  # the vertex itself is within sqrt(2) m
     assert max(np.hypot(x - (vx - 1.0), y - (vy - 1.0)) for x, y, _ in mine[0].points) <= S.planner.sensing_range_m
+
+
+def test_a_world_stalled_itself_waits_afresh_and_stays_in_lockstep() -> None:
+    """SIGSTOP of simworld: when it runs again, no step has timed out (nobody was late but the world), the
+    tick goes out again at once, and it waits for every agent even while their tokens flap."""
+    node = started()
+    node.step(0.0)
+    command_all(node, 0, (0.5, 0.0), 0.0, skip=(IDS[0], IDS[1]))
+    for a in IDS:  # the world's own session reconnects: every token seems gone for a moment
+        node.agent_up(a, False)
+    st = node.step(10.0)  # 10 s later
+    assert [o.clock.k for o in st.out] == [0] and node.k == 0 and not node.strikes
+    assert node.missing() == [IDS[0], IDS[1]]
+    for a in IDS:
+        node.agent_up(a, True)
+    node.command(wire.Cmd(IDS[0], 0, 0.5, 0.0), 10.1)
+    node.command(wire.Cmd(IDS[1], 0, 0.5, 0.0), 10.1)
+    node.step(10.2)
+    assert node.k == 1 and node.u_k.tolist() == [0] * len(IDS) and not node.resumed

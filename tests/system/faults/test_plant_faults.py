@@ -70,13 +70,14 @@ def test_disk_full_fails_loudly_once_and_keeps_the_record(tmp_path: Path) -> Non
 
 def test_launcher_killed_while_an_agent_is_frozen_leaves_no_orphan(tmp_path: Path) -> None:
     out = tmp_path / "run"
-    launcher = subprocess.Popen(launcher_cmd(out, "--fault", "freeze:agent:2@5+600"), cwd=ROOT,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    with (tmp_path / "launcher.log").open("wb") as log:
+        launcher = subprocess.Popen(launcher_cmd(out, "--fault", "freeze:agent:2@5+600"), cwd=ROOT,
+                                    stdout=log, stderr=subprocess.STDOUT)
     try:
         deadline = time.monotonic() + 180
         while not (out / "faults.tsv").exists() and time.monotonic() < deadline:
             time.sleep(0.2)
-        assert (out / "faults.tsv").exists(), "the freeze never fired"
+        assert (out / "faults.tsv").exists(), (tmp_path / "launcher.log").read_text()[-2000:]
         time.sleep(0.5)
         frozen = [int(line.split("\t")[2]) for line in (out / "processes.tsv").read_text().splitlines()
                   if line.startswith("agent\t2\t")]
