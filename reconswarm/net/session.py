@@ -186,7 +186,7 @@ def bind_to_parent(every_s: float = 0.2, grace_s: float = 10.0) -> None:
 
     When the parent dies the kernel sends this process SIGCONT (Linux PR_SET_PDEATHSIG), which wakes it if a
     fault froze it with SIGSTOP (a stopped process would never act on SIGTERM); a watcher thread then sees
-    the parent gone and stops the process cleanly (SIGTERM to itself), or kills it `grace_s` later."""
+    the parent gone and stops the process cleanly (SIGTERM to itself); SIGALRM ends it `grace_s` later."""
     import os
 
     parent = os.environ.get("RECONSWARM_DIE_WITH_PARENT")
@@ -207,9 +207,10 @@ def _watch_parent(parent: int, every_s: float, grace_s: float) -> None:
     while os.getppid() == parent:  # re-parented (to init or a subreaper) once the parent is gone
         time.sleep(every_s)
     log.warning("parent %d is gone: stopping", parent)
+    # The kernel ends the process grace_s from now whatever state Python is in (SIGALRM has no handler: its
+    # default action terminates): a clean stop can hang in the interpreter's shutdown, where no thread runs.
+    signal.alarm(max(1, round(grace_s)))
     os.kill(os.getpid(), signal.SIGTERM)
-    time.sleep(grace_s)
-    os.kill(os.getpid(), signal.SIGKILL)
 
 
 def usage() -> dict[str, float]:
