@@ -23,12 +23,12 @@ from monitor.node import MonitorNode
 from reconswarm.errors import ProcessFailure
 from reconswarm.net import wire
 from reconswarm.net.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
+from reconswarm.net.timing import TIMING
 from reconswarm.record.store import RunWriter
 from reconswarm.scenario import load
 
 log = logging.getLogger("reconswarm.monitor")
 CHANNEL_DEPTH = 1 << 20  # samples a queue holds (deep enough that zenoh never waits for the monitor)
-POLL_S = 0.002  # with nothing queued, look again after this long
 
 
 @dataclass(frozen=True)
@@ -114,12 +114,12 @@ class MonitorAdapter(Member):
                         self.handle(str(sample.key_expr), sample.payload.to_bytes(), "PUT")
                         got += 1
                 if not got:
-                    time.sleep(POLL_S)
+                    time.sleep(TIMING.monitor_poll_s)
                 done = node.poll(time.monotonic())
                 self.publish()
                 if done:
                     break
-                if time.monotonic() - last_counts > 0.5:
+                if time.monotonic() - last_counts > TIMING.commit_wall_s:
                     node.counts["monitor"] = self.rej.count
                     node.writer.counters(node.counts)
                     node.writer.maybe_commit()

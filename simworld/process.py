@@ -108,6 +108,6 @@ def run(cfg: SimworldConfig) -> int:
         if not node.started:
             return 0
         log.info("mission ended (%s) after %.2f s wall; stats %s", reason, time.monotonic() - wall0, node.stats())
-        time.sleep(0.3)  # let the last messages reach the monitor before the session closes
+        time.sleep(TIMING.world_end_linger_s)  # let the last messages reach the monitor before the session closes
         world.close()
         return 0

@@ -16,7 +16,7 @@ from reconswarm.sim import unicycle
 from simworld.world import Phase, Step, WorldNode
 from tests.support import PAPER
 
-T = Timing(start_timeout_s=10.0, republish_s=0.5, step_timeout_s=5.0, strikes=2, hold_s=0.2, no_agents_grace_s=30.0)
+T = Timing(start_timeout_s=10.0, republish_s=0.5, step_timeout_s=5.0, strikes=2, hold_sim_s=0.2, no_agents_grace_s=30.0)
 S = load(PAPER)
 IDS = [a.id for a in S.agents]
 
@@ -119,7 +119,7 @@ def test_a_silent_robot_is_held_then_stopped_and_strikes_out() -> None:
     command_all(node, 0, (1.0, 0.0), now)
     node.step(now)
     trail = [node.p[i].copy()]
-    hold_ticks = round(T.hold_s / S.meta.dt_s)
+    hold_ticks = round(T.hold_sim_s / S.meta.dt_s)
     for k in range(1, 3):
         node.step(now)  # publish tick k
         command_all(node, k, (1.0, 0.0), now, skip=(silent,))
@@ -137,7 +137,7 @@ def test_a_silent_robot_is_held_then_stopped_and_strikes_out() -> None:
         assert node.k == k + 1
         trail.append(node.p[i].copy())
     moved = [float(np.linalg.norm(b - a)) for a, b in itertools.pairwise(trail)]
-    assert all(m > 0 for m in moved[:hold_ticks])  # the last command is held for hold_s
+    assert all(m > 0 for m in moved[:hold_ticks])  # the last command is held for hold_sim_s
     assert all(m == 0 for m in moved[hold_ticks:])  # then the robot stops
     node.step(now)
     node.command(wire.Cmd(silent, node.k, 0.0, 0.0), now)
