@@ -21,6 +21,7 @@ Array = NDArray[np.float64]
 # along a straight edge deviate from it by rounding only (~1e-16 relative), so they are dropped
 # consistently whatever else is in the input; real corners are many orders of magnitude above this.
 COLLINEAR_TOL = 1e-9
+SAMPLE_SPACING_M = 1.0  # obstacle contours are sampled at most this far apart (what agents sense)
 ON_EDGE_M = 1e-9  # closer to an edge than this, a point's direction from it is the edge's normal
 
 
@@ -142,16 +143,24 @@ def is_strictly_convex(vertices: Array) -> bool:
     return abs(abs(ang) - 2 * math.pi) < 1e-6
 
 
-def sample_boundary(vertices: Array, spacing_m: float = 1.0) -> Array:
+def edge_sample_counts(vertices: Array, spacing_m: float = SAMPLE_SPACING_M) -> list[int]:
+    """How many contour points `sample_boundary` puts on each edge (from vertex i, that vertex included).
+
+    (V, 2) -> V counts; edge i of length L gets max(1, ceil(L / spacing_m)) points, L / count apart.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    return [max(1, math.ceil(float(norm2(v[(i + 1) % v.shape[0]] - v[i])) / spacing_m)) for i in range(v.shape[0])]
+
+
+def sample_boundary(vertices: Array, spacing_m: float = SAMPLE_SPACING_M) -> Array:
     """Contour points along a closed polygon, vertices included, at most `spacing_m` apart.
 
     (V, 2) -> (S, 2), in boundary order.
     """
     v = np.asarray(vertices, dtype=np.float64)
     out = []
-    for i in range(v.shape[0]):
+    for i, n in enumerate(edge_sample_counts(v, spacing_m)):
         a, b = v[i], v[(i + 1) % v.shape[0]]
-        n = max(1, math.ceil(float(norm2(b - a)) / spacing_m))
         t = np.arange(n, dtype=np.float64)[:, None] / n
         out.append(a + t * (b - a))
     return np.concatenate(out)

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from reconswarm import limits, wire
 from reconswarm.errors import BadInput
 from reconswarm.geometry import (
     distance_to_polygon,
@@ -206,6 +207,7 @@ class _Reader:
                 raise self.fail(f"{where}[{k}]", f"expected a number, got {_kind(c)}")
             if not math.isfinite(c):
                 raise self.fail(f"{where}[{k}]", f"must be finite, got {c}")
+            limits.check_point(where, k, c, self.fail)
             out.append(float(c))
         return (out[0], out[1])
 
@@ -322,6 +324,11 @@ def _build(data: dict[str, Any], src: str) -> tuple[Scenario, None]:
     agents = _agents(r, data["agents"])
     obstacles = _obstacles(r, data.get("obstacles", []))
     scen = Scenario(meta, planner, world, target, agents, obstacles, source=src)
+    # Magnitudes, stability, memory and what the wire can carry (reconswarm/limits.py), first problem found.
+    agent_path = {int(a["id"]): f"agents[{k}]" for k, a in enumerate(data["agents"])}
+    obstacle_path = {str(o["id"]): f"obstacles[{k}]" for k, o in enumerate(data.get("obstacles", []))}
+    for path, msg in limits.problems(scen, agent_path, obstacle_path):
+        raise r.fail(path, msg)
     _check_placement(r, scen, data)
     return scen, None
 
@@ -336,8 +343,8 @@ def _agents(r: _Reader, raw: Any) -> tuple[AgentSpec, ...]:
         a = r.table(a, path)
         r.keys(a, path, {"id", "start_m", "radius_m", "offset_m"}, {"heading_rad", "head_offset_m"})
         aid = r.integer(a, path, "id")
-        if aid < 0 or aid > 2**31:
-            raise r.fail(f"{path}.id", f"must be in [0, 2^31], got {aid}")
+        if aid < 0 or aid > wire.MAX_AGENT_ID:
+            raise r.fail(f"{path}.id", f"must be in [0, {wire.MAX_AGENT_ID}] (the wire's agent ids), got {aid}")
         if aid in seen:
             raise r.fail(f"{path}.id", f"duplicate agent id {aid} (also agents[{seen[aid]}])")
         seen[aid] = k
@@ -411,8 +418,9 @@ def _check_placement(r: _Reader, s: Scenario, data: dict[str, Any]) -> None:
 
 
 def warnings(s: Scenario) -> list[str]:
-    """Conditions the paper's theory needs but a run can live without (Assumptions 4.1 and 4.2)."""
-    out = []
+    """Conditions the paper's theory needs but a run can live without (Assumptions 4.1 and 4.2), and
+    those a collision-free run needs (limits.physics_warnings)."""
+    out = [f"{s.source}: {path}: {msg}" for path, msg in limits.physics_warnings(s)]
     offs, radii = s.offsets, s.radii
     reach = 2 * float(radii.max()) + s.planner.d_max_m
     for i, j in pairs_within(offs, reach):

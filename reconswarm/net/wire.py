@@ -25,7 +25,8 @@ MAX_POINTS = 50_000  # contour points in a scan
 MAX_OBSTACLES = 4_096  # obstacle ids in one obstacle set
 MAX_VERTICES = 4_096  # vertices of one shared hull
 MAX_IDS = 100_000  # agent ids in a clock's alive list
-MAX_STR = 128
+MAX_STR = 128  # characters of a string (obstacle ids, stats keys, event kinds)
+MAX_AGENT_ID = 2**31  # agent ids are 0..MAX_AGENT_ID (at most 10 digits in a key)
 
 
 # ---------------------------------------------------------------------------------------------- messages
@@ -215,7 +216,7 @@ def _str(v: Any, what: str) -> str:
 
 
 def _agent_id(obj: dict[str, Any], key_id: int | None) -> int:
-    aid = _int(obj, "id", 0, 2**31)
+    aid = _int(obj, "id", 0, MAX_AGENT_ID)
     if key_id is not None and aid != key_id:
         raise WireError(f"payload claims agent {aid} on agent {key_id}'s key")
     return aid
@@ -284,7 +285,7 @@ def clock_from_wire(payload: bytes) -> Clock:
     alive = o.get("alive")
     if not isinstance(alive, list) or len(alive) > MAX_IDS:
         raise WireError("field 'alive': expected a list of agent ids")
-    ids = tuple(_int({"id": a}, "id", 0, 2**31) for a in alive)
+    ids = tuple(_int({"id": a}, "id", 0, MAX_AGENT_ID) for a in alive)
     try:
         mode = ClockMode(o.get("mode", "lockstep"))
     except ValueError:
@@ -317,7 +318,7 @@ def truth_from_wire(payload: bytes) -> Truth:
         if not isinstance(col, list) or len(col) != n:
             raise WireError(f"field {key!r}: expected {n} numbers")
         cols.append(tuple(_num(v, f"field {key!r}") for v in col))
-    return Truth(_int(o, "k"), _float(o, "t"), tuple(_int({"id": a}, "id", 0, 2**31) for a in ids), *cols)
+    return Truth(_int(o, "k"), _float(o, "t"), tuple(_int({"id": a}, "id", 0, MAX_AGENT_ID) for a in ids), *cols)
 
 
 def event_from_wire(payload: bytes) -> Event:
@@ -330,9 +331,9 @@ def event_from_wire(payload: bytes) -> Event:
             raise WireError(f"field {key!r}: expected a list of groups")
         for grp in g:
             for a in grp:
-                _int({"id": a}, "id", 0, 2**31)
+                _int({"id": a}, "id", 0, MAX_AGENT_ID)
     if "agent" in o:
-        _int(o, "agent", 0, 2**31)
+        _int(o, "agent", 0, MAX_AGENT_ID)
     try:
         return Event.from_dict(o)
     except (KeyError, TypeError, ValueError) as exc:

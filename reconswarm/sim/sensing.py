@@ -13,11 +13,10 @@ from typing import cast
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import Edges, norm2, sample_boundary, signed_distance_only, tile_edges
+from reconswarm.geometry import SAMPLE_SPACING_M, Edges, norm2, sample_boundary, signed_distance_only, tile_edges
 from reconswarm.scenario import Scenario
 
 Array = NDArray[np.float64]
-SAMPLE_SPACING_M = 1.0
 
 
 @dataclass(frozen=True)

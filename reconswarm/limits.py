@@ -1,0 +1,276 @@
+"""What a scenario may ask for: limits checked when a file is loaded, and warnings from the physics.
+
+Refusals (the loader raises them as `FILE: field.path: what is wrong`, exit 2), each for a reason:
+
+- **The wire must carry every message the run can produce.** For each kind of message the largest one
+  this scenario can produce is built and put through the wire's own encoder and decoder
+  (reconswarm/wire.py): whatever the wire would drop in the distributed run is refused here first, and
+  these checks follow the wire's constants (and any check its decoders gain) by construction.
+- **Magnitudes that make the program fail**: float64 arithmetic that overflows or loses the resolution
+  the geometry relies on, and memory that grows with the scenario (contour samples, the knowledge
+  tables, the stall detector's history).
+- **Discrete-time stability** of the control law, where a violation makes positions grow without bound.
+
+Warnings (`physics_warnings`): conditions derived from the control law (PAPER_NOTES eqs. 9 and 11) that
+a collision-free run needs. The run goes on without them, but contacts are to be expected.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from reconswarm import wire
+from reconswarm.geometry import SAMPLE_SPACING_M, edge_sample_counts, norm2
+
+if TYPE_CHECKING:
+    from reconswarm.scenario import ObstacleSpec, Scenario
+
+# Coordinates and lengths within ±1,000 km. float64 resolves 1.2e-10 m there: nine orders below the 1 m
+# contour spacing, so contour samples along an edge stay collinear within geometry.COLLINEAR_TOL (1e-9
+# relative) and an agent's hull of an obstacle keeps at most two samples per edge (used below); squares
+# of distances (1e12 m²) are far from overflow. Nothing a robot does needs more.
+COORD_MAX_M = 1e6
+# No speed may carry a robot farther than the whole coordinate range in one step: the next step's
+# distances would be meaningless (and, a few steps on, not finite).
+STEP_MAX_M = COORD_MAX_M
+# Memory of the tables that grow with the scenario, each (knowledge bits, stall history): 1 GiB.
+TABLE_BUDGET_BYTES = 1 << 30
+# Contour samples of all obstacles (every one is a candidate in every scan): 24 bytes each in the world,
+# and a bit per agent in the knowledge tables. 200,000 samples = 200 km of obstacle boundary.
+MAX_CONTOUR_SAMPLES = 200_000
+_STALL_BYTES_PER_TICK = 3 * 8  # deadlock.StallState: a position (2 float64) and an error norm per tick
+_WORST_FLOAT = 0.1  # any finite float: msgpack packs every Python float as 9 bytes
+_WORST_COUNTER = 2**53  # the largest counter the wire accepts (rev, rejected): 9 bytes
+# The world's final statistics (simworld sends up to 7): 8 of the longest keys the wire accepts.
+_WORST_STATS = {f"{j:0{wire.MAX_STR}d}": _WORST_FLOAT for j in range(8)}
+
+Problem = tuple[str, str]  # (field path, what is wrong)
+
+
+def check_point(where: str, k: int, value: float, fail: Callable[[str, str], Exception]) -> None:
+    """A coordinate in metres: within ±COORD_MAX_M."""
+    if abs(value) > COORD_MAX_M:
+        raise fail(f"{where}[{k}]", f"must be within ±{COORD_MAX_M:g} m, got {value}")
+
+
+def problems(s: Scenario, agent_path: dict[int, str], obstacle_path: dict[str, str]) -> Iterator[Problem]:
+    """What is wrong with a parsed scenario, cheapest checks first (the loader reports the first).
+
+    agent_path / obstacle_path: id -> its table's path in the file (`agents[3]`, `obstacles[0]`).
+    """
+    yield from _magnitudes(s, agent_path)
+    yield from _stability(s)
+    yield from _memory(s, obstacle_path)
+    yield from _wire(s, obstacle_path)
+
+
+def _magnitudes(s: Scenario, agent_path: dict[int, str]) -> Iterator[Problem]:
+    p = s.planner
+    for key in ("target_radius_m", "d_safe_m", "d_max_m", "sensing_range_m", "link_range_m", "converge_tol_m"):
+        v = getattr(p, key)
+        if v > COORD_MAX_M:
+            yield f"planner.{key}", f"must be at most {COORD_MAX_M:g} m, got {v}"
+    for a in s.agents:
+        for key in ("radius_m", "head_offset_m"):
+            v = getattr(a, key)
+            if v > COORD_MAX_M:
+                yield f"{agent_path[a.id]}.{key}", f"must be at most {COORD_MAX_M:g} m, got {v}"
+        # A heading is an angle: beyond a few turns float64 keeps no useful fraction of a turn (at 1e16 rad
+        # consecutive values are 2 rad apart).
+        if abs(a.heading_rad) > 1000 * math.pi:
+            yield f"{agent_path[a.id]}.heading_rad", f"must be within ±1000π rad, got {a.heading_rad}"
+
+
+def _stability(s: Scenario) -> Iterator[Problem]:
+    p, dt = s.planner, s.meta.dt_s
+    # Attraction inside the target disk (eq. 9 with R_i* = R_c) is ė = -k_att e; explicit Euler gives
+    # e(k+1) = (1 - k_att dt) e(k). With k_att dt >= 2 the tracking error grows every step, geometrically,
+    # until positions overflow. (Outside the disk the speed is R_c k_att, so a step is < 2 R_c: finite.)
+    if p.k_att * dt >= 2.0:
+        yield "planner.k_att", (f"k_att * dt_s = {p.k_att * dt:.6g} must be below 2: inside the target disk each "
+                                f"step multiplies the tracking error by |1 - k_att dt| >= 1 (explicit Euler on "
+                                f"de/dt = -k_att e diverges)")
+    if p.perturbation_mps * dt > STEP_MAX_M:
+        yield "planner.perturbation_mps", (f"perturbation_mps * dt_s = {p.perturbation_mps * dt:.6g} m per step, "
+                                           f"more than {STEP_MAX_M:g} m")
+    # Repulsion (eq. 11) is |Ψ| (d_max,ij - d) / (d_max - d_safe): |Ψ| at d_min and, as the line goes on
+    # below d_min, |Ψ| d_max,ij / (d_max - d_safe) when two head points meet. That speed for one step must
+    # stay within STEP_MAX_M, or a single contact throws robots out of any meaningful range (a band of
+    # 2e-15 m threw them 4.6e14 m). Written to stay finite for any finite inputs.
+    band = p.d_max_m - p.d_safe_m
+    reach = 2 * max(a.radius_m for a in s.agents) + p.d_max_m  # the largest d_max,ij
+    psi_step = abs(p.psi_mps) * dt
+    if psi_step > STEP_MAX_M:
+        yield "planner.psi_mps", f"|psi_mps| * dt_s = {psi_step:.6g} m per step, more than {STEP_MAX_M:g} m"
+    elif psi_step > STEP_MAX_M * (band / reach):
+        yield "planner.d_safe_m", (f"the repulsion band d_max_m - d_safe_m = {band:.6g} m is too narrow for "
+                                   f"psi_mps: at contact one step of repulsion, |Ψ| dt (d_max,ij / band) = "
+                                   f"{psi_step / band * reach:.6g} m, would exceed {STEP_MAX_M:g} m")
+    ticks = s.planner.stall_window_s / dt
+    need = ticks * len(s.agents) * _STALL_BYTES_PER_TICK
+    if need > TABLE_BUDGET_BYTES:
+        yield "planner.stall_window_s", (f"the stall detector keeps stall_window_s / dt_s = {ticks:.4g} positions per "
+                                         f"agent, {_size(need)} for {len(s.agents)} agents, over "
+                                         f"{_size(TABLE_BUDGET_BYTES)}")
+
+
+def _memory(s: Scenario, obstacle_path: dict[str, str]) -> Iterator[Problem]:
+    total = 0
+    for o in s.obstacles:
+        total += sum(edge_sample_counts(_verts(o)))
+        if total > MAX_CONTOUR_SAMPLES:
+            yield f"{obstacle_path[o.id]}.vertices_m", (
+                f"the obstacles' contours, sampled every {SAMPLE_SPACING_M:g} m, reach {total} points here, more "
+                f"than {MAX_CONTOUR_SAMPLES} (obstacle boundaries longer than {MAX_CONTOUR_SAMPLES:,} m in all)")
+            return
+    # The knowledge tables: one bit per contour sample per agent, twice (this tick and the last).
+    need = 2 * len(s.agents) * sum((sum(edge_sample_counts(_verts(o))) + 7) // 8 for o in s.obstacles)
+    if need > TABLE_BUDGET_BYTES:
+        yield "obstacles", (f"{len(s.agents)} agents x {total} contour samples need {_size(need)} of knowledge "
+                            f"tables, over {_size(TABLE_BUDGET_BYTES)}")
+
+
+# ------------------------------------------------------------------------------------------------ wire
+
+
+def _wire(s: Scenario, obstacle_path: dict[str, str]) -> Iterator[Problem]:
+    n = len(s.agents)
+    if n > wire.MAX_IDS:
+        yield "agents", f"{n} agents, more than the wire's {wire.MAX_IDS} per message"
+        return
+    for o in s.obstacles:
+        if len(o.id) > wire.MAX_STR:
+            yield f"{obstacle_path[o.id]}.id", (f"{len(o.id)} characters, more than the wire's {wire.MAX_STR} "
+                                                f"(every scan point and shared hull carries the id)")
+            return
+    if len(s.obstacles) > wire.MAX_OBSTACLES:
+        yield "obstacles", f"{len(s.obstacles)} obstacles, more than the wire's {wire.MAX_OBSTACLES} per obstacle set"
+        return
+    hull = {o.id: hull_vertices_max(o) for o in s.obstacles}
+    for o in s.obstacles:
+        if hull[o.id] > wire.MAX_VERTICES:
+            yield f"{obstacle_path[o.id]}.vertices_m", (
+                f"an agent's hull of this obstacle can have up to {hull[o.id]} vertices (its contour samples), "
+                f"more than the wire's {wire.MAX_VERTICES}")
+            return
+    r_v = s.planner.sensing_range_m
+    scan = {o.id: scan_points_max(o, r_v) for o in s.obstacles}
+    if sum(scan.values()) > wire.MAX_POINTS:
+        yield "planner.sensing_range_m", (f"a scan within {r_v:g} m can hold up to {sum(scan.values())} contour "
+                                          f"points of these obstacles, more than the wire's {wire.MAX_POINTS}")
+        return
+    yield from _largest_messages(s, scan, hull)
+
+
+def _largest_messages(s: Scenario, scan: dict[str, int], hull: dict[str, int]) -> Iterator[Problem]:
+    """Build the largest message of every kind this scenario can produce and decode it as a receiver would."""
+    ids = tuple(a.id for a in s.agents)
+    n, a_max, f = len(ids), max(ids), _WORST_FLOAT
+    k, t = round(s.meta.duration_s / s.meta.dt_s) + 1, s.meta.duration_s
+    pts = tuple(pt for o in s.obstacles for pt in ((f, f, o.id),) * scan[o.id])
+    hulls = {o.id: ((f, f),) * hull[o.id] for o in s.obstacles}
+    agents, scans, sets = "agents", "planner.sensing_range_m", "obstacles"
+    largest: list[tuple[str, str, Callable[[], bytes], Callable[[bytes], object]]] = [
+        (agents, "truth", lambda: wire.truth_to_wire(wire.Truth(k, t, ids, *(((f,) * n,) * 5))), wire.truth_from_wire),
+        (agents, "clock", lambda: wire.clock_to_wire(
+            wire.Clock(k, t, ids, "realtime", f, True, "r" * 256, _WORST_COUNTER, _WORST_STATS)), wire.clock_from_wire),
+        (agents, "event", lambda: wire.event_to_wire(
+            wire.Event(t, "split", (ids,), tuple((i,) for i in ids), a_max)), wire.event_from_wire),
+        (agents, "beacon", lambda: wire.beacon_to_wire(
+            wire.Beacon(a_max, k, t, f, f, COORD_MAX_M, _WORST_COUNTER, _WORST_COUNTER)), wire.beacon_from_wire),
+        (agents, "cmd", lambda: wire.cmd_to_wire(wire.Cmd(a_max, k, f, f)), wire.cmd_from_wire),
+        (scans, "state", lambda: wire.state_to_wire(wire.State(a_max, k, t, f, f, f, f, f, len(pts))),
+         wire.state_from_wire),
+        (scans, "scan", lambda: wire.scan_to_wire(wire.Scan(a_max, k, t, pts)), wire.scan_from_wire),
+        (sets, "obstacle set", lambda: wire.obstacles_to_wire(wire.ObstacleSet(a_max, k, _WORST_COUNTER, hulls)),
+         wire.obstacles_from_wire),
+    ]
+    for path, what, encode, decode in largest:
+        payload = encode()
+        try:
+            decode(payload)
+        except wire.WireError as exc:
+            yield path, (f"the largest {what} message of this scenario ({len(payload):,} bytes) would be refused "
+                         f"by the wire: {exc}")
+            return
+
+
+def hull_vertices_max(o: ObstacleSpec) -> int:
+    """The most vertices an agent's hull of this obstacle can have.
+
+    The hull is that of a subset of the obstacle's contour samples (what was sensed, merged). Samples
+    strictly inside one edge are collinear with any two others of that edge and dropped, so at most two
+    samples per edge are vertices (fewer than there are samples on a short polygon).
+    """
+    counts = edge_sample_counts(_verts(o))
+    return min(sum(counts), 2 * len(counts))
+
+
+def scan_points_max(o: ObstacleSpec, sensing_range_m: float) -> int:
+    """The most contour samples of this obstacle one scan (a disk of radius R_v) can hold.
+
+    Edge e of length L carries n = ceil(L / spacing) samples L / n apart; a disk meets its line in a chord
+    of at most 2 R_v, which holds at most floor(2 R_v n / L) + 1 of them (+1 for rounding at the rim).
+    """
+    v = _verts(o)
+    out = 0
+    for i, n in enumerate(edge_sample_counts(v)):
+        length = float(norm2(v[(i + 1) % len(v)] - v[i]))
+        out += min(n, math.floor(2 * sensing_range_m * n / length) + 2)
+    return out
+
+
+def _verts(o: ObstacleSpec) -> NDArray[np.float64]:
+    return np.array(o.vertices_m, dtype=np.float64)
+
+
+def _size(n: float) -> str:
+    return f"{n / 2**30:.3g} GiB" if n >= 2**30 else f"{n / 2**20:.3g} MiB"
+
+
+# -------------------------------------------------------------------------------------------- warnings
+
+
+def physics_warnings(s: Scenario) -> list[Problem]:
+    """Conditions a collision-free run needs (derived below from eqs. 9 and 11); none holds a run back.
+
+    v: the fastest an agent closes on anything before repulsion acts: the attraction's cruise speed
+    R_c k_att (its largest magnitude, eq. 9) plus the deadlock perturbation. w = d_max - d_safe: the
+    repulsion band. In the band, at depth x (x = 0 at d_max, x = w at d_min), repulsion is |Ψ| x / w.
+    For an agent driving at v into a static obstacle, explicit Euler gives x(k+1) = x(k) + dt (v - |Ψ| x(k) / w):
+    from x(k) in [0, x*] the next depth is at most max(v dt, x*) (linear in x(k)), with x* = v w / |Ψ| the
+    depth where repulsion balances the approach, and from beyond x* it only decreases. So the deepest an
+    agent gets is max(v dt, v w / |Ψ|); two agents closing on each other double the approach speed and
+    the repulsion alike: max(2 v dt, v w / |Ψ|). Both must stay below w, d_min, with a margin (a crowd
+    adds pushes the pairwise bound does not see): we warn beyond half the band.
+    """
+    p, dt = s.planner, s.meta.dt_s
+    v = p.target_radius_m * p.k_att + p.perturbation_mps
+    w = p.d_max_m - p.d_safe_m
+    psi = abs(p.psi_mps)
+    out: list[Problem] = []
+    if 2 * v * dt > w / 2:
+        out.append(("scenario.dt_s", f"two agents closing at 2 x {v:.4g} m/s (R_c k_att + perturbation) cover "
+                                     f"{2 * v * dt:.4g} m in one step, more than half the repulsion band d_max - "
+                                     f"d_safe = {w:.4g} m: they can cross it before repulsion acts (contacts likely)"))
+    if v > psi / 2:
+        out.append(("planner.psi_mps", f"|Ψ| = {psi:.4g} m/s cannot stop an agent moving at {v:.4g} m/s (R_c k_att + "
+                                       f"perturbation) within half the repulsion band: repulsion balances the approach "
+                                       f"{v * w / psi:.4g} m deep into the {w:.4g} m band (|Ψ| >= 2 v needed; contacts "
+                                       f"likely)"))
+    # Sensing: an obstacle must be known before the head point enters its repulsion band, r_i + d_max from
+    # its surface, and within one more step. The nearest contour sample to the nearest surface point is at
+    # most half a sample spacing along the edge, so detection is certain from d only if
+    # sqrt(d^2 + (spacing / 2)^2) <= R_v.
+    need = math.hypot(max(a.radius_m for a in s.agents) + p.d_max_m + v * dt, SAMPLE_SPACING_M / 2)
+    if s.obstacles and p.sensing_range_m < need:
+        out.append(("planner.sensing_range_m", f"{p.sensing_range_m:.4g} m is less than the {need:.4g} m an agent "
+                                               f"needs to see an obstacle before it enters the repulsion band (r + "
+                                               f"d_max + one step): it meets obstacles it does not know (contacts "
+                                               f"likely)"))
+    return out
