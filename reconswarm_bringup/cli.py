@@ -36,7 +36,7 @@ def sim(
 ) -> None:
     """Run the mission in one process, vectorized (same math as the distributed deployment)."""
     from reconswarm.scenario import load, warnings
-    from reconswarm_bringup import engine
+    from reconswarm_bringup import engine, validate
 
     try:
         s = load(scenario)
@@ -48,6 +48,7 @@ def sim(
             s = s.with_seed(seed)
         for w in warnings(s):
             typer.echo(f"warning: {w}", err=True)
+        validate.writable_dir("-o", out)
         summary = engine.run(engine.SimConfig(s, out, progress=not as_json))
     except (ReconswarmError, OSError) as exc:
         fail(exc)

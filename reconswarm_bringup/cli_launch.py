@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import sys
 from pathlib import Path
 from typing import Annotated
 
@@ -40,22 +41,21 @@ def launch_cmd(
 ) -> None:
     """Run the mission as separate processes over Zenoh on this machine (router, simworld, monitor, agents)."""
     from reconswarm_bringup import faults as faults_mod
+    from reconswarm_bringup import validate
     from reconswarm_bringup.config import LaunchConfig
     from reconswarm_bringup.launcher import run
 
     set_debug(debug)
     logging.basicConfig(level=logging.DEBUG if debug else logging.INFO, format=f"{PROG}: %(message)s")
     try:
-        if agents is not None and agents < 1:
-            raise BadInput(f"-n: must be >= 1, got {agents}")
-        if not speed > 0:
-            raise BadInput(f"--speed: must be > 0, got {speed}")
         if clock not in ("lockstep", "realtime"):
             raise BadInput(f"--clock: expected lockstep or realtime, got {clock!r}")
         if planner is not None and planner not in ("reconfigurable", "virtual-leader"):
             raise BadInput(f"--planner: expected reconfigurable or virtual-leader, got {planner!r}")
         if hosts not in (1, 2):
             raise BadInput(f"--hosts: expected 1 or 2, got {hosts}")
+        validate.launch(agents=agents, scenario=scenario, out=out.resolve(), timeout_s=timeout, speed=speed,
+                        router=router, hosts=hosts, available_mb=validate.available_memory_mb())
         cfg = LaunchConfig(out=out.resolve(), scenario=scenario, agents=agents, clock=clock, speed=speed,
                            planner=planner, router=router, secure=secure,
                            faults=tuple(faults_mod.parse(f) for f in fault or []), timeout_s=timeout,
@@ -75,7 +75,15 @@ def main() -> None:
     """`python -m reconswarm_bringup.cli_launch ARGS` = `reconswarm launch ARGS` (deploy/run_local.sh)."""
     app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
     app.command()(launch_cmd)
-    app(prog_name="deploy/run_local.sh")
+    try:
+        code = app(prog_name="deploy/run_local.sh", standalone_mode=False)
+    except Exception as exc:
+        if not (hasattr(exc, "format_message") and hasattr(exc, "exit_code")):
+            raise
+        # A usage error (a value typer cannot parse, an unknown option): one line, not the usage and a box.
+        print(f"{PROG}: error: {exc.format_message()}", file=sys.stderr)
+        sys.exit(exc.exit_code)
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ from typing import Annotated, Any
 
 import typer
 
+from reconswarm_bringup import validate
 from reconswarm.errors import BadInput, ReconswarmError
 from reconswarm_bringup.console import fail, print_json
 
@@ -88,6 +89,7 @@ def export_cmd(
         if fmt == "mcap":
             if out is None:
                 raise BadInput("--format mcap: give the file to write with -o FILE.mcap")
+            validate.writable_file("-o", out)
             from monitor.mcap_export import export_mcap
 
             rec = _open(db)
@@ -98,6 +100,8 @@ def export_cmd(
             typer.echo(f"wrote {out}: {stats.bytes / 1e6:.1f} MB, {stats.scene_messages} scenes ({every}), "
                        f"{stats.events} events")
             return
+        if out is not None:
+            validate.writable_file("-o", out)
         rec = _open(db)
         tk = rec.ticks()
         ids = rec.ids
@@ -163,6 +167,7 @@ def animate_cmd(
             check_request(out, fps, speed)  # before opening the record: bad requests fail fast
         elif out.suffix.lower() != ".png":
             raise BadInput(f"{out}: --at writes one frame as a PNG (-o FILE.png)")
+        validate.writable_file("-o", out)
         rec = _open(db)
         with _progress_bar("animate") as progress:
             stats = animate_run(rec, out, fps, speed, dpi, progress, still_at_s=at_s)
@@ -190,6 +195,7 @@ def plot_cmd(
     try:
         from monitor.plot import plot_run
 
+        validate.writable_file("-o", out)
         rec = _open(db)
         plot_run(rec, out)
         rec.close()

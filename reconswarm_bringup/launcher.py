@@ -32,8 +32,8 @@ from reconswarm.net.session import ZenohOptions, open_session
 from reconswarm.net.timing import TIMING
 from reconswarm.record.store import RunRecord
 from reconswarm.record.summary import render, summarize
-from reconswarm.scenario import Scenario, load, to_toml
-from reconswarm_bringup import chaos, netns
+from reconswarm.scenario import Scenario, load, parse, to_toml, warnings
+from reconswarm_bringup import chaos, netns, validate
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.console import mission_exit_code
 from reconswarm_bringup.fleet import ROOT, Fleet, Proc
@@ -45,19 +45,23 @@ MONITOR_RESTARTS = 5  # a monitor that dies more often than this (restarted afte
 ZENOH_RUNTIME = "(" + ", ".join(f"{pool}: (worker_threads: 1)" for pool in ("app", "acc", "tx", "rx", "net")) + ")"
 
 
-def prepare_scenario(cfg: LaunchConfig) -> tuple[Scenario, Path]:
-    """The scenario of the run, written to OUTDIR/scenario.toml so every process reads the same file."""
+def prepare_scenario(cfg: LaunchConfig) -> Scenario:
+    """The scenario of the run, checked against the machine and the faults (nothing written yet)."""
     if cfg.scenario is not None and cfg.agents is not None:
         raise BadInput("-n/--agents and -s/--scenario: give one (-n generates a scenario)")
     if cfg.agents is not None:
-        s = generate(cfg.agents, max(1, min(10, cfg.agents // 5 + 2)), 0)
+        option = f"-n {cfg.agents}"
+        validate.machine_holds(option, cfg.agents, validate.available_memory_mb(), routers=cfg.hosts)
+        # Through the loader's checks (what the wire can carry, ...), as every process will read it.
+        s = parse(to_toml(generate(cfg.agents, max(1, min(10, cfg.agents // 5 + 2)), 0)), f"{option} (generated)")
     else:
         s = load(cfg.scenario or PAPER)
-    if cfg.planner is not None:
-        s = s.with_planner(cfg.planner)
-    path = cfg.out / "scenario.toml"
-    path.write_text(to_toml(s))
-    return s, path
+        validate.machine_holds(f"-s {cfg.scenario or PAPER}", len(s.agents), validate.available_memory_mb(),
+                               routers=cfg.hosts)
+    for w in warnings(s):
+        log.warning("warning: %s", w)
+    validate.fault_targets(cfg.faults, {a.id for a in s.agents})
+    return s if cfg.planner is None else s.with_planner(cfg.planner)
 
 
 class ClockWatch:
@@ -96,14 +100,16 @@ class ClockWatch:
 
 
 def run(cfg: LaunchConfig) -> int:
-    cfg.out.mkdir(parents=True, exist_ok=True)
-    for stale in ("processes.tsv", "faults.tsv", "run.db", "run.db-wal", "run.db-shm"):
-        (cfg.out / stale).unlink(missing_ok=True)
-    s, scen_path = prepare_scenario(cfg)
+    validate.writable_dir("-o", cfg.out)
     if cfg.clock not in ("lockstep", "realtime"):
         raise BadInput(f"--clock: expected lockstep or realtime, got {cfg.clock!r}")
     if any(f.action == "partition" for f in cfg.faults) and cfg.hosts != 2:
         raise BadInput("--fault partition@...: needs --hosts 2 (two hosts to cut apart)")
+    s = prepare_scenario(cfg)  # refused before anything of a previous run in OUTDIR is touched
+    for stale in ("processes.tsv", "faults.tsv", "run.db", "run.db-wal", "run.db-shm"):
+        (cfg.out / stale).unlink(missing_ok=True)
+    scen_path = cfg.out / "scenario.toml"  # every process reads the same file
+    scen_path.write_text(to_toml(s))
     router_env = dict(os.environ, RECONSWARM_DIE_WITH_PARENT=str(os.getpid()), PYTHONUNBUFFERED="1")
     env = dict(router_env)
     # One worker thread per zenoh runtime pool in the clients: a process here handles a few hundred messages

@@ -182,22 +182,47 @@ class Ticks:
 
 
 class RunRecord:
-    """Read access to a run.db (complete or still being written)."""
+    """Read access to a run.db (complete or still being written).
+
+    Whatever is wrong with the file (not SQLite, pages overwritten, a table missing, a blob or a JSON
+    value of the wrong shape) is a BadInput naming the file and what is wrong: reading never tracebacks.
+    """
 
     def __init__(self, path: str | Path) -> None:
         p = Path(path)
         if not p.is_file():
             raise BadInput(f"{path}: no such run record")
+        self.path = p
         try:
             self.db = sqlite3.connect(f"file:{p}?mode=ro", uri=True)
             self.meta = dict(self.db.execute("SELECT key, value FROM meta").fetchall())
-        except sqlite3.DatabaseError as exc:
+        except sqlite3.Error as exc:
+            if "malformed" in str(exc):  # an SQLite file whose pages are damaged
+                raise self._bad(str(exc)) from None
             raise BadInput(f"{path}: not a reconswarm run record ({exc})") from None
         if "scenario_toml" not in self.meta:
             raise BadInput(f"{path}: not a reconswarm run record (meta.scenario_toml missing)")
-        self.path = p
+        if not all(isinstance(v, str) for v in self.meta.values()):
+            raise self._bad("meta: values must be text")
         self.scenario = parse(self.meta["scenario_toml"], str(p))
-        self.ids = np.array(json.loads(self.meta["agent_ids"]), dtype=np.int64)
+        ids = self.meta_json("agent_ids")
+        if ids != [a.id for a in self.scenario.agents]:
+            raise self._bad("meta.agent_ids: not the ids of the record's scenario")
+        self.ids = np.array(ids, dtype=np.int64)
+        if "wall_time_s" in self.meta:
+            try:
+                float(self.meta["wall_time_s"])
+            except ValueError:
+                raise self._bad(f"meta.wall_time_s: not a number: {self.meta['wall_time_s'][:40]!r}") from None
+
+    def _bad(self, what: str) -> BadInput:
+        return BadInput(f"{self.path}: damaged run record: {what}")
+
+    def _rows(self, sql: str, params: tuple[Any, ...] = ()) -> list[Any]:
+        try:
+            return self.db.execute(sql, params).fetchall()
+        except sqlite3.Error as exc:  # pages overwritten ("malformed"), a table missing, ...
+            raise self._bad(str(exc)) from None
 
     def close(self) -> None:
         self.db.close()
@@ -209,13 +234,27 @@ class RunRecord:
         self.close()
 
     def meta_json(self, key: str, default: Any = None) -> Any:
-        return json.loads(self.meta[key]) if key in self.meta else default
+        if key not in self.meta:
+            return default
+        try:
+            return json.loads(self.meta[key])
+        except ValueError:
+            raise self._bad(f"meta.{key}: not valid JSON") from None
 
     def ticks(self, every: int = 1) -> Ticks:
-        rows = self.db.execute(
+        rows = self._rows(
             "SELECT k, t, px, py, theta, alive, max_error_m, min_agent_gap_m, min_obstacle_gap_m, groups "
-            "FROM ticks WHERE k % ? = 0 ORDER BY k", (every,)).fetchall()
+            "FROM ticks WHERE k % ? = 0 ORDER BY k", (every,))
         n = len(self.ids)
+        for r in rows:  # every blob holds one value per agent; the numbers are numbers
+            for col, name, size in ((2, "px", 8), (3, "py", 8), (4, "theta", 8), (5, "alive", 1)):
+                if not isinstance(r[col], bytes) or len(r[col]) != n * size:
+                    got = f"{len(r[col])} bytes" if isinstance(r[col], bytes) else type(r[col]).__name__
+                    raise self._bad(f"ticks k={r[0]}: {name} holds {got}, expected {n * size} bytes "
+                                    f"({n} agents)")
+            if type(r[0]) is not int or not _number(r[1]) or not all(v is None or _number(v) for v in r[6:9]) \
+                    or not (r[9] is None or type(r[9]) is int):
+                raise self._bad(f"ticks k={r[0]!r}: a column of the wrong type")
 
         def stack(col: int, dtype: str) -> NDArray[Any]:
             if not rows:
@@ -231,15 +270,50 @@ class RunRecord:
                      np.array([r[9] if r[9] is not None else -1 for r in rows], dtype=np.int64))
 
     def events(self) -> list[dict[str, Any]]:
-        return [json.loads(r[0]) for r in self.db.execute("SELECT data FROM events ORDER BY t, seq")]
+        out = []
+        for seq, data in self._rows("SELECT seq, data FROM events ORDER BY t, seq"):
+            try:
+                ev = json.loads(data)
+            except (TypeError, ValueError):
+                raise self._bad(f"events seq={seq}: not valid JSON") from None
+            if not _event_shape(ev):
+                raise self._bad(f"events seq={seq}: not an event (t, kind, before, after, agent)")
+            out.append(ev)
+        return out
 
     def contacts(self) -> list[dict[str, Any]]:
         cols = ("kind", "a", "b", "t_start", "t_end", "gap_m")
-        rows = self.db.execute(f"SELECT {', '.join(cols)} FROM contacts ORDER BY t_start, seq")
-        return [dict(zip(cols, r, strict=True)) for r in rows]
+        rows = self._rows(f"SELECT seq, {', '.join(cols)} FROM contacts ORDER BY t_start, seq")
+        for seq, kind, a, b, t0, t1, gap in rows:
+            if not (isinstance(kind, str) and isinstance(a, str) and isinstance(b, str) and _number(t0)
+                    and (t1 is None or _number(t1)) and _number(gap)):
+                raise self._bad(f"contacts seq={seq}: a column of the wrong type")
+        return [dict(zip(cols, r[1:], strict=True)) for r in rows]
 
     def counters(self) -> dict[str, int]:
-        return {p: int(n) for p, n in self.db.execute("SELECT process, messages_rejected FROM counters")}
+        rows = self._rows("SELECT process, messages_rejected FROM counters")
+        if not all(isinstance(p, str) and type(n) is int for p, n in rows):
+            raise self._bad("counters: a column of the wrong type")
+        return dict(rows)
 
     def gaps(self) -> list[dict[str, Any]]:
-        return [{"t_from": a, "t_to": b, "note": c} for a, b, c in self.db.execute("SELECT * FROM gaps")]
+        rows = self._rows("SELECT t_from, t_to, note FROM gaps")
+        if not all(_number(a) and _number(b) and isinstance(c, str) for a, b, c in rows):
+            raise self._bad("gaps: a column of the wrong type")
+        return [{"t_from": a, "t_to": b, "note": c} for a, b, c in rows]
+
+
+def _number(v: Any) -> bool:
+    return type(v) in (int, float)
+
+
+def _event_shape(ev: Any) -> bool:
+    """What the readers use of an event: numeric t, text kind, groups as lists of lists of ints, agent."""
+    if not isinstance(ev, dict) or not _number(ev.get("t")) or not isinstance(ev.get("kind"), str):
+        return False
+    for key in ("before", "after"):
+        groups = ev.get(key, [])
+        if not isinstance(groups, list) or not all(
+                isinstance(g, list) and all(type(a) is int for a in g) for g in groups):
+            return False
+    return "agent" not in ev or ev["agent"] is None or type(ev["agent"]) is int

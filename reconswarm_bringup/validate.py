@@ -1,0 +1,151 @@
+"""Checks of command-line values before anything starts: pure functions the CLIs call (run_local.sh's
+launcher, `reconswarm sim`, the monitor's commands). Each raises BadInput with one line naming the option.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import math
+import os
+import re
+import tempfile
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Protocol
+
+from reconswarm.errors import BadInput
+
+# Peak RSS per process of a local run, in MB: README "Results and benchmarks" (bench/bench_deploy.py, medians
+# at 10-50 agents); the launcher's own (a zenoh session, numpy, rich) measured at 54 MB (VmHWM, paper mission).
+PEAK_RSS_MB = {"agent": 64, "monitor": 86, "simworld": 62, "router": 50, "launcher": 60}
+# Endpoints the launcher can check and start a router on: PROTO/HOST:PORT.
+HOST_PORT_PROTOCOLS = ("tcp", "tls", "udp", "quic", "ws")
+_HOSTNAME = re.compile(r"^[A-Za-z0-9]([A-Za-z0-9-]{0,62})(\.[A-Za-z0-9]([A-Za-z0-9-]{0,62}))*\.?$")
+
+
+def positive_seconds(option: str, value: float | None) -> None:
+    """A duration in seconds: finite and > 0 (None: not given)."""
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise BadInput(f"{option}: must be a positive number of seconds, got {value}")
+
+
+def positive_finite(option: str, value: float) -> None:
+    if not (math.isfinite(value) and value > 0):
+        raise BadInput(f"{option}: must be a positive finite number, got {value}")
+
+
+def endpoint(option: str, ep: str) -> tuple[str, str, int]:
+    """A zenoh endpoint PROTO/HOST:PORT (metadata after '?' or '#' ignored) -> (proto, host, port)."""
+    proto, sep, addr = ep.partition("/")
+    addr = re.split(r"[?#]", addr, maxsplit=1)[0]
+    if not sep or proto not in HOST_PORT_PROTOCOLS:
+        raise BadInput(f"{option}: expected PROTO/HOST:PORT with PROTO one of {', '.join(HOST_PORT_PROTOCOLS)}, "
+                       f"got {ep!r}")
+    host, colon, port_s = addr.rpartition(":")
+    if not colon or not host:
+        raise BadInput(f"{option}: expected {proto}/HOST:PORT, got {ep!r}")
+    if not port_s.isascii() or not port_s.isdigit() or not 1 <= int(port_s) <= 65535:
+        raise BadInput(f"{option}: port must be 1..65535, got {port_s!r} in {ep!r}")
+    bare = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    try:
+        ipaddress.ip_address(bare)
+    except ValueError:
+        if host.startswith("[") or not _HOSTNAME.match(host):
+            raise BadInput(f"{option}: {host!r} is neither an IP address nor a host name in {ep!r}") from None
+    return proto, bare, int(port_s)
+
+
+class _Fault(Protocol):
+    agent_id: int | None
+
+    def describe(self) -> str: ...
+
+
+def fault_targets(faults: Iterable[_Fault], agent_ids: set[int]) -> None:
+    """Every --fault aimed at an agent names one of the scenario's."""
+    for f in faults:
+        if f.agent_id is not None and f.agent_id not in agent_ids:
+            raise BadInput(f"--fault {f.describe()}: the scenario has no agent {f.agent_id}")
+
+
+def agent_count(option: str, n: int) -> None:
+    if n < 1:
+        raise BadInput(f"{option}: must be >= 1, got {n}")
+
+
+def available_memory_mb(meminfo: str | None = None) -> float | None:
+    """MemAvailable from /proc/meminfo (or the given text), in MB; None if unknown."""
+    if meminfo is None:
+        try:
+            meminfo = Path("/proc/meminfo").read_text()
+        except OSError:
+            return None
+    m = re.search(r"^MemAvailable:\s+(\d+) kB", meminfo, re.MULTILINE)
+    return int(m.group(1)) / 1024 if m else None
+
+
+def run_memory_mb(n_agents: int, routers: int = 1) -> float:
+    """Peak memory of a local run: one process per agent, simworld, monitor, the routers, the launcher."""
+    p = PEAK_RSS_MB
+    return n_agents * p["agent"] + p["simworld"] + p["monitor"] + routers * p["router"] + p["launcher"]
+
+
+def machine_holds(option: str, n_agents: int, available_mb: float | None, routers: int = 1) -> None:
+    """Refuse a run whose processes need more memory than this machine has available."""
+    if available_mb is None:
+        return
+    need = run_memory_mb(n_agents, routers)
+    if need > available_mb:
+        raise BadInput(f"{option}: {n_agents} agent processes need about {_mb(need)} of memory "
+                       f"({PEAK_RSS_MB['agent']} MB each, plus simworld, monitor, router and launcher), "
+                       f"this machine has {_mb(available_mb)} available")
+
+
+def _mb(v: float) -> str:
+    if v >= 1024**3:
+        return f"{v / 1024:.3g} GB"
+    return f"{v / 1024:,.1f} GB" if v >= 1024 else f"{v:,.0f} MB"
+
+
+def _probe(directory: Path) -> None:
+    directory.mkdir(parents=True, exist_ok=True)
+    fd, probe = tempfile.mkstemp(prefix=".write-probe-", dir=directory)
+    os.close(fd)
+    os.unlink(probe)
+
+
+def writable_dir(option: str, path: Path) -> None:
+    """Create the directory if needed and make sure a file can be written in it."""
+    try:
+        _probe(path)
+    except OSError as exc:
+        raise BadInput(f"{option} {path}: cannot write there ({exc.strerror or exc})") from None
+
+
+def writable_file(option: str, path: Path) -> None:
+    """The file can be created: not a directory, and its directory exists (or can be made) and is writable."""
+    if path.is_dir():
+        raise BadInput(f"{option} {path}: is a directory")
+    try:
+        _probe(path.parent)
+    except OSError as exc:
+        raise BadInput(f"{option} {path}: cannot write there ({exc.strerror or exc})") from None
+
+
+def launch(*, agents: int | None, scenario: Path | None, out: Path, timeout_s: float | None, speed: float,
+           router: str | None, hosts: int, available_mb: float | None) -> None:
+    """run_local.sh's arguments, before anything starts (the scenario's own size is checked once loaded,
+    with `machine_holds`)."""
+    if agents is not None and scenario is not None:
+        raise BadInput("-n/--agents and -s/--scenario: give one (-n generates a scenario)")
+    if agents is not None:
+        agent_count("-n", agents)
+        machine_holds(f"-n {agents}", agents, available_mb, routers=hosts)
+    positive_seconds("--timeout", timeout_s)
+    positive_finite("--speed", speed)
+    if router is not None:
+        proto, _, _ = endpoint("--router", router)
+        if proto not in ("tcp", "tls"):
+            raise BadInput(f"--router: the launcher starts and checks routers on tcp/ or tls/ endpoints, "
+                           f"got {router!r}")
+    writable_dir("-o", out)
