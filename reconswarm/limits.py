@@ -2,10 +2,11 @@
 
 Refusals (the loader raises them as `FILE: field.path: what is wrong`, exit 2), each for a reason:
 
-- **The wire must carry every message the run can produce.** For each kind of message the largest one
-  this scenario can produce is built and put through the wire's own encoder and decoder
-  (reconswarm/wire.py): whatever the wire would drop in the distributed run is refused here first, and
-  these checks follow the wire's constants (and any check its decoders gain) by construction.
+- **The wire must carry every message the run can produce.** Counts, lengths and ids against the wire's
+  limits (reconswarm/wire_limits.py, which reconswarm/net/wire.py's decoders enforce), and the encoded
+  size of the largest message of each kind this scenario can produce (tests check these sizes against
+  the wire's own encoder, byte for byte): whatever the wire would drop in the distributed run is refused
+  here first.
 - **Magnitudes that make the program fail**: float64 arithmetic that overflows or loses the resolution
   the geometry relies on, and memory that grows with the scenario (contour samples, the knowledge
   tables, the stall detector's history).
@@ -19,16 +20,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm import wire
+from reconswarm import wire_limits as W
 from reconswarm.geometry import SAMPLE_SPACING_M, edge_sample_counts, norm2
 
-if TYPE_CHECKING:
-    from reconswarm.scenario import ObstacleSpec, Scenario
+# reconswarm.scenario's Scenario and ObstacleSpec: not imported, as the loader in that module calls this one.
+Scenario = Any
+ObstacleSpec = Any
 
 # Coordinates and lengths within ±1,000 km. float64 resolves 1.2e-10 m there: nine orders below the 1 m
 # contour spacing, so contour samples along an edge stay collinear within geometry.COLLINEAR_TOL (1e-9
@@ -44,10 +46,6 @@ TABLE_BUDGET_BYTES = 1 << 30
 # and a bit per agent in the knowledge tables. 200,000 samples = 200 km of obstacle boundary.
 MAX_CONTOUR_SAMPLES = 200_000
 _STALL_BYTES_PER_TICK = 3 * 8  # deadlock.StallState: a position (2 float64) and an error norm per tick
-_WORST_FLOAT = 0.1  # any finite float: msgpack packs every Python float as 9 bytes
-_WORST_COUNTER = 2**53  # the largest counter the wire accepts (rev, rejected): 9 bytes
-# The world's final statistics (simworld sends up to 7): 8 of the longest keys the wire accepts.
-_WORST_STATS = {f"{j:0{wire.MAX_STR}d}": _WORST_FLOAT for j in range(8)}
 
 Problem = tuple[str, str]  # (field path, what is wrong)
 
@@ -140,64 +138,84 @@ def _memory(s: Scenario, obstacle_path: dict[str, str]) -> Iterator[Problem]:
 
 def _wire(s: Scenario, obstacle_path: dict[str, str]) -> Iterator[Problem]:
     n = len(s.agents)
-    if n > wire.MAX_IDS:
-        yield "agents", f"{n} agents, more than the wire's {wire.MAX_IDS} per message"
+    if n > W.MAX_IDS:
+        yield "agents", f"{n} agents, more than the wire's {W.MAX_IDS} per message"
         return
     for o in s.obstacles:
-        if len(o.id) > wire.MAX_STR:
-            yield f"{obstacle_path[o.id]}.id", (f"{len(o.id)} characters, more than the wire's {wire.MAX_STR} "
+        if len(o.id) > W.MAX_STR:
+            yield f"{obstacle_path[o.id]}.id", (f"{len(o.id)} characters, more than the wire's {W.MAX_STR} "
                                                 f"(every scan point and shared hull carries the id)")
             return
-    if len(s.obstacles) > wire.MAX_OBSTACLES:
-        yield "obstacles", f"{len(s.obstacles)} obstacles, more than the wire's {wire.MAX_OBSTACLES} per obstacle set"
+    if len(s.obstacles) > W.MAX_OBSTACLES:
+        yield "obstacles", f"{len(s.obstacles)} obstacles, more than the wire's {W.MAX_OBSTACLES} per obstacle set"
         return
     hull = {o.id: hull_vertices_max(o) for o in s.obstacles}
     for o in s.obstacles:
-        if hull[o.id] > wire.MAX_VERTICES:
+        if hull[o.id] > W.MAX_VERTICES:
             yield f"{obstacle_path[o.id]}.vertices_m", (
                 f"an agent's hull of this obstacle can have up to {hull[o.id]} vertices (its contour samples), "
-                f"more than the wire's {wire.MAX_VERTICES}")
+                f"more than the wire's {W.MAX_VERTICES}")
             return
     r_v = s.planner.sensing_range_m
     scan = {o.id: scan_points_max(o, r_v) for o in s.obstacles}
-    if sum(scan.values()) > wire.MAX_POINTS:
+    if sum(scan.values()) > W.MAX_POINTS:
         yield "planner.sensing_range_m", (f"a scan within {r_v:g} m can hold up to {sum(scan.values())} contour "
-                                          f"points of these obstacles, more than the wire's {wire.MAX_POINTS}")
+                                          f"points of these obstacles, more than the wire's {W.MAX_POINTS}")
         return
-    yield from _largest_messages(s, scan, hull)
-
-
-def _largest_messages(s: Scenario, scan: dict[str, int], hull: dict[str, int]) -> Iterator[Problem]:
-    """Build the largest message of every kind this scenario can produce and decode it as a receiver would."""
-    ids = tuple(a.id for a in s.agents)
-    n, a_max, f = len(ids), max(ids), _WORST_FLOAT
-    k, t = round(s.meta.duration_s / s.meta.dt_s) + 1, s.meta.duration_s
-    pts = tuple(pt for o in s.obstacles for pt in ((f, f, o.id),) * scan[o.id])
-    hulls = {o.id: ((f, f),) * hull[o.id] for o in s.obstacles}
-    agents, scans, sets = "agents", "planner.sensing_range_m", "obstacles"
-    largest: list[tuple[str, str, Callable[[], bytes], Callable[[bytes], object]]] = [
-        (agents, "truth", lambda: wire.truth_to_wire(wire.Truth(k, t, ids, *(((f,) * n,) * 5))), wire.truth_from_wire),
-        (agents, "clock", lambda: wire.clock_to_wire(
-            wire.Clock(k, t, ids, "realtime", f, True, "r" * 256, _WORST_COUNTER, _WORST_STATS)), wire.clock_from_wire),
-        (agents, "event", lambda: wire.event_to_wire(
-            wire.Event(t, "split", (ids,), tuple((i,) for i in ids), a_max)), wire.event_from_wire),
-        (agents, "beacon", lambda: wire.beacon_to_wire(
-            wire.Beacon(a_max, k, t, f, f, COORD_MAX_M, _WORST_COUNTER, _WORST_COUNTER)), wire.beacon_from_wire),
-        (agents, "cmd", lambda: wire.cmd_to_wire(wire.Cmd(a_max, k, f, f)), wire.cmd_from_wire),
-        (scans, "state", lambda: wire.state_to_wire(wire.State(a_max, k, t, f, f, f, f, f, len(pts))),
-         wire.state_from_wire),
-        (scans, "scan", lambda: wire.scan_to_wire(wire.Scan(a_max, k, t, pts)), wire.scan_from_wire),
-        (sets, "obstacle set", lambda: wire.obstacles_to_wire(wire.ObstacleSet(a_max, k, _WORST_COUNTER, hulls)),
-         wire.obstacles_from_wire),
-    ]
-    for path, what, encode, decode in largest:
-        payload = encode()
-        try:
-            decode(payload)
-        except wire.WireError as exc:
-            yield path, (f"the largest {what} message of this scenario ({len(payload):,} bytes) would be refused "
-                         f"by the wire: {exc}")
+    for path, what, size in largest_messages(s, scan, hull):
+        if size > W.MAX_PAYLOAD_BYTES:
+            yield path, (f"the largest {what} message of this scenario would be {size:,} bytes, over the wire's "
+                         f"limit of {W.MAX_PAYLOAD_BYTES:,}")
             return
+
+
+# msgpack sizes (the format's rules, as msgpack-python packs Python values): every float is a float64.
+_FLOAT = 9
+
+
+def _uint(v: int) -> int:
+    return 1 if v < 128 else 2 if v < 256 else 3 if v < 65536 else 5 if v < 2**32 else 9
+
+
+def _strlen(n: int) -> int:
+    return n + (1 if n < 32 else 2 if n < 256 else 3 if n < 65536 else 5)
+
+
+def _container(n: int) -> int:  # array or map header
+    return 1 if n < 16 else 3 if n < 65536 else 5
+
+
+def _keys(*names: str) -> int:  # a map of these keys: header and key strings ("v" included)
+    return _container(len(names) + 1) + _strlen(1) + 1 + sum(_strlen(len(k)) for k in names)
+
+
+def largest_messages(s: Scenario, scan: dict[str, int], hull: dict[str, int]) -> list[tuple[str, str, int]]:
+    """(field path, message, encoded bytes) of the largest message of each growing kind this scenario can
+    produce, as reconswarm.net.wire encodes it (tests check these sizes against its encoder, byte for byte).
+
+    Worst values where the scenario leaves them open: tick k and time at the end of the duration, counters
+    (rev, rejected) at 2^53, the longest end reason and MAX_STATS statistics of the longest keys, the event
+    that splits the whole swarm into single agents. State, cmd and beacon have a fixed size (< 200 bytes).
+    """
+    ids = [a.id for a in s.agents]
+    n, a_max = len(ids), max(ids)
+    k = _uint(round(s.meta.duration_s / s.meta.dt_s) + 1)
+    id_bytes = sum(_uint(i) for i in ids)
+    counter = _uint(2**53)
+    truth = (_keys("k", "t", "ids", "x", "y", "theta", "px", "py") + k + _FLOAT + _container(n) + id_bytes
+             + 5 * (_container(n) + n * _FLOAT))
+    clock = (_keys("k", "t", "alive", "mode", "speed", "end", "reason", "rejected", "stats") + k + _FLOAT
+             + _container(n) + id_bytes + _strlen(len("realtime")) + _FLOAT + 1 + _strlen(W.MAX_REASON) + counter
+             + _container(W.MAX_STATS) + W.MAX_STATS * (_strlen(W.MAX_STR) + _FLOAT))
+    event = (_keys("t", "kind", "before", "after", "agent") + _FLOAT + _strlen(W.MAX_STR) + _container(1)
+             + _container(n) + id_bytes + _container(n) + n * _container(1) + id_bytes + _uint(a_max))
+    points = sum(scan.values())
+    scan_b = (_keys("id", "k", "t", "points") + _uint(a_max) + k + _FLOAT + _container(points)
+              + sum(c * (_container(3) + 2 * _FLOAT + _strlen(len(oid))) for oid, c in scan.items()))
+    sets = (_keys("id", "k", "rev", "obstacles") + _uint(a_max) + k + counter + _container(len(hull))
+            + sum(_strlen(len(oid)) + _container(h) + h * (_container(2) + 2 * _FLOAT) for oid, h in hull.items()))
+    return [("agents", "truth", truth), ("agents", "clock", clock), ("agents", "event", event),
+            ("planner.sensing_range_m", "scan", scan_b), ("obstacles", "obstacle set", sets)]
 
 
 def hull_vertices_max(o: ObstacleSpec) -> int:

@@ -14,7 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from reconswarm import limits, wire
+from reconswarm import limits
+from reconswarm import wire_limits as wire
 from reconswarm.errors import BadInput
 from reconswarm.geometry import (
     distance_to_polygon,

@@ -11,8 +11,8 @@ from typing import Annotated, Any
 
 import typer
 
-from reconswarm_bringup import validate
 from reconswarm.errors import BadInput, ReconswarmError
+from reconswarm_bringup import validate
 from reconswarm_bringup.console import fail, print_json
 
 monitor_app = typer.Typer(no_args_is_help=True, help="Record runs and read run records (run.db).")

@@ -11,9 +11,9 @@ import re
 import tempfile
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Protocol
 
 from reconswarm.errors import BadInput
+from reconswarm_bringup.faults import Fault
 
 # Peak RSS per process of a local run, in MB: README "Results and benchmarks" (bench/bench_deploy.py, medians
 # at 10-50 agents); the launcher's own (a zenoh session, numpy, rich) measured at 54 MB (VmHWM, paper mission).
@@ -55,13 +55,7 @@ def endpoint(option: str, ep: str) -> tuple[str, str, int]:
     return proto, bare, int(port_s)
 
 
-class _Fault(Protocol):
-    agent_id: int | None
-
-    def describe(self) -> str: ...
-
-
-def fault_targets(faults: Iterable[_Fault], agent_ids: set[int]) -> None:
+def fault_targets(faults: Iterable[Fault], agent_ids: set[int]) -> None:
     """Every --fault aimed at an agent names one of the scenario's."""
     for f in faults:
         if f.agent_id is not None and f.agent_id not in agent_ids:

@@ -18,15 +18,16 @@ from reconswarm.net.keys import Keys as Keys
 from reconswarm.net.keys import WireError as WireError
 from reconswarm.paper.events import Event as Event
 from reconswarm.paper.events import EventKind as EventKind
+from reconswarm.wire_limits import MAX_AGENT_ID as MAX_AGENT_ID
+from reconswarm.wire_limits import MAX_ARRAY_LEN, MAX_MAP_LEN, MAX_REASON, MAX_STATS, MAX_STR_BYTES
+from reconswarm.wire_limits import MAX_IDS as MAX_IDS
+from reconswarm.wire_limits import MAX_OBSTACLES as MAX_OBSTACLES
+from reconswarm.wire_limits import MAX_PAYLOAD_BYTES as MAX_PAYLOAD_BYTES
+from reconswarm.wire_limits import MAX_POINTS as MAX_POINTS
+from reconswarm.wire_limits import MAX_STR as MAX_STR
+from reconswarm.wire_limits import MAX_VERTICES as MAX_VERTICES
 
 VERSION = 1
-MAX_PAYLOAD_BYTES = 1 << 20  # 1 MiB: larger payloads are rejected before decoding
-MAX_POINTS = 50_000  # contour points in a scan
-MAX_OBSTACLES = 4_096  # obstacle ids in one obstacle set
-MAX_VERTICES = 4_096  # vertices of one shared hull
-MAX_IDS = 100_000  # agent ids in a clock's alive list
-MAX_STR = 128  # characters of a string (obstacle ids, stats keys, event kinds)
-MAX_AGENT_ID = 2**31  # agent ids are 0..MAX_AGENT_ID (at most 10 digits in a key)
 
 
 # ---------------------------------------------------------------------------------------------- messages
@@ -169,8 +170,8 @@ def _unpack(payload: bytes) -> dict[str, Any]:
         raise WireError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD_BYTES}")
     try:
         obj = msgpack.unpackb(payload, raw=False, strict_map_key=True,
-                              max_array_len=MAX_POINTS * 3, max_map_len=MAX_OBSTACLES + 16,
-                              max_str_len=MAX_STR * 4, max_bin_len=0, max_ext_len=0)
+                              max_array_len=MAX_ARRAY_LEN, max_map_len=MAX_MAP_LEN,
+                              max_str_len=MAX_STR_BYTES, max_bin_len=0, max_ext_len=0)
     except Exception as exc:  # msgpack raises several unrelated exception types
         raise WireError(f"undecodable payload: {type(exc).__name__}") from None
     if not isinstance(obj, dict):
@@ -294,10 +295,10 @@ def clock_from_wire(payload: bytes) -> Clock:
     if not isinstance(end, bool):
         raise WireError("field 'end': expected a boolean")
     reason = o.get("reason", "")
-    if not isinstance(reason, str) or len(reason) > 256:
+    if not isinstance(reason, str) or len(reason) > MAX_REASON:
         raise WireError("field 'reason': expected a short string")
     stats_raw = o.get("stats", {})
-    if not isinstance(stats_raw, dict) or len(stats_raw) > 64:
+    if not isinstance(stats_raw, dict) or len(stats_raw) > MAX_STATS:
         raise WireError("field 'stats': expected a small map")
     stats = {_str(k, "stats key"): _num(v, f"stats {k!r}") for k, v in stats_raw.items()}
     speed = _num(o.get("speed", 0.0), "field 'speed'")

@@ -14,13 +14,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from monitor.record import RunRecord
-from reconswarm import engine
 from reconswarm.errors import BadInput
 from reconswarm.limits import physics_warnings
+from reconswarm.record.store import RunRecord
 from reconswarm.scenario import parse, warnings
+from reconswarm_bringup import engine
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 BASE = (ROOT / "deploy" / "scenarios" / "paper.toml").read_text().replace(
     "converge_tol_m = 0.5\n", "converge_tol_m = 0.5\nstall_window_s = 5.0\n")
 SIM_S = 40.0  # simulated seconds per accepted mutation: the swarm reaches the diamond at t ~ 40 s

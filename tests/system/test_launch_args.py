@@ -12,12 +12,12 @@ from pathlib import Path
 
 import pytest
 
-from reconswarm import validate
 from reconswarm.errors import BadInput
 from reconswarm.generate import generate
 from reconswarm.scenario import to_toml
+from reconswarm_bringup import validate
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 RUN_LOCAL = ROOT / "deploy" / "run_local.sh"
 MEMINFO = "MemTotal:       24684096 kB\nMemFree:         1000000 kB\nMemAvailable:   23929832 kB\n"
 
@@ -53,7 +53,7 @@ def run_local(out: Path, *args: str) -> list[str]:
 
 
 def launcher(out: Path, *args: str) -> list[str]:
-    return [sys.executable, "-m", "reconswarm.launcher", "-o", str(out), "--no-progress", *args]
+    return [sys.executable, "-m", "reconswarm_bringup.cli_launch", "-o", str(out), "--no-progress", *args]
 
 
 # ------------------------------------------------------------------------ the cases, run_local.sh
@@ -113,7 +113,7 @@ def test_unwritable_output_dir(tmp_path, where):
     out = Path("/proc/x") if where == "proc" else tmp_path / "afile" / "run"
     refused(run_local(out), out, f"-o {out}: cannot write there (")
     paper = ROOT / "deploy" / "scenarios" / "paper.toml"
-    r = subprocess.run([sys.executable, "-m", "reconswarm.cli", "sim", str(paper), "-o", str(out), "--json"],
+    r = subprocess.run([sys.executable, "-m", "reconswarm_bringup.cli", "sim", str(paper), "-o", str(out), "--json"],
                        capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert r.returncode == 2 and r.stdout == "" and "Traceback" not in r.stderr
     assert r.stderr.splitlines() == [f"reconswarm: error: -o {out}: cannot write there (" +

@@ -1,8 +1,9 @@
 """Scenario limits (reconswarm/limits.py): what the wire refuses is refused by `scenario check` first,
 magnitudes that broke `sim` are refused, and the physics warnings fire where runs collide.
 
-The wire's limits are taken from reconswarm.wire; the bounds on scans and hulls are checked against the
-real sensing (simworld.sensing) and knowledge (agent.knowledge) code, message by message.
+The wire's limits are reconswarm.net.wire's; the bounds on scans and hulls are checked against the real
+sensing (reconswarm.sim.sensing) and knowledge (reconswarm.paper.knowledge) code, message by message, and
+the sizes the check computes against the wire's encoder, byte for byte.
 """
 
 from __future__ import annotations
@@ -16,13 +17,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agent.knowledge import KnownObstacles
-from reconswarm import limits, wire
+from reconswarm import limits, wire_limits
 from reconswarm.errors import BadInput
+from reconswarm.net import wire
+from reconswarm.paper.knowledge import KnownObstacles
 from reconswarm.scenario import load, parse, warnings
-from simworld.sensing import ContourField
+from reconswarm.sim.sensing import ContourField
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
 PAPER_TEXT = PAPER.read_text()
 DIAMOND = "vertices_m = [[345.0, 0.0], [300.0, 45.0], [255.0, 0.0], [300.0, -45.0]]"
@@ -42,7 +44,7 @@ def refused(text: str, field: str) -> str:
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "reconswarm.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "reconswarm_bringup.cli", *args], capture_output=True, text=True,
                           timeout=300, cwd=ROOT)
 
 
@@ -107,10 +109,52 @@ def test_agent_count_follows_the_truth_message_size():
     truth = wire.truth_to_wire(wire.Truth(6000, 300.0, tuple(a.id for a in s.agents), *cols))
     assert wire.truth_from_wire(truth).ids[-1] == ok_n
     msg = refused(grid_scenario(big_n), "agents")
-    assert "truth" in msg and str(wire.MAX_PAYLOAD_BYTES) in msg
+    assert "truth" in msg and f"{wire.MAX_PAYLOAD_BYTES:,}" in msg
     cols = [tuple(rng.normal(0, 1e5, big_n).tolist()) for _ in range(5)]
     with pytest.raises(wire.WireError):
         wire.truth_from_wire(wire.truth_to_wire(wire.Truth(6000, 300.0, tuple(range(1, big_n + 1)), *cols)))
+
+
+def worst_messages(s) -> dict[str, bytes]:
+    """The largest message of each growing kind, built as the processes would and encoded by the wire."""
+    ids = tuple(a.id for a in s.agents)
+    n, a_max, f = len(ids), max(ids), 0.1
+    k, t = round(s.meta.duration_s / s.meta.dt_s) + 1, s.meta.duration_s
+    scan = {o.id: limits.scan_points_max(o, s.planner.sensing_range_m) for o in s.obstacles}
+    hull = {o.id: limits.hull_vertices_max(o) for o in s.obstacles}
+    pts = tuple(pt for o in s.obstacles for pt in ((f, f, o.id),) * scan[o.id])
+    stats = {f"{j:0{wire.MAX_STR}d}": f for j in range(wire_limits.MAX_STATS)}
+    return {
+        "truth": wire.truth_to_wire(wire.Truth(k, t, ids, *(((f,) * n,) * 5))),
+        "clock": wire.clock_to_wire(wire.Clock(k, t, ids, "realtime", f, True, "r" * wire_limits.MAX_REASON,
+                                               2**53, stats)),
+        "event": wire.event_to_wire(wire.Event(t, "x" * wire.MAX_STR, (ids,), tuple((i,) for i in ids), a_max)),
+        "scan": wire.scan_to_wire(wire.Scan(a_max, k, t, pts)),
+        "obstacle set": wire.obstacles_to_wire(wire.ObstacleSet(a_max, k, 2**53, {
+            o.id: ((f, f),) * hull[o.id] for o in s.obstacles})),
+    }
+
+
+@pytest.mark.parametrize("case", ["paper", "long-ids", "big-ids", "many-agents", "wide-sensing"])
+def test_computed_sizes_are_the_encoders_byte_for_byte(case):
+    """The loader computes message sizes from msgpack's rules (it may not import the wire, a layer above);
+    here they are checked against the wire's own encoder, and the decoder accepts them."""
+    text = {"paper": PAPER_TEXT,
+            "long-ids": sub('id = "diamond"', f'id = "{"d" * wire.MAX_STR}"',
+                            sub('id = "hexagon"', 'id = "h' + "x" * 40 + '"')),
+            "big-ids": sub("id = 10\n", f"id = {wire.MAX_AGENT_ID}\n", sub("id = 9\n", "id = 70000\n")),
+            "many-agents": grid_scenario(3000, first_id=100),
+            "wide-sensing": sub("sensing_range_m = 40.0", "sensing_range_m = 700.0")}[case]
+    s = parse(text)
+    scan = {o.id: limits.scan_points_max(o, s.planner.sensing_range_m) for o in s.obstacles}
+    hull = {o.id: limits.hull_vertices_max(o) for o in s.obstacles}
+    computed = {what: size for _, what, size in limits.largest_messages(s, scan, hull)}
+    encoded = worst_messages(s)
+    assert computed == {what: len(b) for what, b in encoded.items()}
+    decode = {"truth": wire.truth_from_wire, "clock": wire.clock_from_wire, "event": wire.event_from_wire,
+              "scan": wire.scan_from_wire, "obstacle set": wire.obstacles_from_wire}
+    for what, payload in encoded.items():  # every message of an accepted scenario passes the wire's checks
+        decode[what](payload)
 
 
 def test_more_obstacles_than_an_obstacle_set_carries_is_refused():

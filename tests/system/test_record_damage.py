@@ -14,13 +14,13 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PAPER_TEXT = (ROOT / "deploy" / "scenarios" / "paper.toml").read_text()
 COMMANDS = ["summary", "events", "export", "plot"]
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "reconswarm.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "reconswarm_bringup.cli", *args], capture_output=True, text=True,
                           timeout=120, cwd=ROOT)
 
 
@@ -141,7 +141,7 @@ MORE = [
 def test_more_damage_in_process(record, tmp_path, name, how, what, reads, command):
     from typer.testing import CliRunner
 
-    from reconswarm.cli import app
+    from reconswarm_bringup.cli import app
 
     db = damaged(record, tmp_path, how)
     extra = ["-o", str(tmp_path / "plot.png")] if command == "plot" else []
