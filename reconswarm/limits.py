@@ -195,7 +195,8 @@ def largest_messages(s: Scenario, scan: dict[str, int], hull: dict[str, int]) ->
 
     Worst values where the scenario leaves them open: tick k and time at the end of the duration, counters
     (rev, rejected) at 2^53, the longest end reason and MAX_STATS statistics of the longest keys, the event
-    that splits the whole swarm into single agents. State, cmd and beacon have a fixed size (< 200 bytes).
+    that splits the whole swarm into single agents with every optional field (kind and cause of MAX_STR).
+    State, cmd and beacon have a fixed size (< 200 bytes).
     """
     ids = [a.id for a in s.agents]
     n, a_max = len(ids), max(ids)
@@ -207,8 +208,10 @@ def largest_messages(s: Scenario, scan: dict[str, int], hull: dict[str, int]) ->
     clock = (_keys("k", "t", "alive", "mode", "speed", "end", "reason", "rejected", "stats") + k + _FLOAT
              + _container(n) + id_bytes + _strlen(len("realtime")) + _FLOAT + 1 + _strlen(W.MAX_REASON) + counter
              + _container(W.MAX_STATS) + W.MAX_STATS * (_strlen(W.MAX_STR) + _FLOAT))
-    event = (_keys("t", "kind", "before", "after", "agent") + _FLOAT + _strlen(W.MAX_STR) + _container(1)
-             + _container(n) + id_bytes + _container(n) + n * _container(1) + id_bytes + _uint(a_max))
+    # kind and cause at most MAX_STR characters; t_confirmed, duration_s, wall_unix floats
+    event = (_keys("t", "kind", "before", "after", "agent", "cause", "t_confirmed", "duration_s", "wall_unix")
+             + _FLOAT + _strlen(W.MAX_STR) + _container(1) + _container(n) + id_bytes + _container(n)
+             + n * _container(1) + id_bytes + _uint(a_max) + _strlen(W.MAX_STR) + 3 * _FLOAT)
     points = sum(scan.values())
     scan_b = (_keys("id", "k", "t", "points") + _uint(a_max) + k + _FLOAT + _container(points)
               + sum(c * (_container(3) + 2 * _FLOAT + _strlen(len(oid))) for oid, c in scan.items()))
