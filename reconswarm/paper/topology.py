@@ -14,8 +14,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.sparse import coo_matrix, csr_matrix
-from scipy.sparse.csgraph import connected_components
 
 from reconswarm.geometry import norm2, pairs_within
 
@@ -57,36 +55,34 @@ def graph_edges(p: Array, active: NDArray[np.bool_], prev: NDArray[np.int64], li
 
 
 def labels(n: int, edges: NDArray[np.int64], active: NDArray[np.bool_]) -> NDArray[np.int64]:
-    """Component label per agent: the smallest agent index of its group; -1 if inactive. -> (N,)"""
+    """Component label per agent: the smallest agent index of its group; -1 if inactive. -> (N,)
+
+    Union-find in whole-array steps: every edge hooks both ends to the smaller of their labels, then
+    labels jump to their label's label, until every edge joins equal labels. Labels only decrease and
+    always name an agent of the same component, so at the fixed point each component carries its
+    smallest index.
+    """
     if n == 0:
         return np.zeros(0, dtype=np.int64)
-    if edges.shape[0] + n <= 160:  # small graphs: union-find beats scipy's overhead
-        parent = list(range(n))
-
-        def find(x: int) -> int:
-            while parent[x] != x:
-                parent[x] = parent[parent[x]]
-                x = parent[x]
-            return x
-
-        for a, b in edges.tolist():
-            ra, rb = find(a), find(b)
-            if ra != rb:
-                parent[max(ra, rb)] = min(ra, rb)  # the root is always the smallest index
-        roots = np.array([find(x) for x in range(n)], dtype=np.int64)
-        return np.where(active, roots, -1)
-    if edges.shape[0] and bool((edges[1:, 0] >= edges[:-1, 0]).all()):  # grouped by i: CSR as it stands
-        indptr = np.zeros(n + 1, dtype=np.int32)
-        np.cumsum(np.bincount(edges[:, 0], minlength=n), out=indptr[1:])
-        g: Any = csr_matrix((np.ones(edges.shape[0]), edges[:, 1].astype(np.int32), indptr), shape=(n, n))
-    else:
-        g = coo_matrix((np.ones(edges.shape[0]), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    # The weak components of the directed graph i -> j are its undirected ones, without symmetrizing.
-    _, comp = connected_components(g, directed=True, connection="weak")
-    first = np.full(comp.max() + 1, n, dtype=np.int64)
-    np.minimum.at(first, comp, np.arange(n))
-    out = first[comp]
-    return np.where(active, out, -1)
+    lab = np.arange(n, dtype=np.int64)
+    if edges.shape[0]:
+        a, b = edges[:, 0], edges[:, 1]
+        while True:
+            la, lb = lab[a], lab[b]
+            differ = la != lb
+            if not differ.any():
+                break
+            low = np.minimum(la, lb)[differ]
+            np.minimum.at(lab, la[differ], low)  # hook the larger root under the smaller label
+            np.minimum.at(lab, lb[differ], low)
+            np.minimum.at(lab, a[differ], low)
+            np.minimum.at(lab, b[differ], low)
+            while True:  # pointer jumping: every label to its root
+                up = lab[lab]
+                if np.array_equal(up, lab):
+                    break
+                lab = up
+    return np.where(active, lab, -1)
 
 
 def groups_of(lab: NDArray[np.int64], ids: NDArray[np.int64]) -> Groups:
