@@ -14,8 +14,9 @@ from numpy.typing import NDArray
 
 from reconswarm.geometry import Edges, norm2
 from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
-from reconswarm.paper.knowledge import KnownObstacles, view_of_edges
+from reconswarm.paper.knowledge import KnownObstacles, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
+from reconswarm.paper.link import linked
 from reconswarm.paper.planner import Neighbours, ObstacleView, command, errors, repulsion
 from reconswarm.scenario import Scenario
 
@@ -61,7 +62,7 @@ class AgentBrain:
             return []
         q = np.array([[x.px, x.py] for x in peers])
         d = norm2(p[None, :] - q)
-        return [peers[k].id for k in np.flatnonzero(d <= self.cfg.link_range_m)]
+        return [peers[k].id for k in np.flatnonzero(linked(d, self.cfg.link_range_m))]
 
     def tick(self, k: int, p: Array, scan: dict[str, Array], peers: list[Peer],
              shared: list[dict[str, Array]], swarm_sets: list[dict[str, Array]] | None = None) -> tuple[Array, bool]:
@@ -127,7 +128,7 @@ class AgentBrain:
         if not (bound <= self.r[0] + self.cfg.d_max_m).any():
             return ObstacleView.empty(1)
         m = self._edges.ax.shape[0]
-        return view_of_edges(pos, 1, m, np.zeros(m, dtype=np.int64), np.arange(m), self._edges)
+        return obstacle_view(pos, 1, m, np.zeros(m, dtype=np.int64), np.arange(m), self._edges)
 
     def _new_points(self, scan: dict[str, Array]) -> dict[str, Array]:
         out = {}

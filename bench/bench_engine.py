@@ -77,7 +77,7 @@ def main() -> int:
     summaries: dict[str, dict[str, object]] = {}
     with tempfile.TemporaryDirectory(prefix="bench_engine_") as tmp:
         sim = ["sim", args.scenario, "--json", "-o", os.path.join(tmp, "run")]
-        cmds = {"engine": ([str(exe), *sim], None),
+        cmds: dict[str, tuple[list[str], dict[str, str] | None]] = {"engine": ([str(exe), *sim], None),
                 "baseline": ([sys.executable, str(HERE / "baseline_numpy.py"), args.scenario], None)}
         if args.before:
             env = {**os.environ, "PYTHONPATH": str(args.before.resolve())}

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -213,13 +213,26 @@ def tile_edges(e: Edges, n: int) -> Edges:
                  rep(e.closed))
 
 
-def signed_distance(px: Array, py: Array, e: Edges) -> tuple[Array, Array, Array]:
+@overload
+def signed_distance(px: Array, py: Array, e: Edges) -> tuple[Array, Array, Array]: ...
+
+
+@overload
+def signed_distance(px: Array, py: Array, e: Edges, *, normals: Literal[True]) -> tuple[Array, Array, Array]: ...
+
+
+@overload
+def signed_distance(px: Array, py: Array, e: Edges, *, normals: Literal[False]) -> Array: ...
+
+
+def signed_distance(px: Array, py: Array, e: Edges, *, normals: bool = True) -> tuple[Array, Array, Array] | Array:
     """Signed distance from points to polygons, and the outward unit normal at the nearest point.
 
     px, py (B...) broadcast against the polygons' batch shape (K,): (P,) with K = P pairs one to one,
     or (N, 1) against (K,) = (M,) for every point against every polygon. Returns d, nx, ny of the
     broadcast shape; d < 0 inside a polygon of >= 3 vertices (CCW); (nx, ny) points from the nearest
     boundary point toward the outside, the direction in which the point must be pushed.
+    normals=False: d alone, by the same operations (the minimum d² is the one at its argmin).
     """
     apx = px[..., None] - e.ax
     apy = py[..., None] - e.ay
@@ -234,18 +247,23 @@ def signed_distance(px: Array, py: Array, e: Edges) -> tuple[Array, Array, Array
     apy = apy.reshape(-1, v)
     abx = full(e.abx)
     aby = full(e.aby)
-    t = np.clip((apx * abx + apy * aby) * full(e.inv_den), 0.0, 1.0)
+    t = (apx * abx + apy * aby) * full(e.inv_den)
+    np.clip(t, 0.0, 1.0, out=t)
     dx = apx - t * abx  # p - q
     dy = apy - t * aby
     d2 = dx * dx + dy * dy + full(e.pad)
+    cross = abx * apy - aby * apx
+    inside = ((cross >= 0.0) | full(e.invalid)).all(axis=1)
+    inside &= (e.closed if same else np.broadcast_to(e.closed, shape[:-1])).reshape(-1)
+    out = shape[:-1]
+    if not normals:
+        dist = np.sqrt(d2.min(axis=1))
+        return np.where(inside, -dist, dist).reshape(out)
     k = np.argmin(d2, axis=1)
     rows = np.arange(k.shape[0])
     dist = np.sqrt(d2[rows, k])
     vx = dx[rows, k]
     vy = dy[rows, k]
-    cross = abx * apy - aby * apx
-    inside = ((cross >= 0.0) | full(e.invalid)).all(axis=1)
-    inside &= (e.closed if same else np.broadcast_to(e.closed, shape[:-1])).reshape(-1)
     # On the boundary (to within 1 nm, where p - q is rounding noise): the edge's outward normal
     # (right-hand side of a CCW edge).
     on_edge = dist <= ON_EDGE_M
@@ -257,30 +275,13 @@ def signed_distance(px: Array, py: Array, e: Edges) -> tuple[Array, Array, Array
         vx = np.where(on_edge, np.where(ok, ey / safe_len, 1.0), vx)
         vy = np.where(on_edge, np.where(ok, -ex / safe_len, 0.0), vy)
         dist_safe = np.where(on_edge, 1.0, dist)
+        flip = np.where(inside & ~on_edge, -1.0, 1.0)
     else:
         dist_safe = dist
+        flip = np.where(inside, -1.0, 1.0)
     # Inside, p - q points inward: flip it so the normal points out of the polygon.
-    flip = np.where(inside & ~on_edge, -1.0, 1.0)
-    out = shape[:-1]
     return (np.where(inside, -dist, dist).reshape(out), (flip * vx / dist_safe).reshape(out),
             (flip * vy / dist_safe).reshape(out))
-
-
-def signed_distance_only(px: Array, py: Array, e: Edges) -> Array:
-    """The d of signed_distance(px, py, e), without the normals: the same operations for d."""
-    apx = px[..., None] - e.ax
-    apy = py[..., None] - e.ay
-    shape = apx.shape
-    same = e.abx.shape == shape
-    abx = e.abx if same else np.broadcast_to(e.abx, shape)
-    aby = e.aby if same else np.broadcast_to(e.aby, shape)
-    t = np.clip((apx * abx + apy * aby) * e.inv_den, 0.0, 1.0)
-    dx = apx - t * abx
-    dy = apy - t * aby
-    dist = np.sqrt((dx * dx + dy * dy + e.pad).min(axis=-1))  # the minimum d2 is the one at its argmin
-    cross = abx * apy - aby * apx
-    inside = ((cross >= 0.0) | e.invalid).all(axis=-1) & e.closed
-    return np.where(inside, -dist, dist)
 
 
 def distance_to_polygon(points: Array, polygon: Array) -> tuple[Array, Array]:

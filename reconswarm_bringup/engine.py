@@ -28,10 +28,10 @@ from numpy.typing import NDArray
 
 from reconswarm.geometry import Edges, pairs_and_distances
 from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
-from reconswarm.paper.knowledge import SwarmKnowledge, view_of_edges
+from reconswarm.paper.knowledge import SwarmKnowledge, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
-from reconswarm.paper.planner import ObstacleView, command, errors, neighbour_table_d, repulsion
-from reconswarm.paper.topology import HYSTERESIS_M
+from reconswarm.paper.link import HYSTERESIS_M, linked
+from reconswarm.paper.planner import ObstacleView, command, errors, neighbour_table, repulsion
 from reconswarm.record.recorder import Recorder
 from reconswarm.record.store import RunRecord, RunWriter
 from reconswarm.record.summary import summarize
@@ -89,17 +89,17 @@ class Engine:
     def plan(self, k: int) -> Array:
         """Steps 1-3 for tick k: returns u (N, 2); leaves true distances in self.true_d."""
         c, p = self.cfg, self.p
-        self.true_d = self.field.distances_for_engine(p, self.exact_within_m, self.r)
+        self.true_d = self.field.true_distances(p, self.exact_within_m, self.r)
         # Sensing and obstacle repulsion reach no farther than exact_within_m: far from every obstacle
         # (the common case) both are empty.
         near_any = self.true_d.size > 0 and float(self.true_d.min()) <= self.exact_within_m
         qa, qs = self.field.scan(p, c.sensing_range_m, self.true_d) if near_any else (_NO_INDEX, _NO_INDEX)
         # (E, 2) superset of every pair any step needs, and their distances
         self.near, self.near_d = pairs_and_distances(p, self.reach_m)
-        self.know.update(qa, qs, self.near[self.near_d <= c.link_range_m])
+        self.know.update(qa, qs, self.near[linked(self.near_d, c.link_range_m)])
 
-        nb = neighbour_table_d(p, self.r, self.near, self.near_d, c.d_max_m)
-        ob = self.obstacle_view() if near_any else self._no_obstacle
+        nb = neighbour_table(p, self.r, self.near, c.d_max_m, self.near_d)
+        ob = self._known_obstacles() if near_any else self._no_obstacle
 
         if self.leader is not None:
             hulls = [h for h in (self.know.union_hull_before(m) for m in range(self.field.n_obstacles))
@@ -117,7 +117,7 @@ class Engine:
                           c.converge_tol_m, self.s.meta.dt_s, rep[0] + rep[1])
         return command(c, p, self.r, self.offsets, center, nb, ob, pert, lead_vel, rep)
 
-    def obstacle_view(self) -> ObstacleView:
+    def _known_obstacles(self) -> ObstacleView:
         """The planner's obstacle table: each agent's known hull of every obstacle within its reach.
 
         Columns keep obstacle-id order; obstacles that no agent both reaches and knows are left out.
@@ -148,7 +148,7 @@ class Engine:
             self._edges_key, self._edges = key, (hulls, Edges.of(hulls))  # held, so their ids stay theirs
         rows = rows_l[0] if len(rows_l) == 1 else np.concatenate(rows_l)
         cols_q = cols_l[0] if len(cols_l) == 1 else np.concatenate(cols_l)
-        return view_of_edges(self.p, n, col, rows, cols_q, self._edges[1])
+        return obstacle_view(self.p, n, col, rows, cols_q, self._edges[1])
 
     def advance(self, u: Array) -> None:
         w = self.s.world

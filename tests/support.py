@@ -15,6 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
+from reconswarm.geometry import Edges
+from reconswarm.paper.knowledge import obstacle_view
+from reconswarm.paper.planner import ObstacleView
+
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
 
@@ -147,3 +151,10 @@ def restart_and_rejoin(out: Path, agent: int, at_s: float, after_s: float) -> li
     assert ev == ["agent_lost", "agent_joined"]
     log = (out / "logs" / f"agent-{agent}.log").read_text().splitlines()
     return [ln for ln in log if "joining at tick" in ln]
+
+
+def view_of(p: np.ndarray, n_rows: int, n_cols: int, entries: list[tuple[int, int, np.ndarray]]) -> ObstacleView:
+    """obstacle_view from (row, column, hull) entries."""
+    rows = np.array([e[0] for e in entries], dtype=np.int64)
+    cols = np.array([e[1] for e in entries], dtype=np.int64)
+    return obstacle_view(p, n_rows, n_cols, rows, cols, Edges.of([e[2] for e in entries]))

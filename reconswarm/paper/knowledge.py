@@ -53,25 +53,17 @@ class KnownObstacles:
         return sorted(self.hulls.items())
 
 
-def obstacle_view(p: Array, n_rows: int, n_cols: int,
-                  entries: list[tuple[int, int, Array]]) -> ObstacleView:
+def obstacle_view(p: Array, n_rows: int, n_cols: int, rows: NDArray[np.int64], cols: NDArray[np.int64],
+                  edges: Edges) -> ObstacleView:
     """Distances from agents to the hulls they know, as the planner's (N, M) table.
 
-    p (N, 2); entries: (row, column, hull) with columns in increasing obstacle id.
+    p (N, 2); entry q: agent rows[q], column cols[q] (columns in increasing obstacle id), the hull whose
+    edges are row q of `edges` (Edges.of(hulls)). Entries not given are invalid.
     """
-    if not entries:
-        return ObstacleView(np.zeros((n_rows, n_cols)), np.zeros((n_rows, n_cols, 2)),
-                            np.zeros((n_rows, n_cols), dtype=bool))
-    rows = np.array([e[0] for e in entries], dtype=np.int64)
-    cols = np.array([e[1] for e in entries], dtype=np.int64)
-    return view_of_edges(p, n_rows, n_cols, rows, cols, Edges.of([e[2] for e in entries]))
-
-
-def view_of_edges(p: Array, n_rows: int, n_cols: int, rows: NDArray[np.int64], cols: NDArray[np.int64],
-                  edges: Edges) -> ObstacleView:
-    """obstacle_view's table from entries already split: rows (Q,), cols (Q,), the Q hulls' edges (Q,)."""
     view = ObstacleView(np.zeros((n_rows, n_cols)), np.zeros((n_rows, n_cols, 2)),
                         np.zeros((n_rows, n_cols), dtype=bool))
+    if rows.size == 0:
+        return view
     d, nx, ny = signed_distance(p[rows, 0], p[rows, 1], edges)
     view.d[rows, cols] = d
     view.n[rows, cols, 0] = nx

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import norm2
+from reconswarm.geometry import Edges, norm2
 from reconswarm.paper.deadlock import LEADER_STREAM, StallState, generator, stall_step, window_ticks
 from reconswarm.paper.knowledge import obstacle_view
 from reconswarm.paper.planner import attraction, obstacle_repulsion
@@ -39,7 +39,8 @@ class VirtualLeader:
         c = self.cfg
         v = self.v
         u = attraction(v, self.target, np.zeros((1, 2)), c.k_att, c.target_radius_m)
-        view = obstacle_view(v, 1, len(hulls), [(0, m, h) for m, h in enumerate(hulls)])
+        m = len(hulls)
+        view = obstacle_view(v, 1, m, np.zeros(m, dtype=np.int64), np.arange(m), Edges.of(hulls))
         body = np.array([c.target_radius_m])
         rep = obstacle_repulsion(body, view.d, view.n, view.valid, c.d_safe_m, c.d_max_m, c.psi_mps)
         u = u + rep

@@ -168,23 +168,19 @@ def command(cfg: PlannerConfig, p: Array, r: Array, offset: Array, center: Array
     return u + perturbation
 
 
-def neighbour_table(p: Array, r: Array, pairs: NDArray[np.int64], d_max: float) -> Neighbours:
+def neighbour_table(p: Array, r: Array, pairs: NDArray[np.int64], d_max: float, d: Array | None = None) -> Neighbours:
     """Build every agent's table from candidate index pairs (i < j) over the whole swarm.
 
-    p (N, 2), r (N,), pairs (E, 2) -> Neighbours with rows for all N agents, neighbours j sorted by
-    index (the swarm is indexed in increasing id). Pairs beyond d_max,ij are dropped here.
+    p (N, 2), r (N,), pairs (E, 2), d (E,) the pairs' distances norm2(p[i] - p[j]) when the caller has
+    them -> Neighbours with rows for all N agents, neighbours j sorted by index (the swarm is indexed in
+    increasing id). Pairs beyond d_max,ij are dropped here.
     """
-    if pairs.shape[0] == 0:
-        return Neighbours.empty(p.shape[0])
-    return neighbour_table_d(p, r, pairs, norm2(p[pairs[:, 0]] - p[pairs[:, 1]]), d_max)
-
-
-def neighbour_table_d(p: Array, r: Array, pairs: NDArray[np.int64], d: Array, d_max: float) -> Neighbours:
-    """neighbour_table given the pairs' distances d (E,) = norm2(p[i] - p[j])."""
     n = p.shape[0]
     if pairs.shape[0] == 0:
         return Neighbours.empty(n)
     i, j = pairs[:, 0], pairs[:, 1]
+    if d is None:
+        d = norm2(p[i] - p[j])
     keep = d <= r[i] + r[j] + d_max
     if not keep.any():
         return Neighbours.empty(n)

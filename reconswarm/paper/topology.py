@@ -1,7 +1,8 @@
 """The swarm graph and its split / merge events (INTERFACES.md). Pure; used live by the in-process
 engine and by the monitor process.
 
-Edge i–j forms when ‖p_i - p_j‖ <= link_range and, once made, breaks only beyond link_range + 2 m.
+Edge i–j: the pair is linked (reconswarm.paper.link, with hysteresis): it forms when ‖p_i - p_j‖ <= link_range
+and, once made, breaks only beyond link_range + 2 m.
 Groups are the connected components over active agents. A change of the grouping is recorded once the
 new grouping has held for 1 s of simulated time: a group dividing is a *split*, groups joining a
 *merge*, each with the groups before and after (agent ids), timed when the change happened.
@@ -16,8 +17,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from reconswarm.geometry import norm2, pairs_within
+from reconswarm.paper.link import HYSTERESIS_M, linked
 
-HYSTERESIS_M = 2.0
 PERSISTENCE_S = 1.0
 
 Array = NDArray[np.float64]
@@ -44,13 +45,12 @@ def graph_edges(p: Array, active: NDArray[np.bool_], prev: NDArray[np.int64], li
     if not active.all():
         live = active[cand[:, 0]] & active[cand[:, 1]]
         cand, cand_d = cand[live], cand_d[live]
-    keep = cand_d <= link_m
-    band = (~keep & (cand_d <= link_m + hysteresis_m)).nonzero()[0]
+    keep = linked(cand_d, link_m)
+    band = (~keep & (cand_d <= link_m + hysteresis_m)).nonzero()[0]  # linked only if linked before
     if band.size and prev.shape[0]:
         keys = cand[band, 0] * n + cand[band, 1]
         old = prev_keys if prev_keys is not None else np.unique(prev[:, 0] * n + prev[:, 1])
-        at = np.minimum(np.searchsorted(old, keys), old.size - 1)
-        keep[band] = old[at] == keys  # np.isin(keys, old)
+        keep[band] = linked(cand_d[band], link_m, _member(keys, old), hysteresis_m)
     return cand[keep]
 
 
@@ -216,15 +216,13 @@ class TopologyTracker:
     _keys_n: int = 0
     _active_bytes: bytes = b""
 
-    def step(self, t: float, p: Array, active: NDArray[np.bool_],
-             cand: NDArray[np.int64] | None = None) -> list[dict[str, Any]]:
-        """Feed the positions at time t (cand: optional superset of the pairs within link + hysteresis);
-        returns the events confirmed at this tick."""
-        return self.step_pairs(t, p, active, cand)
+    def step(self, t: float, p: Array, active: NDArray[np.bool_], cand: NDArray[np.int64] | None = None,
+             cand_d: Array | None = None) -> list[dict[str, Any]]:
+        """Feed the positions at time t; returns the events confirmed at this tick.
 
-    def step_pairs(self, t: float, p: Array, active: NDArray[np.bool_], cand: NDArray[np.int64] | None = None,
-                   cand_d: Array | None = None) -> list[dict[str, Any]]:
-        """step, with the candidates' norm2 distances (C,) when the caller has them."""
+        cand: optional superset (C, 2) of the pairs within link + hysteresis, cand_d (C,) optionally their
+        norm2 distances.
+        """
         prev_edges = self.edges
         n = p.shape[0]
         if self._keys is None or self._keys_n != n:

@@ -55,7 +55,7 @@ class Recorder:
         else:
             self.max_error_m = float(err[alive].max()) if alive.any() else float("inf")
         gap_a, gap_o, started, ended = self.safety.step(t, p, true_d, cand, cand_d)
-        events = [Event.from_dict(e) for e in self.topology.step_pairs(t, p, alive, cand, cand_d)]
+        events = [Event.from_dict(e) for e in self.topology.step(t, p, alive, cand, cand_d)]
         for ev in events:
             self.event(ev)
         if self.writer is not None:

@@ -13,7 +13,7 @@ from typing import cast
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import SAMPLE_SPACING_M, Edges, norm2, sample_boundary, signed_distance_only, tile_edges
+from reconswarm.geometry import SAMPLE_SPACING_M, Edges, norm2, sample_boundary, signed_distance, tile_edges
 from reconswarm.scenario import Scenario
 
 Array = NDArray[np.float64]
@@ -31,7 +31,6 @@ class ContourField:
     centre: Array  # (M, 2) centre of each polygon's bounding circle
     reach: Array  # (M,) its radius
     _tiled: dict[int, Edges] = field(default_factory=dict, compare=False, repr=False)
-    _one: dict[int, Edges] = field(default_factory=dict, compare=False, repr=False)
     _idx: dict[bytes, tuple[NDArray[np.int64], Array, Array]] = field(default_factory=dict, compare=False, repr=False)
 
     @staticmethod
@@ -51,57 +50,34 @@ class ContourField:
     def n_obstacles(self) -> int:
         return len(self.ids)
 
-    def true_distances(self, p: Array, exact_within_m: float = np.inf) -> Array:
+    def true_distances(self, p: Array, exact_within_m: float = np.inf, radii: Array | None = None) -> Array:
         """Signed distance from every head point to every obstacle: p (N, 2) -> d (N, M).
 
-        Exact wherever the distance is <= exact_within_m; beyond, a lower bound from the obstacle's
-        bounding circle (still > exact_within_m), which saves the work for far-away obstacles.
+        Exact wherever the distance is <= exact_within_m; beyond, possibly a lower bound from the
+        obstacle's bounding circle (still > exact_within_m), which saves the work for far-away obstacles.
+        With radii (N,), also exact for the pair(s) that hold the minimum of d - radii (the smallest
+        surface gap): a pair is left at its lower bound only if that bound cannot hold the minimum.
         """
         n, m = p.shape[0], self.n_obstacles
         if m == 0:
             return np.zeros((n, 0))
-        if not np.isinf(exact_within_m):
-            bound = norm2(p[:, None, :] - self.centre[None, :, :]) - self.reach  # (N, M)
-            if not (bound <= exact_within_m).any():
-                return bound
-        return self._exact_all(p)
-
-    def _exact_all(self, p: Array) -> Array:
-        """Exact signed distance from every head point to every obstacle: (N, 2) -> (N, M)."""
-        n = p.shape[0]
-        tiled = self._tiled.get(n)
-        if tiled is None:
-            tiled = self._tiled[n] = tile_edges(self.edges, n)
-        return signed_distance_only(p[:, 0:1], p[:, 1:2], tiled)
-
-    def distances_for_engine(self, p: Array, exact_within_m: float, radii: Array) -> Array:
-        """true_distances(p, exact_within_m) with the exact values computed only where they can matter.
-
-        p (N, 2), radii (N,) -> d (N, M). Identical to true_distances wherever the bound is within
-        exact_within_m (so wherever d <= exact_within_m), and gives the same minimum of d - radii: a pair
-        is left at its lower bound only if that bound cannot hold the minimum. Everything else stays
-        above exact_within_m, as in true_distances.
-        """
-        n, m = p.shape[0], self.n_obstacles
-        if m == 0:
-            return np.zeros((n, 0))
+        if np.isinf(exact_within_m) or n * m <= 256:  # small: exact everywhere is cheaper than picking
+            return self._exact_all(p)
         bound = norm2(p[:, None, :] - self.centre[None, :, :]) - self.reach  # (N, M)
         close = bound <= exact_within_m
+        if radii is None:
+            if not close.any():
+                return bound
+            return self._exact_all(p)
+        out = bound.copy()
+        gap = bound - radii[:, None]
         if not close.any():  # all far: exact for the pair(s) that can hold the minimum gap, bounds elsewhere
-            out = bound.copy()
-            gap = bound - radii[:, None]
             i, j = divmod(int(gap.argmin()), m)
-            one = self._one.get(j)
-            if one is None:
-                one = self._one[j] = self._edges_of(np.array([j]))
-            out[i, j] = float(signed_distance_only(p[i:i + 1, 0], p[i:i + 1, 1], one)[0])
+            out[i, j] = float(self._exact(p, np.array([i]), np.array([j]))[0])
             rows, cols = (gap < out[i, j] - radii[i]).nonzero()
             if rows.size:
                 out[rows, cols] = self._exact(p, rows, cols)
             return out
-        if n * m <= 256:  # small: exact everywhere, as true_distances, is cheaper than picking
-            return self._exact_all(p)
-        out = bound.copy()
         rows, cols = np.nonzero(close)
         out[rows, cols] = self._exact(p, rows, cols)
         gap = out - radii[:, None]  # exact where close, a lower bound elsewhere
@@ -110,12 +86,20 @@ class ContourField:
             out[rows, cols] = self._exact(p, rows, cols)
         return out
 
+    def _exact_all(self, p: Array) -> Array:
+        """Exact signed distance from every head point to every obstacle: (N, 2) -> (N, M)."""
+        n = p.shape[0]
+        tiled = self._tiled.get(n)
+        if tiled is None:
+            tiled = self._tiled[n] = tile_edges(self.edges, n)
+        return signed_distance(p[:, 0:1], p[:, 1:2], tiled, normals=False)
+
     def _exact(self, p: Array, rows: NDArray[np.int64], cols: NDArray[np.int64]) -> Array:
         """Signed distance of head point rows[q] to obstacle cols[q]: (Q,), (Q,) -> (Q,).
 
         The same edges (padded alike) and element-wise arithmetic as the tiled call in true_distances.
         """
-        return signed_distance_only(p[rows, 0], p[rows, 1], self._edges_of(cols))
+        return signed_distance(p[rows, 0], p[rows, 1], self._edges_of(cols), normals=False)
 
     def _edges_of(self, cols: NDArray[np.int64]) -> Edges:
         """The true polygons' edges for the given obstacle columns, one row each: (Q,) -> Edges (Q, V)."""

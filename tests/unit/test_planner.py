@@ -16,7 +16,6 @@ from hypothesis import strategies as st
 from shapely.geometry import Point, Polygon
 
 from reconswarm.geometry import pairs_within
-from reconswarm.paper.knowledge import obstacle_view
 from reconswarm.paper.planner import (
     Neighbours,
     ObstacleView,
@@ -30,6 +29,7 @@ from reconswarm.paper.planner import (
     repulsion_speed,
 )
 from reconswarm.scenario import PlannerConfig
+from tests.support import view_of
 
 SETTINGS = settings(max_examples=120, deadline=None)
 H = 1e-4  # finite-difference step (m)
@@ -340,7 +340,7 @@ def test_obstacle_repulsion_is_minus_gradient_with_surface_distance(poly, ri, d_
     def u_rep(x: np.ndarray) -> float:
         return u_rep_term(poly_distance(shape, x), ri + d_safe, ri + d_max, psi)
 
-    view = obstacle_view(p[None], 1, 1, [(0, 0, poly)])
+    view = view_of(p[None], 1, 1, [(0, 0, poly)])
     got = obstacle_repulsion(np.array([ri]), view.d, view.n, view.valid, d_safe, d_max, psi)[0]
     # (h small: where the face and vertex regions meet, the distance's curvature jumps, so the central
     # difference is only O(h / d) accurate there.)
@@ -358,7 +358,7 @@ def test_obstacle_repulsion_bounds_against_a_face():
     ri, d_safe, d_max, psi = 3.0, 2.0, 10.0, -65.0
 
     def rep(d: float) -> np.ndarray:
-        view = obstacle_view(np.array([[10.0 + d, 4.0]]), 1, 1, [(0, 0, sq)])
+        view = view_of(np.array([[10.0 + d, 4.0]]), 1, 1, [(0, 0, sq)])
         return obstacle_repulsion(np.array([ri]), view.d, view.n, view.valid, d_safe, d_max, psi)[0]
 
     np.testing.assert_allclose(rep(ri + d_safe), [65.0, 0.0], atol=1e-12)  # |Ψ| at d_min = r + d_safe
@@ -366,13 +366,13 @@ def test_obstacle_repulsion_bounds_against_a_face():
     assert np.array_equal(rep(ri + d_max + 0.5), np.zeros(2))
     np.testing.assert_allclose(rep(ri + d_safe + 2.0), [65.0 * 6 / 8, 0.0], atol=1e-12)  # linear
     # Inside the obstacle (d < 0) the line continues upward and still pushes out through the near face.
-    view = obstacle_view(np.array([[9.0, 4.0]]), 1, 1, [(0, 0, sq)])
+    view = view_of(np.array([[9.0, 4.0]]), 1, 1, [(0, 0, sq)])
     assert view.d[0, 0] == pytest.approx(-1.0)
     u = obstacle_repulsion(np.array([ri]), view.d, view.n, view.valid, d_safe, d_max, psi)[0]
     np.testing.assert_allclose(u, [65.0 * (13 + 1) / 8, 0.0], atol=1e-12)
     # Near a corner the push points from the corner to the agent.
     p = np.array([[10.0 + 3.0, 10.0 + 4.0]])  # 5 m from (10, 10)
-    view = obstacle_view(p, 1, 1, [(0, 0, sq)])
+    view = view_of(p, 1, 1, [(0, 0, sq)])
     u = obstacle_repulsion(np.array([ri]), view.d, view.n, view.valid, d_safe, d_max, psi)[0]
     np.testing.assert_allclose(u, 65.0 * 8 / 8 * np.array([0.6, 0.8]), atol=1e-12)
 
@@ -381,14 +381,14 @@ def test_obstacle_view_columns_and_validity():
     sq = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
     tri = np.array([[20.0, 0.0], [30.0, 0.0], [25.0, 8.0]])
     p = np.array([[15.0, 5.0], [-5.0, 5.0]])
-    view = obstacle_view(p, 2, 2, [(0, 0, sq), (0, 1, tri), (1, 0, sq)])
+    view = view_of(p, 2, 2, [(0, 0, sq), (0, 1, tri), (1, 0, sq)])
     assert view.valid.tolist() == [[True, True], [True, False]]
     assert view.d[0, 0] == pytest.approx(5.0) and view.d[1, 0] == pytest.approx(5.0)
     assert view.d[0, 1] == pytest.approx(Polygon(tri).distance(Point(15.0, 5.0)))
     np.testing.assert_allclose(view.n[1, 0], [-1.0, 0.0])
     # A knowledge of one sample point (a 1-vertex hull) or a segment still gives a distance and a direction.
     seg = np.array([[10.0, -1.0], [10.0, 9.0]])
-    v1 = obstacle_view(np.array([[3.0, 4.0]]), 1, 2, [(0, 0, np.zeros((1, 2))), (0, 1, seg)])
+    v1 = view_of(np.array([[3.0, 4.0]]), 1, 2, [(0, 0, np.zeros((1, 2))), (0, 1, seg)])
     np.testing.assert_allclose(v1.d[0], [5.0, 7.0])
     np.testing.assert_allclose(v1.n[0, 0], [0.6, 0.8])
     np.testing.assert_allclose(v1.n[0, 1], [-1.0, 0.0])
@@ -453,7 +453,7 @@ def test_command_is_minus_gradient_of_total_potential(seed, px, py):
         return u
 
     nb = Neighbours(nb_p[None], nb_r[None], np.ones((1, 3), bool))
-    ob = obstacle_view(p[None], 1, 1, [(0, 0, poly)])
+    ob = view_of(p[None], 1, 1, [(0, 0, poly)])
     pert = np.array([[0.3, -0.2]])
     got = command(CFG, p[None], np.array([ri]), delta[None], c[None], nb, ob, pert)[0]
     want = -grad_fd(total, p, h=1e-5) + pert[0]

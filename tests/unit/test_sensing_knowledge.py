@@ -75,9 +75,8 @@ def test_scan_returns_exactly_the_samples_within_range(seed, n, rv):
     p = rng.uniform(-80, 140, (n, 2))
     want = {(i, s) for i in range(n) for s in range(FIELD.samples.shape[0])
             if math.sqrt((p[i, 0] - FIELD.samples[s, 0]) ** 2 + (p[i, 1] - FIELD.samples[s, 1]) ** 2) <= rv}
-    variants = [FIELD.true_distances(p), FIELD.true_distances(p, exact_within_m=rv)]
-    if hasattr(FIELD, "distances_for_engine"):
-        variants.append(FIELD.distances_for_engine(p, rv, np.ones(n)))
+    variants = [FIELD.true_distances(p), FIELD.true_distances(p, exact_within_m=rv),
+                FIELD.true_distances(p, rv, np.ones(n))]
     for true_d in variants:
         a, s = FIELD.scan(p, rv, true_d)
         got = list(zip(a.tolist(), s.tolist(), strict=True))
@@ -86,10 +85,10 @@ def test_scan_returns_exactly_the_samples_within_range(seed, n, rv):
 
 
 @SETTINGS
-@given(st.integers(0, 2**32 - 1), st.floats(1.0, 50.0))
-def test_true_distances_exact_near_and_a_lower_bound_far(seed, within):
+@given(st.integers(0, 2**32 - 1), st.floats(1.0, 50.0), st.sampled_from([12, 100]))
+def test_true_distances_exact_near_and_a_lower_bound_far(seed, within, n):
     rng = np.random.default_rng(seed)
-    p = rng.uniform(-300, 400, (12, 2))
+    p = rng.uniform(-300, 400, (n, 2))  # n * M above 256: bounds far away; below: exact everywhere
     exact = FIELD.true_distances(p)
     for i in range(p.shape[0]):
         for m in range(FIELD.n_obstacles):
@@ -104,13 +103,11 @@ def test_true_distances_exact_near_and_a_lower_bound_far(seed, within):
         np.testing.assert_array_equal(fast, exact)
     else:
         assert np.all(fast > within) and np.all(fast <= exact + 1e-9)
-    if hasattr(FIELD, "distances_for_engine"):
-        radii = np.asarray(rng.uniform(1.0, 5.0, p.shape[0]), dtype=np.float64)
-        eng = FIELD.distances_for_engine(p, within, radii)
-        np.testing.assert_array_equal(eng[close], exact[close])
-        assert np.all(eng[~close] > within) and np.all(eng <= exact + 1e-9)
-        if close.any():  # (when nothing is close, every value is a bound: see test_engine's xfail)
-            assert (eng - radii[:, None]).min() == pytest.approx((exact - radii[:, None]).min(), abs=1e-12)
+    radii = np.asarray(rng.uniform(1.0, 5.0, p.shape[0]), dtype=np.float64)
+    eng = FIELD.true_distances(p, within, radii)  # also exact for the smallest surface gap
+    np.testing.assert_array_equal(eng[close], exact[close])
+    assert np.all(eng[~close] > within) and np.all(eng <= exact + 1e-9)
+    assert (eng - radii[:, None]).min() == (exact - radii[:, None]).min()
 
 
 # ------------------------------------------------------------------------------------------ knowledge
