@@ -18,7 +18,7 @@ from reconswarm.paper.knowledge import KnownObstacles, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
 from reconswarm.paper.link import linked
 from reconswarm.paper.planner import Neighbours, ObstacleView, command, errors, repulsion
-from reconswarm.scenario import Scenario
+from reconswarm.scenario import PlannerKind, Scenario
 
 Array = NDArray[np.float64]
 
@@ -54,7 +54,7 @@ class AgentBrain:
         self._seen: set[tuple[float, float]] = set()  # contour points already merged (merging again is a no-op)
         w = window_ticks(self.cfg.stall_window_s, s.meta.dt_s)
         self.stall = StallState.create(1, w, [generator(s.meta.seed, agent_id)])
-        self.leader = VirtualLeader(s) if self.cfg.kind == "virtual-leader" else None
+        self.leader = VirtualLeader(s) if self.cfg.kind == PlannerKind.VIRTUAL_LEADER else None
 
     def linked(self, p: Array, peers: list[Peer]) -> list[int]:
         """Ids of peers within link range of head point p (2,): whose obstacle sets we merge."""

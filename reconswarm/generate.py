@@ -14,7 +14,15 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.scenario import AgentSpec, ObstacleSpec, PlannerConfig, Scenario, ScenarioMeta, WorldConfig
+from reconswarm.scenario import (
+    AgentSpec,
+    ObstacleSpec,
+    PlannerConfig,
+    PlannerKind,
+    Scenario,
+    ScenarioMeta,
+    WorldConfig,
+)
 
 R_MIN_M, R_MAX_M = 2.5, 5.0
 D_SAFE_M, D_MAX_M = 2.0, 10.0
@@ -95,7 +103,7 @@ def generate(n_agents: int, n_obstacles: int = 3, seed: int = 0) -> Scenario:
     duration = math.ceil((2.5 * travel + 3.0 * settle) / 10.0) * 10.0
     return Scenario(
         meta=ScenarioMeta(name=f"gen-n{n_agents}-m{n_obstacles}-s{seed}", seed=seed, duration_s=duration, dt_s=0.05),
-        planner=PlannerConfig(kind="reconfigurable", k_att=k_att, target_radius_m=float(r_c), psi_mps=-65.0,
+        planner=PlannerConfig(kind=PlannerKind.RECONFIGURABLE, k_att=k_att, target_radius_m=float(r_c), psi_mps=-65.0,
                               d_safe_m=D_SAFE_M, d_max_m=D_MAX_M, sensing_range_m=40.0, link_range_m=40.0,
                               perturbation_mps=1.0, converge_tol_m=0.5),
         world=WorldConfig(),

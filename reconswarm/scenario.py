@@ -9,6 +9,7 @@ import math
 import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +26,15 @@ from reconswarm.geometry import (
     polygon_area,
 )
 
-PLANNERS = ("reconfigurable", "virtual-leader")
+
+class PlannerKind(StrEnum):
+    """Which law the agents run: the paper's reconfigurable APF or the virtual-leader benchmark."""
+
+    RECONFIGURABLE = "reconfigurable"
+    VIRTUAL_LEADER = "virtual-leader"
+
+
+PLANNERS = tuple(k.value for k in PlannerKind)
 
 
 @dataclass(frozen=True)
@@ -38,7 +47,7 @@ class ScenarioMeta:
 
 @dataclass(frozen=True)
 class PlannerConfig:
-    kind: str
+    kind: PlannerKind
     k_att: float
     target_radius_m: float
     psi_mps: float
@@ -120,12 +129,12 @@ class Scenario:
                 return k
         raise KeyError(agent_id)
 
-    def with_planner(self, kind: str) -> Scenario:
+    def with_planner(self, kind: str | PlannerKind) -> Scenario:
         from dataclasses import replace
 
         if kind not in PLANNERS:
             raise BadInput(f"--planner: unknown planner {kind!r} (expected one of {', '.join(PLANNERS)})")
-        return replace(self, planner=replace(self.planner, kind=kind))
+        return replace(self, planner=replace(self.planner, kind=PlannerKind(kind)))
 
     def with_seed(self, seed: int) -> Scenario:
         from dataclasses import replace
@@ -291,7 +300,7 @@ def _build(data: dict[str, Any], src: str) -> tuple[Scenario, None]:
         raise r.fail("planner.kind", f"expected one of {', '.join(PLANNERS)}, got {kind!r}")
     pos = {"check": lambda v: v > 0, "need": "> 0"}
     planner = PlannerConfig(
-        kind=kind,
+        kind=PlannerKind(kind),
         k_att=r.number(pl, "planner", "k_att", **pos),  # type: ignore[arg-type]
         target_radius_m=r.number(pl, "planner", "target_radius_m", **pos),  # type: ignore[arg-type]
         psi_mps=r.number(pl, "planner", "psi_mps", check=lambda v: v < 0, need="negative (Ψ < 0, as in the paper)"),
@@ -461,7 +470,7 @@ def to_toml(s: Scenario) -> str:
         f"dt_s = {_f(s.meta.dt_s)}",
         "",
         "[planner]",
-        f'kind = "{p.kind}"',
+        f'kind = "{p.kind.value}"',
     ]
     for key in ("k_att", "target_radius_m", "psi_mps", "d_safe_m", "d_max_m", "sensing_range_m", "link_range_m",
                 "perturbation_mps", "converge_tol_m", "stall_window_s"):

@@ -99,7 +99,7 @@ def scenario_check(file: Annotated[Path, typer.Argument(help="Scenario TOML file
         return
     for w in warns:
         typer.echo(f"warning: {w}", err=True)
-    typer.echo(f"{file}: ok ({len(s.agents)} agents, {len(s.obstacles)} obstacles, planner {s.planner.kind})")
+    typer.echo(f"{file}: ok ({len(s.agents)} agents, {len(s.obstacles)} obstacles, planner {s.planner.kind.value})")
 
 
 def _register() -> None:

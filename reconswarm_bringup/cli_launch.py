@@ -10,6 +10,7 @@ from typing import Annotated
 import typer
 
 from reconswarm.errors import BadInput, ReconswarmError
+from reconswarm.scenario import PLANNERS
 from reconswarm_bringup.console import fail, set_debug
 from reconswarm_bringup.fleet import ROOT
 
@@ -50,7 +51,7 @@ def launch_cmd(
     try:
         if clock not in ("lockstep", "realtime"):
             raise BadInput(f"--clock: expected lockstep or realtime, got {clock!r}")
-        if planner is not None and planner not in ("reconfigurable", "virtual-leader"):
+        if planner is not None and planner not in PLANNERS:
             raise BadInput(f"--planner: expected reconfigurable or virtual-leader, got {planner!r}")
         if hosts not in (1, 2):
             raise BadInput(f"--hosts: expected 1 or 2, got {hosts}")

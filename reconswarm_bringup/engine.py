@@ -35,7 +35,7 @@ from reconswarm.paper.planner import ObstacleView, command, errors, neighbour_ta
 from reconswarm.record.recorder import Recorder
 from reconswarm.record.store import RunRecord, RunWriter
 from reconswarm.record.summary import summarize
-from reconswarm.scenario import Scenario
+from reconswarm.scenario import PlannerKind, Scenario
 from reconswarm.sim import unicycle
 from reconswarm.sim.sensing import ContourField
 
@@ -71,7 +71,7 @@ class Engine:
         self.know = SwarmKnowledge(self.field.samples, self.field.start, self.field.count, self.n)
         w = window_ticks(self.cfg.stall_window_s, s.meta.dt_s)
         self.stall = StallState.create(self.n, w, [generator(s.meta.seed, int(i)) for i in self.ids])
-        self.leader = VirtualLeader(s) if self.cfg.kind == "virtual-leader" else None
+        self.leader = VirtualLeader(s) if self.cfg.kind == PlannerKind.VIRTUAL_LEADER else None
         self.rmax = float(self.r.max())
         self.true_d = np.zeros((self.n, self.field.n_obstacles))
         self.reach_m = max(self.cfg.link_range_m + HYSTERESIS_M, 2 * self.rmax + self.cfg.d_max_m)

@@ -73,7 +73,7 @@ class RunWriter:
         self.db.execute("BEGIN")
         existing = dict(self.db.execute("SELECT key, value FROM meta").fetchall())
         if not existing:
-            self.set_meta(schema=SCHEMA_VERSION, scenario=scenario.meta.name, planner=scenario.planner.kind,
+            self.set_meta(schema=SCHEMA_VERSION, scenario=scenario.meta.name, planner=scenario.planner.kind.value,
                           mode=mode, scenario_toml=to_toml(scenario), scenario_source=scenario.source,
                           agent_ids=json.dumps([a.id for a in scenario.agents]),
                           started_unix=f"{time.time():.3f}", finished="0")

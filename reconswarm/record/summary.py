@@ -54,7 +54,7 @@ def summarize(rec: RunRecord) -> dict[str, Any]:
     wall = rec.meta.get("wall_time_s")
     out: dict[str, Any] = {
         "scenario": rec.meta.get("scenario", s.meta.name),
-        "planner": rec.meta.get("planner", s.planner.kind),
+        "planner": rec.meta.get("planner", s.planner.kind.value),
         "mode": rec.meta.get("mode"),
         "agents": len(rec.ids),
         "duration_s": _r(float(tk.t[-1]) if tk.t.size else 0.0),

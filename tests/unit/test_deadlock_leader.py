@@ -9,7 +9,7 @@ import pytest
 
 from reconswarm.paper.deadlock import ESCAPE_WINDOWS, StallState, generator, stall_step, window_ticks
 from reconswarm.paper.leader import VirtualLeader
-from reconswarm.scenario import AgentSpec, PlannerConfig, Scenario, ScenarioMeta, WorldConfig
+from reconswarm.scenario import AgentSpec, PlannerConfig, PlannerKind, Scenario, ScenarioMeta, WorldConfig
 
 K_ATT, R_C, TOL, DT = 0.08, 80.0, 0.5, 0.05
 
@@ -118,7 +118,7 @@ def leader_scenario(starts, perturbation: float = 0.0) -> Scenario:
     agents = tuple(AgentSpec(id=i + 1, start_m=(float(x), float(y)), radius_m=2.0, offset_m=(25.0 * i, 0.0))
                    for i, (x, y) in enumerate(starts))
     return Scenario(ScenarioMeta("lead", 3, 300.0, DT),
-                    PlannerConfig("virtual-leader", K_ATT, R_C, -65.0, 2.0, 10.0, 40.0, 40.0, perturbation),
+                    PlannerConfig(PlannerKind.VIRTUAL_LEADER, K_ATT, R_C, -65.0, 2.0, 10.0, 40.0, 40.0, perturbation),
                     WorldConfig(), (800.0, 100.0), agents, ())
 
 

@@ -28,7 +28,7 @@ from reconswarm.paper.planner import (
     obstacle_repulsion,
     repulsion_speed,
 )
-from reconswarm.scenario import PlannerConfig
+from reconswarm.scenario import PlannerConfig, PlannerKind
 from tests.support import view_of
 
 SETTINGS = settings(max_examples=120, deadline=None)
@@ -422,7 +422,7 @@ def test_containment_is_minus_gradient_of_wall_potential(rc, ri, a, frac):
 # ------------------------------------------------------------------------------------------ eq. (7)
 
 
-CFG = PlannerConfig(kind="reconfigurable", k_att=0.08, target_radius_m=80.0, psi_mps=-65.0, d_safe_m=2.0,
+CFG = PlannerConfig(kind=PlannerKind.RECONFIGURABLE, k_att=0.08, target_radius_m=80.0, psi_mps=-65.0, d_safe_m=2.0,
                     d_max_m=10.0, sensing_range_m=40.0, link_range_m=40.0)
 
 
@@ -472,7 +472,7 @@ def test_command_virtual_leader_adds_feedforward_and_containment():
     ob = ObstacleView.empty(n)
     vel = np.broadcast_to(np.array([[6.4, 0.0]]), (n, 2))
     pert = np.zeros((n, 2))
-    cfg = PlannerConfig(**{**CFG.__dict__, "kind": "virtual-leader"})
+    cfg = PlannerConfig(**{**CFG.__dict__, "kind": PlannerKind.VIRTUAL_LEADER})
     got = command(cfg, p, r, off, center, nb, ob, pert, vel)
     want = (attraction(p, center, off, cfg.k_att, cfg.target_radius_m)
             + agent_repulsion(p, r, nb.p, nb.r, nb.valid, cfg.d_safe_m, cfg.d_max_m, cfg.psi_mps)

@@ -12,7 +12,7 @@ from shapely.geometry import Point, Polygon
 
 from reconswarm.geometry import convex_hull, merge_hull
 from reconswarm.paper.knowledge import KnownObstacles, SwarmKnowledge
-from reconswarm.scenario import AgentSpec, ObstacleSpec, PlannerConfig, Scenario, ScenarioMeta, WorldConfig
+from reconswarm.scenario import AgentSpec, ObstacleSpec, PlannerConfig, PlannerKind, Scenario, ScenarioMeta, WorldConfig
 from reconswarm.sim.sensing import ContourField
 
 SETTINGS = settings(max_examples=60, deadline=None)
@@ -33,7 +33,7 @@ def scenario_with(obstacles: dict[str, np.ndarray], starts: np.ndarray | None = 
     obs = tuple(ObstacleSpec(id=k, vertices_m=tuple((float(x), float(y)) for x, y in v))
                 for k, v in sorted(obstacles.items()))
     return Scenario(ScenarioMeta("t", 0, 10.0, 0.05),
-                    PlannerConfig("reconfigurable", 0.08, 80.0, -65.0, 2.0, 10.0, rv, link),
+                    PlannerConfig(PlannerKind.RECONFIGURABLE, 0.08, 80.0, -65.0, 2.0, 10.0, rv, link),
                     WorldConfig(), (2000.0, 0.0), agents, obs)
 
 
