@@ -237,8 +237,18 @@ def signed_distance(px: Array, py: Array, e: Edges, *, normals: bool = True) -> 
     apx = px[..., None] - e.ax
     apy = py[..., None] - e.ay
     shape = apx.shape
-    v = shape[-1]
     same = e.abx.shape == shape
+    if not normals:  # the same operations in the broadcast shape, reduced over the last axis
+        abx = e.abx if same else np.broadcast_to(e.abx, shape)
+        aby = e.aby if same else np.broadcast_to(e.aby, shape)
+        t = (apx * abx + apy * aby) * e.inv_den
+        np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)  # clip to [0, 1]
+        dx = apx - t * abx
+        dy = apy - t * aby
+        dist = np.sqrt((dx * dx + dy * dy + e.pad).min(axis=-1))
+        inside = ((abx * apy - aby * apx >= 0.0) | e.invalid).all(axis=-1) & e.closed
+        return np.where(inside, -dist, dist)
+    v = shape[-1]
 
     def full(a: NDArray[Any]) -> NDArray[Any]:
         return (a if same else np.broadcast_to(a, shape)).reshape(-1, v)
@@ -248,7 +258,7 @@ def signed_distance(px: Array, py: Array, e: Edges, *, normals: bool = True) -> 
     abx = full(e.abx)
     aby = full(e.aby)
     t = (apx * abx + apy * aby) * full(e.inv_den)
-    np.clip(t, 0.0, 1.0, out=t)
+    np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)  # clip to [0, 1]
     dx = apx - t * abx  # p - q
     dy = apy - t * aby
     d2 = dx * dx + dy * dy + full(e.pad)
@@ -256,9 +266,6 @@ def signed_distance(px: Array, py: Array, e: Edges, *, normals: bool = True) -> 
     inside = ((cross >= 0.0) | full(e.invalid)).all(axis=1)
     inside &= (e.closed if same else np.broadcast_to(e.closed, shape[:-1])).reshape(-1)
     out = shape[:-1]
-    if not normals:
-        dist = np.sqrt(d2.min(axis=1))
-        return np.where(inside, -dist, dist).reshape(out)
     k = np.argmin(d2, axis=1)
     rows = np.arange(k.shape[0])
     dist = np.sqrt(d2[rows, k])
@@ -340,3 +347,33 @@ def pairs_and_distances(points: Array, radius: float) -> tuple[NDArray[np.int64]
     out[:, 0] = i[keep]
     out[:, 1] = j[keep]
     return out, d[keep]
+
+
+class NearPairs:
+    """pairs_and_distances(points, radius) for a point set that moves a little every call (a Verlet list).
+
+    Large sets: the pairs within radius + skin are found once (k-d tree, sorted) and reused while no point
+    has moved more than skin / 2 since; each call then only measures those candidates. A pair within
+    radius now was within radius + skin then, so the result is the same pairs in the same order with the
+    same norm2 distances as pairs_and_distances. Small sets (dense search) go straight through.
+    """
+
+    def __init__(self, radius: float, skin: float) -> None:
+        self.radius, self.skin = radius, skin
+        self._ref = np.zeros((0, 2))
+        self._cand = np.zeros((0, 2), dtype=np.int64)
+        self._i = self._j = np.zeros(0, dtype=np.int64)
+
+    def __call__(self, points: Array) -> tuple[NDArray[np.int64], Array]:
+        if points.shape[0] <= 96:
+            return pairs_and_distances(points, self.radius)
+        if self._ref.shape != points.shape or 2 * float(norm2(points - self._ref).max()) > self.skin - 1e-6:
+            self._cand = pairs_and_distances(points, self.radius + self.skin)[0]
+            self._i, self._j = self._cand[:, 0].copy(), self._cand[:, 1].copy()
+            self._ref = points.copy()
+        x, y = points[:, 0], points[:, 1]
+        dx = x[self._i] - x[self._j]  # norm2(points[i] - points[j]), coordinate by coordinate
+        dy = y[self._i] - y[self._j]
+        d = np.sqrt(dx * dx + dy * dy)
+        keep = d <= self.radius
+        return self._cand[keep], d[keep]

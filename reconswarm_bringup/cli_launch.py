@@ -10,7 +10,6 @@ from typing import Annotated
 import typer
 
 from reconswarm.errors import BadInput, ReconswarmError
-from reconswarm.scenario import PLANNERS
 from reconswarm_bringup.console import fail, set_debug
 from reconswarm_bringup.fleet import ROOT
 
@@ -41,6 +40,7 @@ def launch_cmd(
     debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False,
 ) -> None:
     """Run the mission as separate processes over Zenoh on this machine (router, simworld, monitor, agents)."""
+    from reconswarm.scenario import PLANNERS
     from reconswarm_bringup import faults as faults_mod
     from reconswarm_bringup import validate
     from reconswarm_bringup.config import LaunchConfig

@@ -26,7 +26,7 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import Edges, pairs_and_distances
+from reconswarm.geometry import Edges, NearPairs
 from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
 from reconswarm.paper.knowledge import SwarmKnowledge, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
@@ -75,6 +75,8 @@ class Engine:
         self.rmax = float(self.r.max())
         self.true_d = np.zeros((self.n, self.field.n_obstacles))
         self.reach_m = max(self.cfg.link_range_m + HYSTERESIS_M, 2 * self.rmax + self.cfg.d_max_m)
+        self.pairs = NearPairs(self.reach_m, 0.25 * self.reach_m)
+        self.pairs(self.p)  # (the first call of a large swarm loads the k-d tree: not in the mission loop)
         self.near = np.zeros((0, 2), dtype=np.int64)
         self.near_d = np.zeros(0)  # (E,) norm2 distance of each pair in self.near
         self.slot_error: Array | None = None
@@ -95,7 +97,7 @@ class Engine:
         near_any = self.true_d.size > 0 and float(self.true_d.min()) <= self.exact_within_m
         qa, qs = self.field.scan(p, c.sensing_range_m, self.true_d) if near_any else (_NO_INDEX, _NO_INDEX)
         # (E, 2) superset of every pair any step needs, and their distances
-        self.near, self.near_d = pairs_and_distances(p, self.reach_m)
+        self.near, self.near_d = self.pairs(p)
         self.know.update(qa, qs, self.near[linked(self.near_d, c.link_range_m)])
 
         nb = neighbour_table(p, self.r, self.near, c.d_max_m, self.near_d)
