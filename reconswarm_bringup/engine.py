@@ -128,7 +128,7 @@ class Engine:
         if self.field.n_obstacles == 0:
             return ObstacleView.empty(n)
         reach = self.true_d <= self.ob_reach[:, None]  # (N, M)
-        cols = cast(NDArray[np.bool_], reach.any(axis=0)).nonzero()[0]
+        cols = cast("NDArray[np.bool_]", reach.any(axis=0)).nonzero()[0]
         if cols.size == 0:
             return self._no_obstacle
         rows_l: list[NDArray[np.int64]] = []

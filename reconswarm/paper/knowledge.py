@@ -95,6 +95,7 @@ class SwarmKnowledge:
         self.mask_of = (np.uint8(0x80) >> (bit % 8).astype(np.uint8)).astype(np.uint8)
         self.bits = np.zeros((n_agents, int(self.b1[-1]) if count.size else 0), dtype=np.uint8)  # (N, B)
         self._cache: dict[tuple[int, bytes], Array] = {}
+        self._last: dict[tuple[int, int], tuple[NDArray[np.uint8], Array]] = {}  # (i, l) -> last (block, hull)
         # OR of every agent's bits (only sensing adds to it: sharing moves bits between agents). (B,)
         self.union = np.zeros(self.bits.shape[1], dtype=np.uint8)
         self.union_prev = self.union.copy()  # the union before the last update (B,)
@@ -248,20 +249,34 @@ class SwarmKnowledge:
         """knows(l)[rows]. rows (R,) -> (R,)"""
         return np.any(self.bits[rows, self.b0[l]:self.b1[l]] != 0, axis=1)
 
-    def hull_of_bits(self, l: int, block: NDArray[np.uint8]) -> Array:
+    def hull_of_bits(self, l: int, block: NDArray[np.uint8], since: tuple[NDArray[np.uint8], Array] | None = None
+                     ) -> Array:
+        """Canonical hull of the samples of obstacle l flagged in block. since: an earlier (block, hull) whose
+        bits block includes: then the hull grows from that hull by the new samples only (merge_hull, as an
+        agent process does), instead of from every sample."""
         key = (l, block.tobytes())
         hull = self._cache.get(key)
         if hull is None:
-            flags = np.unpackbits(block)[: int(self.count[l])].astype(bool)
-            s0 = int(self.start[l])
-            hull = convex_hull(self.samples[s0:s0 + int(self.count[l])][flags])
+            if since is not None and not (since[0] & ~block).any():
+                hull = merge_hull(since[1], self._samples_of(l, block & ~since[0]))
+            else:
+                hull = convex_hull(self._samples_of(l, block))
             if len(self._cache) > 200_000:
                 self._cache.clear()
             self._cache[key] = hull
         return hull
 
+    def _samples_of(self, l: int, block: NDArray[np.uint8]) -> Array:
+        """The contour samples of obstacle l flagged in block (its bytes). -> (P, 2)"""
+        flags = np.unpackbits(block)[: int(self.count[l])].astype(bool)
+        s0 = int(self.start[l])
+        return self.samples[s0:s0 + int(self.count[l])][flags]
+
     def hull(self, i: int, l: int) -> Array:
-        return self.hull_of_bits(l, self.bits[i, self.b0[l]:self.b1[l]])
+        block = self.bits[i, self.b0[l]:self.b1[l]]
+        hull = self.hull_of_bits(l, block, self._last.get((i, l)))
+        self._last[(i, l)] = (block.copy(), hull)  # where agent i's next hull of l grows from
+        return hull
 
     def hulls(self, rows: NDArray[np.int64], l: int) -> list[Array]:
         """[hull(i, l) for i in rows], reusing each agent's hull while its knowledge of l is unchanged."""

@@ -117,10 +117,10 @@ class ContourField:
         if self.n_obstacles == 0:
             return empty, empty
         hit = true_d <= sensing_range_m  # (N, M)
-        seen = cast(NDArray[np.bool_], hit.any(axis=0)).nonzero()[0]
+        seen = cast("NDArray[np.bool_]", hit.any(axis=0)).nonzero()[0]
         if seen.size == 0:
             return empty, empty
-        near = cast(NDArray[np.bool_], hit[:, seen].any(axis=1)).nonzero()[0]  # (n,) agents near any of them
+        near = cast("NDArray[np.bool_]", hit[:, seen].any(axis=1)).nonzero()[0]  # (n,) agents near any of them
         idx, sx, sy = self._sample_index(seen)  # (S',) increasing, and the samples' coordinates
         if seen.size > 1 and near.size * idx.size > 4096:
             return self._scan_each(p, sensing_range_m, hit, seen)
