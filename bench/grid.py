@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from reconswarm.scenario import AgentSpec, PlannerConfig, Scenario, ScenarioMeta, WorldConfig
+from reconswarm.scenario import AgentSpec, PlannerConfig, PlannerKind, Scenario, ScenarioMeta, WorldConfig
 
 SPACING_M = 25.0
 
@@ -23,7 +23,7 @@ def grid_scenario(n: int, duration_s: float, shift_m: float = 60.0, seed: int = 
     agents = tuple(AgentSpec(id=i + 1, start_m=(float(xy[i, 0]), float(xy[i, 1])), heading_rad=0.0, radius_m=1.5,
                              offset_m=(float(offsets[i, 0]), float(offsets[i, 1])), head_offset_m=0.5)
                    for i in range(n))
-    planner = PlannerConfig(kind="reconfigurable", k_att=0.08, target_radius_m=max(80.0, form_r + 20.0),
+    planner = PlannerConfig(kind=PlannerKind.RECONFIGURABLE, k_att=0.08, target_radius_m=max(80.0, form_r + 20.0),
                             psi_mps=-65.0, d_safe_m=2.0, d_max_m=10.0, sensing_range_m=40.0, link_range_m=40.0,
                             perturbation_mps=0.0, converge_tol_m=0.5)
     return Scenario(meta=ScenarioMeta(name=f"grid{n}", seed=seed, duration_s=duration_s, dt_s=0.05),

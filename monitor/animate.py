@@ -130,7 +130,7 @@ def animate_run(rec: RunRecord, out: Path, fps: int = 10, speed: float = 20.0, d
     link_lines = LineCollection([], lw=0.7, zorder=3)
     ax.add_collection(link_lines)
     title = fig.suptitle("", fontsize=11)
-    name = f"{rec.meta.get('scenario', s.meta.name)} - {rec.meta.get('planner', s.planner.kind)}"
+    name = f"{rec.meta.get('scenario', s.meta.name)} - {rec.meta.get('planner', s.planner.kind.value)}"
 
     def draw(i: int) -> None:
         row = int(rows[i])

@@ -16,7 +16,7 @@ from agent.brain import AgentBrain, Peer
 from agent.node import AgentNode, Exit, Invalid, Joined, Left, Output, Reconnect
 from reconswarm.net import wire
 from reconswarm.net.timing import Timing
-from reconswarm.scenario import Scenario, load
+from reconswarm.scenario import PlannerKind, Scenario, load
 from tests.support import PAPER
 
 S = load(PAPER)
@@ -219,7 +219,7 @@ def test_a_restarted_agent_joining_late_merges_every_cached_obstacle_set() -> No
 
 
 def test_the_virtual_leader_waits_for_every_set_and_merges_the_union() -> None:
-    s = dataclasses.replace(S, planner=dataclasses.replace(S.planner, kind="virtual-leader"))
+    s = dataclasses.replace(S, planner=dataclasses.replace(S.planner, kind=PlannerKind.VIRTUAL_LEADER))
     node = started(node_s=s, peers=(B,))
     hull: dict[str, tuple[tuple[float, float], ...]] = {"hexagon": ((600.0, 0.0), (601.0, 1.0), (601.0, -1.0))}
     node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 900.0, 0.0)], 0.0)
