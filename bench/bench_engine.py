@@ -82,7 +82,7 @@ def main() -> int:
         if args.before:
             env = {**os.environ, "PYTHONPATH": str(args.before.resolve())}
             main_code = "import sys; from reconswarm_bringup.cli import main; sys.argv[0] = 'reconswarm'; main()"
-            cmds["before"] = ([sys.executable, "-c", main_code, *sim], env)
+            cmds["before"] = ([sys.executable, "-P", "-c", main_code, *sim], env)  # -P: not the cwd first
         for r in range(args.repeats):
             for name in names[r % len(names):] + names[:r % len(names)]:  # rotate who goes first
                 wall, cpu, out = timed(*cmds[name])
