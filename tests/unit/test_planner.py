@@ -311,7 +311,7 @@ def test_neighbour_table_matches_brute_force_and_rows_are_bit_identical(n, seed)
 
 @SETTINGS
 @given(convex_polygon(centre=(100.0, -50.0)), st.floats(0.5, 5.0), st.floats(0.0, 4.0), st.floats(1.0, 15.0),
-       st.floats(1.0, 100.0), st.integers(0, 7), st.floats(0.0, 1.0), st.booleans(), st.floats(0.02, 0.97))
+       st.floats(1.0, 100.0), st.integers(0, 7), st.floats(0.01, 0.99), st.booleans(), st.floats(0.02, 0.97))
 def test_obstacle_repulsion_is_minus_gradient_with_surface_distance(poly, ri, d_safe, width, mag, edge, t,
                                                                       at_vertex, frac):
     d_max = d_safe + width
@@ -343,7 +343,8 @@ def test_obstacle_repulsion_is_minus_gradient_with_surface_distance(poly, ri, d_
     view = view_of(p[None], 1, 1, [(0, 0, poly)])
     got = obstacle_repulsion(np.array([ri]), view.d, view.n, view.valid, d_safe, d_max, psi)[0]
     # (h small: where the face and vertex regions meet, the distance's curvature jumps, so the central
-    # difference is only O(h / d) accurate there.)
+    # difference is only O(h / d) accurate there; t stays off those seams (t = 0 or 1 is exactly on one,
+    # where hypothesis found a 2.6e-5 difference). The exact checks below hold everywhere.)
     want = -grad_fd(u_rep, p, h=1e-7)
     np.testing.assert_allclose(got, want, rtol=2e-5, atol=2e-5)
     # Magnitude from the surface distance; direction from the nearest point of the polygon to p.
