@@ -5,9 +5,7 @@ Every refusal is a `BadInput` whose message is one line: `FILE: field.path: what
 
 from __future__ import annotations
 
-import math
 import tomllib
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
@@ -25,6 +23,7 @@ from reconswarm.geometry import (
     pairs_within,
     polygon_area,
 )
+from reconswarm.toml_reader import TableReader
 
 
 class PlannerKind(StrEnum):
@@ -145,107 +144,6 @@ class Scenario:
 # ---------------------------------------------------------------------------------------------- loading
 
 
-class _Reader:
-    """Walks the parsed TOML, collecting the first error with its field path."""
-
-    def __init__(self, source: str) -> None:
-        self.source = source
-
-    def fail(self, path: str, msg: str) -> BadInput:
-        return BadInput(f"{self.source}: {path}: {msg}")
-
-    def table(self, data: Any, path: str) -> dict[str, Any]:
-        if not isinstance(data, dict):
-            raise self.fail(path, f"expected a table, got {_kind(data)}")
-        return data
-
-    def keys(self, data: dict[str, Any], path: str, required: set[str], optional: set[str]) -> None:
-        for key in data:
-            if key not in required | optional:
-                raise self.fail(_join(path, key), "unknown key")
-        for key in sorted(required):
-            if key not in data:
-                raise self.fail(_join(path, key), "missing key")
-
-    def number(self, data: dict[str, Any], path: str, key: str, default: float | None = None,
-               check: Callable[[float], bool] | None = None, need: str = "") -> float:
-        where = _join(path, key)
-        if key not in data:
-            if default is None:
-                raise self.fail(where, "missing key")
-            return default
-        v = data[key]
-        if isinstance(v, bool) or not isinstance(v, int | float):
-            raise self.fail(where, f"expected a number, got {_kind(v)}")
-        if not math.isfinite(v):
-            raise self.fail(where, f"must be finite, got {v}")
-        if check is not None and not check(float(v)):
-            raise self.fail(where, f"must be {need}, got {v}")
-        return float(v)
-
-    def integer(self, data: dict[str, Any], path: str, key: str, default: int | None = None,
-                lo: int | None = None) -> int:
-        where = _join(path, key)
-        if key not in data:
-            if default is None:
-                raise self.fail(where, "missing key")
-            return default
-        v = data[key]
-        if isinstance(v, bool) or not isinstance(v, int):
-            raise self.fail(where, f"expected an integer, got {_kind(v)}")
-        if lo is not None and v < lo:
-            raise self.fail(where, f"must be >= {lo}, got {v}")
-        return int(v)
-
-    def string(self, data: dict[str, Any], path: str, key: str, default: str | None = None) -> str:
-        where = _join(path, key)
-        if key not in data:
-            if default is None:
-                raise self.fail(where, "missing key")
-            return default
-        v = data[key]
-        if not isinstance(v, str) or not v:
-            raise self.fail(where, f"expected a non-empty string, got {_kind(v)}")
-        return v
-
-    def point(self, v: Any, where: str) -> tuple[float, float]:
-        if not isinstance(v, list) or len(v) != 2:
-            raise self.fail(where, f"expected [x, y], got {_kind(v)}")
-        out = []
-        for k, c in enumerate(v):
-            if isinstance(c, bool) or not isinstance(c, int | float):
-                raise self.fail(f"{where}[{k}]", f"expected a number, got {_kind(c)}")
-            if not math.isfinite(c):
-                raise self.fail(f"{where}[{k}]", f"must be finite, got {c}")
-            limits.check_point(where, k, c, self.fail)
-            out.append(float(c))
-        return (out[0], out[1])
-
-    def point_key(self, data: dict[str, Any], path: str, key: str,
-                  default: tuple[float, float] | None = None) -> tuple[float, float]:
-        if key not in data:
-            if default is None:
-                raise self.fail(_join(path, key), "missing key")
-            return default
-        return self.point(data[key], _join(path, key))
-
-
-def _join(path: str, key: str) -> str:
-    return f"{path}.{key}" if path else key
-
-
-def _kind(v: Any) -> str:
-    if isinstance(v, bool):
-        return f"boolean {str(v).lower()}"
-    if isinstance(v, str):
-        return f"string {v!r}"
-    if isinstance(v, list):
-        return "array"
-    if isinstance(v, dict):
-        return "table"
-    return f"{type(v).__name__} {v!r}"
-
-
 def load(path: str | Path) -> Scenario:
     """Read and validate a scenario file; raise BadInput naming the file and field on any problem."""
     p = Path(path)
@@ -275,7 +173,7 @@ def check(path: str | Path) -> tuple[Scenario, list[str]]:
 
 
 def _build(data: dict[str, Any], src: str) -> tuple[Scenario, None]:
-    r = _Reader(src)
+    r = TableReader(src)
     r.keys(data, "", {"scenario", "planner", "target", "agents"}, {"world", "obstacles"})
 
     s = r.table(data["scenario"], "scenario")
@@ -343,7 +241,7 @@ def _build(data: dict[str, Any], src: str) -> tuple[Scenario, None]:
     return scen, None
 
 
-def _agents(r: _Reader, raw: Any) -> tuple[AgentSpec, ...]:
+def _agents(r: TableReader, raw: Any) -> tuple[AgentSpec, ...]:
     if not isinstance(raw, list) or not raw:
         raise r.fail("agents", "expected at least one [[agents]] table")
     seen: dict[int, int] = {}
@@ -369,7 +267,7 @@ def _agents(r: _Reader, raw: Any) -> tuple[AgentSpec, ...]:
     return tuple(sorted(out, key=lambda a: a.id))
 
 
-def _obstacles(r: _Reader, raw: Any) -> tuple[ObstacleSpec, ...]:
+def _obstacles(r: TableReader, raw: Any) -> tuple[ObstacleSpec, ...]:
     if not isinstance(raw, list):
         raise r.fail("obstacles", "expected an array of [[obstacles]] tables")
     seen: dict[str, int] = {}
@@ -404,7 +302,7 @@ def _obstacles(r: _Reader, raw: Any) -> tuple[ObstacleSpec, ...]:
     return tuple(sorted(out, key=lambda o: o.id))
 
 
-def _check_placement(r: _Reader, s: Scenario, data: dict[str, Any]) -> None:
+def _check_placement(r: TableReader, s: Scenario, data: dict[str, Any]) -> None:
     # The error names agents by their position in the file.
     file_index = {int(a["id"]): k for k, a in enumerate(data["agents"])}
     starts, radii = s.starts, s.radii
