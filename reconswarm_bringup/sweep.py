@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from reconswarm_bringup import engine
 from reconswarm.errors import BadInput
 from reconswarm.scenario import PLANNERS, Scenario, load
+from reconswarm_bringup import engine
 
 COLUMNS = ("scenario", "planner", "seed", "converged", "convergence_time_s", "final_max_error_m", "collisions",
            "safety_violations", "min_agent_gap_m", "min_obstacle_gap_m", "splits", "merges", "wall_time_s")

@@ -23,10 +23,11 @@ from reconswarm_bringup import engine
 from reconswarm_bringup.cli import app
 from reconswarm_bringup.sweep import COLUMNS, make_jobs, run_sweep
 from tests.support import reconswarm
+
 PLANNERS = ("reconfigurable", "virtual-leader")
 SEEDS = (0, 1)
 # Two tiny generated scenarios cut short: at 170 s every run of the first converges (reconfigurable
-# ~133 s, virtual leader ~157 s); at 160 s the second's virtual leader (~176 s) does not.
+# ~132 s, virtual leader ~157 s); at 160 s the second's virtual leader (~178 s) does not.
 DURATIONS_S = {1: 170.0, 2: 160.0}
 
 
