@@ -1,10 +1,20 @@
 """Random valid scenarios of any size: `reconswarm scenario generate --agents N --obstacles M --seed S`.
 
-Layout: starts on a jittered hexagonal lattice around the origin, the target formation a hexagonal
-lattice around p* = (D, 0) with spacing 2 r_max + d_max + 2 m (Assumption 4.1 holds for every pair),
-and M random convex polygons in the corridor between, apart from each other by more than the largest
-robot plus its safety band and out of reach of the target slots (Assumption 4.2). The planner's gains
-are the paper's; R_c grows with the formation so every slot lies well inside the target disk.
+Layout: starts on a jittered hexagonal lattice around the origin with spacing 2 r_max + d_max + 2 m
+(Assumption 4.1 holds for every pair), the target formation the same lattice scaled up around
+p* = (D, 0) (SLOT_SPACING_M between neighbouring slots, each agent keeping its place), and M random
+convex polygons in the corridor between, apart from each other by more than the largest robot plus its
+safety band and out of reach of the target slots (Assumption 4.2). The planner's gains are the
+paper's; R_c grows with the formation so every slot lies well inside the target disk.
+
+Why the formation is wider than the start: a filled lattice has interior slots, and an agent held up
+behind an obstacle arrives after the agents around its slot have settled. It can only pass between two
+settled neighbours if the gap between them clears both repulsion bands (eq. 11 acts within
+r_i + r_j + d_max): a slot spacing of 2 (2 r_max + d_max) or more. At the start lattice's 22 m the
+midpoint between two settled robots lies inside their safety bands (11 m < 2 r_max + d_safe = 12 m):
+the late agent can only push one of them out of its slot, which then has to push the next, and the
+stall perturbation (1 m/s) cannot win against repulsion of tens of m/s. The paper's own formation is a
+ring (every slot on the outside), which never meets this.
 """
 
 from __future__ import annotations
@@ -27,6 +37,8 @@ from reconswarm.scenario import (
 R_MIN_M, R_MAX_M = 2.5, 5.0
 D_SAFE_M, D_MAX_M = 2.0, 10.0
 CRUISE_MPS = 0.08 * 80.0  # the paper's R_c k_att
+START_SPACING_M = 2 * R_MAX_M + D_MAX_M + 2.0
+SLOT_SPACING_M = 2 * (2 * R_MAX_M + D_MAX_M) + 2.0  # a free lane between two settled neighbours
 
 
 def _hex_lattice(n: int, spacing: float) -> NDArray[np.float64]:
@@ -57,25 +69,26 @@ def _convex_polygon(rng: np.random.Generator, centre: NDArray[np.float64], size:
     return np.round(np.stack([centre[0] + c * x - s * y, centre[1] + s * x + c * y], axis=1), 3)
 
 
-def generate(n_agents: int, n_obstacles: int = 3, seed: int = 0) -> Scenario:
+def generate(n_agents: int, n_obstacles: int = 3, seed: int = 0, slot_spacing_m: float = SLOT_SPACING_M) -> Scenario:
     if n_agents < 1:
         raise ValueError("n_agents must be >= 1")
     if n_obstacles < 0:
         raise ValueError("n_obstacles must be >= 0")
     rng = np.random.default_rng(seed)
     radii = np.round(rng.uniform(R_MIN_M, R_MAX_M, n_agents), 2)
-    spacing = 2 * R_MAX_M + D_MAX_M + 2.0
-    lattice = _hex_lattice(n_agents, spacing)
-    # Each agent's slot keeps its place in the swarm (the start lattice translated to the target), so
+    lattice = _hex_lattice(n_agents, START_SPACING_M)
+    # Each agent's slot keeps its place in the swarm (the start lattice scaled up at the target), so
     # nobody has to cross the formation: what the agents must solve is the obstacles, not the assignment.
-    offsets = np.round(lattice, 2)
+    offsets = np.round(lattice * (slot_spacing_m / START_SPACING_M), 2)
     form_r = float(np.hypot(offsets[:, 0], offsets[:, 1]).max())
+    swarm = np.round(lattice, 2)
+    swarm_r = float(np.hypot(swarm[:, 0], swarm[:, 1]).max())  # the travelling swarm's extent
     r_c = max(80.0, math.ceil(form_r + R_MAX_M + D_MAX_M + 15.0))
     # Starts: the jittered lattice (spacing minus twice the jitter still clears r_i + r_j + d_safe).
     jitter = 3.0
     starts = np.round(lattice + rng.uniform(-jitter, jitter, (n_agents, 2)), 2)
     start_r = float(np.hypot(starts[:, 0], starts[:, 1]).max())
-    width = max(100.0, form_r + 40.0)
+    width = max(100.0, swarm_r + 40.0)
     corridor = max(300.0, 2.5 * width)
     x0 = start_r + 60.0  # obstacles begin here
     target_x = x0 + corridor + r_c + 60.0

@@ -11,7 +11,7 @@ import pytest
 from shapely.geometry import Point, Polygon
 
 from reconswarm.errors import BadInput
-from reconswarm.generate import D_MAX_M, D_SAFE_M, R_MAX_M, generate
+from reconswarm.generate import D_MAX_M, D_SAFE_M, R_MAX_M, SLOT_SPACING_M, START_SPACING_M, generate
 from reconswarm.geometry import is_strictly_convex, polygon_area
 from reconswarm.scenario import load, parse, to_toml, warnings
 
@@ -182,6 +182,15 @@ def test_generated_scenarios_are_valid(n, m, seed):
             assert poly.distance(polys[j]) > 2 * R_MAX_M + 2 * D_SAFE_M
         # ... and out of reach of every slot (Assumption 4.2).
         assert min(poly.distance(Point(*q)) - r for q, r in zip(slots, s.radii, strict=True)) >= D_MAX_M
+    # Neighbouring slots leave a lane clear of both repulsion bands (eq. 11) for the largest robot, so an
+    # agent that arrives after its neighbours have settled can pass between them ...
+    if n > 1:
+        d_slots = np.hypot(*(s.offsets[:, None, :] - s.offsets[None, :, :]).transpose(2, 0, 1))
+        np.fill_diagonal(d_slots, np.inf)
+        assert d_slots.min() / 2 >= 2 * R_MAX_M + s.planner.d_max_m
+        # ... and each slot keeps its agent's place in the start lattice (the same lattice scaled up).
+        lattice = s.offsets * (START_SPACING_M / SLOT_SPACING_M)
+        assert np.abs(s.starts - lattice).max() <= 3.0 + 0.02
     # Deterministic in the seed; different seeds differ.
     assert generate(n, m, seed) == s
     if n > 1:
