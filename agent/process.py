@@ -20,6 +20,7 @@ import zenoh
 from zenoh import ext
 
 from agent.node import AgentNode, Exit, Input, Invalid, Joined, Left, Output, Reconnect
+from agent.ros2_io import AgentRos2
 from reconswarm.errors import BadInput
 from reconswarm.net import wire
 from reconswarm.net.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
@@ -37,12 +38,19 @@ class AgentConfig:
     zenoh: ZenohOptions
     run_id: str | None = None
     timing: Timing = TIMING
+    ros2_domain_id: int | None = None  # ROS 2 mode: odom in, cmd_vel out (agent/ros2_io.py) in this domain
 
 
 class AgentLink(Member):
     """One zenoh session of an agent: its publishers, subscribers and token, around the node."""
 
-    def __init__(self, node: AgentNode, keys: wire.Keys, session: zenoh.Session, rej: Rejections) -> None:
+    def close(self) -> None:
+        if self.ros2 is not None:
+            self.ros2.close()
+        super().close()
+
+    def __init__(self, node: AgentNode, keys: wire.Keys, session: zenoh.Session, rej: Rejections,
+                 ros2_domain_id: int | None = None) -> None:
         self.node, self.keys, self.z, self.rej = node, keys, session, rej
         self.id = node.id
         self.inbox = Inbox()
@@ -50,12 +58,15 @@ class AgentLink(Member):
         k = self.keys
         z = session
         self.pub_beacon = z.declare_publisher(k.beacon(self.id), congestion_control=block)
-        self.pub_cmd = z.declare_publisher(k.cmd(self.id), congestion_control=block)
+        l_m = float(node.s.head_offsets[node.s.agent_index(self.id)])
+        self.ros2 = None if ros2_domain_id is None else AgentRos2(
+            z, ros2_domain_id, self.id, l_m, node.s.meta.dt_s, self.inbox.callback)
+        self.pub_cmd = None if self.ros2 else z.declare_publisher(k.cmd(self.id), congestion_control=block)
         self.pub_obs = ext.declare_advanced_publisher(z, k.obstacles(self.id), cache=ext.CacheConfig(max_samples=1))
         cb = self.inbox.callback
         remote = zenoh.Locality.REMOTE
         self.subs = [
-            z.declare_subscriber(k.state(self.id), cb),
+            *([] if self.ros2 else [z.declare_subscriber(k.state(self.id), cb)]),
             z.declare_subscriber(k.scan(self.id), cb),
             z.declare_subscriber(k.clock, cb),
             # Our own announcements are not delivered back (REMOTE); anyone else's on our keys are checked.
@@ -69,6 +80,11 @@ class AgentLink(Member):
 
     def decode(self, key: str, payload: bytes, kind: str) -> Input | None:
         """The sample as a node input (None: not for us); a malformed one becomes Invalid (and is logged)."""
+        if self.ros2 is not None and self.ros2.owns(key):
+            m = self.ros2.decode(key, payload)
+            if isinstance(m, Invalid):
+                self.rej.reject(key, m.reason)
+            return m
         try:
             what, aid, leaf = self.keys.parse(key)
             if what == "alive":
@@ -100,7 +116,10 @@ class AgentLink(Member):
 
     def publish(self, out: Output) -> None:
         if isinstance(out, wire.Cmd):
-            self.pub_cmd.put(wire.cmd_to_wire(out))
+            if self.ros2 is not None:
+                self.ros2.command(out)
+            elif self.pub_cmd is not None:
+                self.pub_cmd.put(wire.cmd_to_wire(out))
         elif isinstance(out, wire.Beacon):
             self.pub_beacon.put(wire.beacon_to_wire(out))
         elif isinstance(out, wire.ObstacleSet):
@@ -114,6 +133,8 @@ class AgentLink(Member):
             item = self.inbox.get(timeout=poll_s if wake is None else max(0.0, wake - time.monotonic()))
             items = [] if item is None else [item, *self.inbox.drain()]
             batch = [m for m in (self.decode(*it) for it in items) if m is not None]
+            if self.ros2 is not None:
+                batch += self.ros2.take_invalid()
             for out in node.step(batch, time.monotonic()):
                 if isinstance(out, Exit):
                     return out.code
@@ -132,7 +153,7 @@ def run(cfg: AgentConfig) -> int:
     rej = Rejections(f"agent {cfg.agent_id}")
     while True:
         with serving(cfg.zenoh, f"agent {cfg.agent_id}", cfg.timing.session_open_timeout_s) as (session, stop):
-            link = AgentLink(node, keys, session, rej)
+            link = AgentLink(node, keys, session, rej, cfg.ros2_domain_id)
             log.info("agent %d up (run %s)", cfg.agent_id, keys.run)
             code = link.run(stop)
             if node.ended and not stop.stopped:

@@ -19,6 +19,7 @@ from typing import Any
 
 import zenoh
 
+from monitor.live import LiveFeed, LiveView
 from monitor.node import MonitorNode
 from reconswarm.errors import ProcessFailure
 from reconswarm.net import wire
@@ -38,6 +39,7 @@ class MonitorConfig:
     zenoh: ZenohOptions
     run_id: str | None = None
     live: bool = False
+    foxglove_port: int | None = None  # serve the run live to the Foxglove app (monitor/live.py)
 
 
 def disk_full(exc: BaseException) -> bool:
@@ -52,6 +54,8 @@ class MonitorAdapter(Member):
         self.keys = k = wire.Keys(run)
         self.rej = Rejections("monitor")
         self.inbox = Inbox()
+        self.feed: LiveFeed | None = None
+        self.live_k = -1
         z = session
         self.pub_event = z.declare_publisher(k.event, congestion_control=zenoh.CongestionControl.BLOCK)
         # Data arrives in queues read by the loop in batches (the monitor is off the lockstep's critical
@@ -82,6 +86,21 @@ class MonitorAdapter(Member):
     def publish(self) -> None:
         for ev in self.node.take_events():
             self.pub_event.put(wire.event_to_wire(ev))
+            if self.feed is not None:
+                self.feed.view.event(ev)
+
+    def serve(self, view: LiveView, session: Any) -> None:
+        """Also serve the run live (--foxglove): the ticks recorded, the events, the agents' obstacle sets."""
+        self.feed = LiveFeed(view, self.keys, session, self.rej)
+
+    def feed_live(self, now: float) -> None:
+        if self.feed is None:
+            return
+        self.feed.poll()
+        n, view = self.node, self.feed.view
+        if n.written >= 0 and n.written != self.live_k and view.due(now):
+            self.live_k = n.written
+            view.tick(now, n.t, n.p, n.theta, n.alive, n.rec.topology.edges, n.rec.max_error_m, *n.rec.gaps_m)
 
     def live_view(self) -> Any:
         from rich.table import Table
@@ -117,6 +136,7 @@ class MonitorAdapter(Member):
                     time.sleep(TIMING.monitor_poll_s)
                 done = node.poll(time.monotonic())
                 self.publish()
+                self.feed_live(time.monotonic())
                 if done:
                     break
                 if time.monotonic() - last_counts > TIMING.commit_wall_s:
@@ -154,8 +174,16 @@ def run(cfg: MonitorConfig) -> int:
     node = MonitorNode(s, writer, resume_from, unix_offset_s=time.time() - time.monotonic())
     with serving(cfg.zenoh, "monitor") as (session, stop):
         adapter = MonitorAdapter(node, cfg.run_id or s.meta.name, session)
+        if cfg.foxglove_port is not None:
+            view = LiveView(s, cfg.foxglove_port)
+            adapter.serve(view, session)
+            log.info("live view: ws://127.0.0.1:%d (Foxglove app: Open connection)", view.port)
         log.info("monitor up (run %s): recording to %s", adapter.keys.run, cfg.db)
-        code = adapter.run(stop, cfg.live)
+        try:
+            code = adapter.run(stop, cfg.live)
+        finally:
+            if adapter.feed is not None:
+                adapter.feed.close()
         adapter.close()
         log.info("monitor done: %d ticks recorded, %d messages rejected", node.written + 1, adapter.rej.count)
         return code

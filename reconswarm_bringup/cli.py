@@ -178,7 +178,9 @@ _register()
 
 
 def main() -> None:
-    app()
+    from reconswarm_bringup.cli_launch import optional_values
+
+    app(args=optional_values(sys.argv[1:]))
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -14,6 +15,19 @@ from reconswarm_bringup.console import fail, set_debug
 from reconswarm_bringup.fleet import ROOT
 
 PROG = "run_local"
+FOXGLOVE_PORT = 8765  # `--foxglove` without a value
+ROS2_SPEED = 1.0  # --ros2's default: the robots' interface in real time, as a robot base runs
+
+
+def optional_values(argv: list[str]) -> list[str]:
+    """`--foxglove` takes an optional value: without one (last, or followed by another option) it means the
+    default port, which is inserted here for the parser."""
+    out = []
+    for i, arg in enumerate(argv):
+        out.append(arg)
+        if arg == "--foxglove" and (i + 1 == len(argv) or argv[i + 1].startswith("-")):
+            out.append(str(FOXGLOVE_PORT))
+    return out
 
 
 def launch_cmd(
@@ -22,8 +36,9 @@ def launch_cmd(
     scenario: Annotated[Path | None, typer.Option("-s", "--scenario",
         help="Scenario TOML (default: the paper's).")] = None,
     out: Annotated[Path, typer.Option("-o", "--out", help="Output directory.")] = ROOT / "runs" / "latest",
-    clock: Annotated[str, typer.Option("--clock", help="lockstep | realtime")] = "lockstep",
-    speed: Annotated[float, typer.Option("--speed", help="Realtime: simulated seconds per wall second.")] = 10.0,
+    clock: Annotated[str | None, typer.Option("--clock", help="lockstep (default) | realtime")] = None,
+    speed: Annotated[float | None, typer.Option("--speed",
+        help="Realtime: simulated seconds per wall second (default 10; 1 with --ros2).")] = None,
     planner: Annotated[str | None, typer.Option("--planner", help="reconfigurable | virtual-leader")] = None,
     router: Annotated[str | None, typer.Option("--router", metavar="EP",
         help="Router endpoint (default tcp/127.0.0.1:7447); one is started there unless one listens.")] = None,
@@ -35,11 +50,19 @@ def launch_cmd(
         help="2: two hosts as network namespaces, each with its own router (needs root).")] = 1,
     timeout: Annotated[float | None, typer.Option("--timeout",
         help="Give up after this many seconds of wall time (exit 3).")] = None,
+    foxglove: Annotated[int | None, typer.Option("--foxglove", metavar="[PORT]",
+        help=f"Also serve the run live to the Foxglove app on ws://127.0.0.1:PORT (default {FOXGLOVE_PORT}).")] = None,
+    ros2: Annotated[bool, typer.Option("--ros2",
+        help="The robots' motion interface as ROS 2 topics over Zenoh (odom, cmd_vel); implies --clock realtime.")
+        ] = False,
+    ros_domain_id: Annotated[int | None, typer.Option("--ros-domain-id", metavar="D",
+        help="ROS 2 domain (default: ROS_DOMAIN_ID, else 0).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
     no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress bar.")] = False,
     debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False,
 ) -> None:
     """Run the mission as separate processes over Zenoh on this machine (router, simworld, monitor, agents)."""
+    from reconswarm.net.ros2 import resolve_domain_id
     from reconswarm.scenario import PLANNERS
     from reconswarm_bringup import faults as faults_mod
     from reconswarm_bringup import validate
@@ -49,10 +72,22 @@ def launch_cmd(
     set_debug(debug)
     logging.basicConfig(level=logging.DEBUG if debug else logging.INFO, format=f"{PROG}: %(message)s")
     try:
+        speed = speed if speed is not None else ROS2_SPEED if ros2 else 10.0
+        if ros2 and clock == "lockstep":
+            raise BadInput("--ros2: runs on the realtime clock only (ROS 2 topics carry no tick), not --clock lockstep")
+        clock = clock or ("realtime" if ros2 else "lockstep")
         if clock not in ("lockstep", "realtime"):
             raise BadInput(f"--clock: expected lockstep or realtime, got {clock!r}")
         if planner is not None and planner not in PLANNERS:
             raise BadInput(f"--planner: expected reconfigurable or virtual-leader, got {planner!r}")
+        if foxglove is not None and not 1 <= foxglove <= 65535:
+            raise BadInput(f"--foxglove: port must be in 1..65535, got {foxglove}")
+        if secure and (ros2 or foxglove is not None):
+            raise BadInput(f"{'--ros2' if ros2 else '--foxglove'} and --secure cannot be combined (the access rules "
+                           "cover neither the ROS 2 keys nor the live view's reading of the obstacle sets)")
+        if ros_domain_id is not None and not ros2:
+            raise BadInput("--ros-domain-id: only with --ros2")
+        domain = resolve_domain_id(ros_domain_id, os.environ) if ros2 else None
         if hosts not in (1, 2):
             raise BadInput(f"--hosts: expected 1 or 2, got {hosts}")
         validate.launch(agents=agents, scenario=scenario, out=out.resolve(), timeout_s=timeout, speed=speed,
@@ -60,7 +95,8 @@ def launch_cmd(
         cfg = LaunchConfig(out=out.resolve(), scenario=scenario, agents=agents, clock=clock, speed=speed,
                            planner=planner, router=router, secure=secure,
                            faults=tuple(faults_mod.parse(f) for f in fault or []), timeout_s=timeout,
-                           progress=not no_progress, as_json=as_json, hosts=hosts)
+                           progress=not no_progress, as_json=as_json, hosts=hosts,
+                           foxglove_port=foxglove, ros_domain_id=domain)
         code = run(cfg)
     except ReconswarmError as exc:
         fail(exc, PROG)
@@ -77,7 +113,7 @@ def main() -> None:
     app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
     app.command()(launch_cmd)
     try:
-        code = app(prog_name="deploy/run_local.sh", standalone_mode=False)
+        code = app(args=optional_values(sys.argv[1:]), prog_name="deploy/run_local.sh", standalone_mode=False)
     except Exception as exc:
         if not (hasattr(exc, "format_message") and hasattr(exc, "exit_code")):
             raise

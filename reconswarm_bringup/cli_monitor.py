@@ -215,6 +215,8 @@ def record_cmd(
     zenoh_config: Annotated[Path | None, typer.Option("--zenoh-config", help="Zenoh JSON5 config file.")] = None,
     run_id: Annotated[str | None, typer.Option("--run", help="Run name in key expressions.")] = None,
     live: Annotated[bool | None, typer.Option("--live/--no-live", help="Live view (default: on a terminal).")] = None,
+    foxglove: Annotated[int | None, typer.Option("--foxglove", metavar="PORT",
+        help="Also serve the run to the Foxglove app on ws://127.0.0.1:PORT (0: any free port).")] = None,
 ) -> None:
     """The monitor process: records states, beacons and topology events of a distributed run."""
     try:
@@ -224,8 +226,10 @@ def record_cmd(
         setup_logging()
         bind_to_parent()
 
+        if foxglove is not None and not 0 <= foxglove <= 65535:
+            raise BadInput(f"--foxglove: port must be in 0..65535, got {foxglove}")
         code = run(MonitorConfig(scenario, db, ZenohOptions.build(connect, listen, mode, zenoh_config), run_id,
-                                 live if live is not None else sys.stderr.isatty()))
+                                 live if live is not None else sys.stderr.isatty(), foxglove))
     except ReconswarmError as exc:
         fail(exc)
         return

@@ -27,6 +27,19 @@ Listen = Annotated[list[str] | None, typer.Option("--listen", help="Zenoh endpoi
 Mode = Annotated[str, typer.Option("--mode", help="Zenoh mode: peer | client | router.")]
 ZConfig = Annotated[Path | None, typer.Option("--zenoh-config", help="Zenoh JSON5 configuration file.")]
 RunId = Annotated[str | None, typer.Option("--run", help="Run name in key expressions (default: scenario name).")]
+Ros2 = Annotated[bool, typer.Option("--ros2", help="The motion interface as ROS 2 topics (odom, cmd_vel) over Zenoh.")]
+RosDomain = Annotated[int | None, typer.Option("--ros-domain-id", metavar="D",
+                                               help="ROS 2 domain (default: ROS_DOMAIN_ID, else 0).")]
+
+
+def _domain(ros2: bool, option: int | None) -> int | None:
+    """The ROS 2 domain in force (None: ROS 2 mode off)."""
+    from reconswarm.errors import BadInput
+    from reconswarm.net.ros2 import resolve_domain_id
+
+    if option is not None and not ros2:
+        raise BadInput("--ros-domain-id: only with --ros2")
+    return resolve_domain_id(option, os.environ) if ros2 else None
 
 
 def _guard(fn: Callable[[], int]) -> None:
@@ -55,31 +68,34 @@ def agent_cmd(
     agent_id: Annotated[int, typer.Option("--id", help="This agent's id (from the scenario).")],
     scenario: Annotated[Path, typer.Option("--scenario", help="Scenario TOML file.")],
     connect: Connect = None, listen: Listen = None, mode: Mode = "client", zenoh_config: ZConfig = None,
-    run_id: RunId = None,
+    run_id: RunId = None, ros2: Ros2 = False, ros_domain_id: RosDomain = None,
 ) -> None:
     """One agent process: plans its own commands from its state, scan and neighbours' announcements."""
     from agent.process import AgentConfig, run
 
     def go() -> int:
-        return run(AgentConfig(agent_id, scenario, ZenohOptions.build(connect, listen, mode, zenoh_config), run_id))
+        return run(AgentConfig(agent_id, scenario, ZenohOptions.build(connect, listen, mode, zenoh_config), run_id,
+                               ros2_domain_id=_domain(ros2, ros_domain_id)))
 
     _guard(go)
 
 
 def simworld_cmd(
     scenario: Annotated[Path, typer.Option("--scenario", help="Scenario TOML file.")],
-    clock: Annotated[ClockMode, typer.Option("--clock", help="How the world advances.")] = ClockMode.LOCKSTEP,
+    clock: Annotated[ClockMode | None, typer.Option("--clock",
+        help="How the world advances (default lockstep; realtime with --ros2).")] = None,
     speed: Annotated[float, typer.Option("--speed", help="Realtime: simulated seconds per wall second.")] = 10.0,
     start_timeout: Annotated[float, typer.Option("--start-timeout", help="Seconds to wait for everyone.")] = 60.0,
     connect: Connect = None, listen: Listen = None, mode: Mode = "client", zenoh_config: ZConfig = None,
-    run_id: RunId = None,
+    run_id: RunId = None, ros2: Ros2 = False, ros_domain_id: RosDomain = None,
 ) -> None:
     """The world process: unicycle kinematics, range-limited sensing and the clock."""
     from simworld.process import SimworldConfig, run
 
     def go() -> int:
         zopts = ZenohOptions.build(connect, listen, mode, zenoh_config)
-        return run(SimworldConfig(scenario, zopts, clock, speed, run_id, start_timeout))
+        mode_ = clock or (ClockMode.REALTIME if ros2 else ClockMode.LOCKSTEP)
+        return run(SimworldConfig(scenario, zopts, mode_, speed, run_id, start_timeout, _domain(ros2, ros_domain_id)))
 
     _guard(go)
 

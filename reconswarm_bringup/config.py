@@ -24,3 +24,5 @@ class LaunchConfig:
     as_json: bool = False
     start_timeout_s: float = 120.0
     hosts: int = 1
+    foxglove_port: int | None = None  # the monitor serves the run live on 127.0.0.1:PORT
+    ros_domain_id: int | None = None  # ROS 2 mode (None: off) in this domain

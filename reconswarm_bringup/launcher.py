@@ -135,15 +135,18 @@ def run(cfg: LaunchConfig) -> int:
         for ident, args, prefix in net.routers:
             fleet.start("router", ident, args, prefix)
         prefix, zargs = net.zopt("monitor")
+        live = [] if cfg.foxglove_port is None else ["--foxglove", str(cfg.foxglove_port)]
         mon = fleet.start("monitor", "-", ["monitor", "record", "--scenario", str(scen_path), "--db",
-                                           str(cfg.out / "run.db"), "--no-live", *zargs], prefix)
+                                           str(cfg.out / "run.db"), "--no-live", *live, *zargs], prefix)
+        ros = [] if cfg.ros_domain_id is None else ["--ros2", "--ros-domain-id", str(cfg.ros_domain_id)]
         for a in s.agents:
             prefix, zargs = net.zopt("agent", str(a.id))
-            fleet.start("agent", str(a.id), ["agent", "--id", str(a.id), "--scenario", str(scen_path), *zargs], prefix)
+            fleet.start("agent", str(a.id), ["agent", "--id", str(a.id), "--scenario", str(scen_path), *ros, *zargs],
+                        prefix)
         prefix, zargs = net.zopt("simworld")
         world = fleet.start("simworld", "-", ["simworld", "--scenario", str(scen_path), "--clock", cfg.clock,
                                               "--speed", str(cfg.speed), "--start-timeout", str(cfg.start_timeout_s),
-                                              *zargs], prefix)
+                                              *ros, *zargs], prefix)
         watch = ClockWatch(s.meta.name, net.watch)
         code = _supervise(cfg, s, fleet, world, mon, watch, stop_sig)
     finally:

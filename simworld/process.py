@@ -15,11 +15,12 @@ from pathlib import Path
 import zenoh
 
 from reconswarm.errors import BadInput
-from reconswarm.net import wire
+from reconswarm.net import ros2, wire
 from reconswarm.net.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
 from reconswarm.net.wire import ClockMode
 from reconswarm.scenario import load
+from simworld.ros2_io import Ros2World, WorldRos2
 from simworld.world import TickOut, WorldNode
 
 log = logging.getLogger("reconswarm.simworld")
@@ -35,27 +36,44 @@ class SimworldConfig:
     speed: float = 10.0
     run_id: str | None = None
     start_timeout_s: float = TIMING.start_timeout_s
+    ros2_domain_id: int | None = None  # ROS 2 mode: odom out, cmd_vel in (simworld/ros2_io.py) in this domain
 
 
 class WorldAdapter(Member):
     """Moves bytes between zenoh and the node: decode in, encode out."""
 
-    def __init__(self, node: WorldNode, run: str, session: zenoh.Session) -> None:
+    def close(self) -> None:
+        if self.ros2 is not None:
+            self.ros2.close()
+        super().close()
+
+    def __init__(self, node: WorldNode, run: str, session: zenoh.Session, ros2_domain_id: int | None = None) -> None:
         self.node = node
         self.keys = k = wire.Keys(run)
         self.inbox = Inbox()
         self.rej = Rejections("simworld")
         block = zenoh.CongestionControl.BLOCK
         z = session
+        self.ros2 = None
+        if ros2_domain_id is not None and isinstance(node, Ros2World):
+            self.ros2 = WorldRos2(z, ros2_domain_id, node, self.inbox.callback)
         self.pub_clock = z.declare_publisher(k.clock, congestion_control=block)
         self.pub_truth = z.declare_publisher(k.truth, congestion_control=block)
-        self.pub_state = {a: z.declare_publisher(k.state(a), congestion_control=block) for a in node.ids}
+        self.pub_state = {} if self.ros2 else {a: z.declare_publisher(k.state(a), congestion_control=block)
+                                                for a in node.ids}
         self.pub_scan = {a: z.declare_publisher(k.scan(a), congestion_control=block) for a in node.ids}
-        self.subs = [z.declare_subscriber(k.all_agents("cmd"), self.inbox.callback),
+        self.subs = [*([] if self.ros2 else [z.declare_subscriber(k.all_agents("cmd"), self.inbox.callback)]),
                      z.liveliness().declare_subscriber(k.alive_all, self.inbox.callback, history=True)]
         self.token = z.liveliness().declare_token(k.alive_simworld)
 
     def handle(self, key: str, payload: bytes, kind: str) -> None:
+        if self.ros2 is not None and self.ros2.owns(key):
+            try:
+                self.ros2.command(key, payload, time.monotonic())
+            except (ros2.Ros2Error, wire.WireError) as exc:
+                self.rej.reject(key, str(exc))
+                self.node.rejected = self.rej.count
+            return
         try:
             what, aid, leaf = self.keys.parse(key)
             if what == "alive":
@@ -73,7 +91,12 @@ class WorldAdapter(Member):
         self.pub_clock.put(wire.clock_to_wire(out.clock))
         self.pub_truth.put(wire.truth_to_wire(out.truth))
         self.node.sent(out.clock.k, time.monotonic())
-        for m in out.states:
+        if self.ros2 is not None:
+            self.ros2.publish(out.states)
+            for _ in range(self.ros2.new_bad_attachments()):
+                self.rej.reject("/robot_<i>/cmd_vel", "a sample without a valid rmw_zenoh attachment")
+            self.node.rejected = self.rej.count
+        for m in out.states if self.ros2 is None else ():
             self.pub_state[m.id].put(wire.state_to_wire(m))
         for sc in out.scans:
             self.pub_scan[sc.id].put(wire.scan_to_wire(sc))
@@ -98,9 +121,13 @@ def run(cfg: SimworldConfig) -> int:
     if not cfg.speed > 0:
         raise BadInput(f"--speed: must be > 0, got {cfg.speed}")
     s = load(cfg.scenario)
-    node = WorldNode(s, clock, cfg.speed, replace(TIMING, start_timeout_s=cfg.start_timeout_s))
+    timing = replace(TIMING, start_timeout_s=cfg.start_timeout_s)
+    if cfg.ros2_domain_id is not None and clock != ClockMode.REALTIME:
+        raise BadInput("--ros2: runs on the realtime clock only (ROS 2 topics carry no tick), not --clock lockstep")
+    node = (WorldNode(s, clock, cfg.speed, timing) if cfg.ros2_domain_id is None
+            else Ros2World(s, cfg.speed, timing=timing))
     with serving(cfg.zenoh, "simworld") as (session, stop):
-        world = WorldAdapter(node, cfg.run_id or s.meta.name, session)
+        world = WorldAdapter(node, cfg.run_id or s.meta.name, session, cfg.ros2_domain_id)
         log.info("simworld up (run %s, %s clock): waiting for %d agents and the monitor", world.keys.run,
                  clock, len(node.ids))
         wall0 = time.monotonic()

@@ -296,7 +296,10 @@ class WorldNode:
             self.expected += len(live)
             self.missed += sum(1 for i in live if i not in got)
         stale = (k - self.u_k) > hold
-        u = np.where(stale[:, None], 0.0, self.u)
+        self.integrate(np.where(stale[:, None], 0.0, self.u))
+
+    def integrate(self, u: np.ndarray) -> None:
+        """Move every robot over one step under its held command (N, 2) (zeros: stopped)."""
         w = self.s.world
         self.p, self.theta = unicycle.step(self.p, self.theta, u, self.l, self.s.meta.dt_s, w.max_speed_mps,
                                            w.max_turn_rate_radps)

@@ -28,6 +28,7 @@ class Recorder:
         self.topology = TopologyTracker(self.ids, s.planner.link_range_m)
         self.events: list[Event] = []  # every event recorded, in order
         self.max_error_m = float("inf")
+        self.gaps_m = (float("inf"), float("inf"))  # the latest tick's smallest agent and obstacle gaps
         p_cfg = s.planner
         # Pairs within this distance cover the swarm graph (link + hysteresis) and the safety reach.
         self.reach_m = max(p_cfg.link_range_m + self.topology.hysteresis_m, 2 * float(s.radii.max()) + p_cfg.d_max_m)
@@ -55,6 +56,7 @@ class Recorder:
         else:
             self.max_error_m = float(err[alive].max()) if alive.any() else float("inf")
         gap_a, gap_o, started, ended = self.safety.step(t, p, true_d, cand, cand_d)
+        self.gaps_m = (gap_a, gap_o)
         events = [Event.from_dict(e) for e in self.topology.step(t, p, alive, cand, cand_d)]
         for ev in events:
             self.event(ev)

@@ -1,0 +1,157 @@
+"""The live view: the monitor serves the run to the Foxglove app while it records (`--foxglove PORT`).
+
+The same channels as the MCAP export (monitor/scene.py: `/world`, `/swarm`, `/tracking_error`, `/metrics`,
+`/events`) through the Foxglove SDK's WebSocket server on 127.0.0.1:PORT, on a private Context, plus what
+only the live swarm knows: `/knowledge` (`foxglove.SceneUpdate`), each agent's known obstacle hulls as
+announced on its obstacle-set key (outlines in its group's colour, one entity per agent).
+
+Fed from the ticks the monitor records: the scene goes out at most `max_rate_hz` times per wall second
+(the app draws at display rate; a lockstep run records several hundred ticks a second) and nothing is
+built while no client is subscribed, so serving costs the mission nothing measurable. Events go out as
+they are recorded. Message times are the mission's wall-clock start plus simulated time (as in the export).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+import foxglove
+import numpy as np
+from foxglove.channels import SceneUpdateChannel
+from foxglove.messages import (
+    LinePrimitive,
+    LinePrimitiveLineType,
+    Point3,
+    Pose,
+    Quaternion,
+    SceneEntity,
+    SceneEntityDeletion,
+    SceneEntityDeletionType,
+    SceneUpdate,
+    Vector3,
+)
+from numpy.typing import NDArray
+from zenoh import ext
+
+from monitor import scene
+from reconswarm.errors import BadInput
+from reconswarm.net import wire
+from reconswarm.net.session import Inbox, Rejections
+from reconswarm.paper.events import Event
+from reconswarm.paper.topology import labels
+from reconswarm.scenario import Scenario
+
+log = logging.getLogger("reconswarm.monitor")
+
+HOST = "127.0.0.1"
+DEFAULT_PORT = 8765
+TOPIC_KNOWLEDGE = "/knowledge"
+MAX_RATE_HZ = 20.0  # scenes per wall second at most
+KNOWLEDGE_Z_M = 0.2  # hull outlines just above the true obstacles
+_ORIGIN = Pose(position=Vector3(x=0.0, y=0.0, z=0.0), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
+
+
+def knowledge_update(sets: dict[int, dict[str, NDArray[np.float64]]], group: dict[int, int], ns: int) -> SceneUpdate:
+    """Every agent's known obstacle hulls: entity `knowledge/<id>` with one closed outline per hull, coloured
+    by the agent's group (grey when it is in none). Replaces the previous update on its topic."""
+    stamp = scene.timestamp(ns)
+    ents = []
+    for aid in sorted(sets):
+        colour = scene.group_colour(group.get(aid, -1), 0.9)
+        lines = [LinePrimitive(type=LinePrimitiveLineType.LineLoop, pose=_ORIGIN, thickness=0.35,
+                               points=[Point3(x=float(x), y=float(y), z=KNOWLEDGE_Z_M) for x, y in hull.tolist()],
+                               color=colour)
+                 for _, hull in sorted(sets[aid].items()) if hull.shape[0] >= 2]
+        ents.append(SceneEntity(timestamp=stamp, frame_id=scene.FRAME, id=f"knowledge/{aid}", lines=lines))
+    return SceneUpdate(deletions=[SceneEntityDeletion(timestamp=stamp, type=SceneEntityDeletionType.All)],
+                       entities=ents)
+
+
+class LiveView:
+    """The WebSocket server and its channels; feed it ticks, obstacle sets and events in time order."""
+
+    def __init__(self, s: Scenario, port: int, max_rate_hz: float = MAX_RATE_HZ, name: str = "reconswarm") -> None:
+        self.s = s
+        self.ids = np.asarray(s.ids, dtype=np.int64)
+        self.index = {int(a): i for i, a in enumerate(self.ids)}
+        self.period_s = 1.0 / max_rate_hz
+        self.ctx = foxglove.Context()
+        try:
+            self.server = foxglove.start_server(name=name, host=HOST, port=port, context=self.ctx)
+        except Exception as exc:  # the SDK's own error type: the port is taken or not allowed
+            raise BadInput(f"--foxglove: cannot serve on {HOST}:{port} ({exc})") from None
+        self.port = self.server.port
+        self.channels = scene.SceneChannels(self.ctx, s, self.ids)
+        self.knowledge = SceneUpdateChannel(TOPIC_KNOWLEDGE, context=self.ctx)
+        self.sets: dict[int, dict[str, NDArray[np.float64]]] = {}
+        self.start_ns: int | None = None
+        self.next_s = 0.0
+        self.group: dict[int, int] = {}
+        self.scenes = 0  # scene updates sent on /swarm
+
+    def _ns(self, t_s: float) -> int:
+        if self.start_ns is None:
+            self.start_ns = time.time_ns() - round(t_s * 1e9)
+        return scene.stamp_ns(self.start_ns, t_s)
+
+    def listened(self) -> bool:
+        return bool(self.channels.swarm.has_sinks() or self.channels.world.has_sinks()
+                    or self.knowledge.has_sinks() or self.channels.errors.has_sinks()
+                    or self.channels.metrics.has_sinks())
+
+    def due(self, now_s: float) -> bool:
+        """Whether a scene would go out now (rate limit, and someone listening)."""
+        return now_s >= self.next_s and self.listened()
+
+    def tick(self, now_s: float, t_s: float, p: NDArray[np.float64], theta: NDArray[np.float64],
+             alive: NDArray[np.bool_], edges: NDArray[np.int64], max_error_m: float, min_agent_gap_m: float,
+             min_obstacle_gap_m: float) -> bool:
+        """One recorded instant (arrays in scenario order, `edges` the swarm graph's index pairs); sent if due."""
+        if not self.due(now_s):
+            return False
+        self.next_s = now_s + self.period_s
+        active = alive & np.isfinite(p).all(axis=1)
+        group = scene.group_index(labels(p.shape[0], edges, active))
+        self.group = {int(a): int(g) for a, g in zip(self.ids, group, strict=True)}
+        frame = scene.SwarmFrame(t_s, self.ids, p, theta, alive, self.s.radii, group, edges)
+        ns = self._ns(t_s)
+        self.channels.tick(frame, ns, max_error_m, min_agent_gap_m, min_obstacle_gap_m)
+        self.knowledge.log(knowledge_update(self.sets, self.group, ns), log_time=ns)
+        self.scenes += 1
+        return True
+
+    def obstacle_set(self, m: wire.ObstacleSet) -> None:
+        self.sets[m.id] = {oid: np.array(v, dtype=np.float64).reshape(-1, 2) for oid, v in m.obstacles.items()}
+
+    def event(self, ev: Event) -> None:
+        self.channels.event(ev.to_dict(), self._ns(ev.t))
+
+    def close(self) -> None:
+        self.server.stop()
+
+
+class LiveFeed:
+    """The zenoh side of the live view: the agents' obstacle sets (an advanced subscriber: sets announced
+    before the monitor started come from the agents' caches), decoded on the monitor's loop."""
+
+    def __init__(self, view: LiveView, keys: wire.Keys, session: Any, rej: Rejections) -> None:
+        self.view, self.keys, self.rej = view, keys, rej
+        self.inbox = Inbox()
+        self.sub = ext.declare_advanced_subscriber(session, keys.all_agents("obstacles"), self.inbox.callback,
+                                                   history=ext.HistoryConfig(detect_late_publishers=True))
+
+    def poll(self) -> None:
+        for key, payload, _kind in self.inbox.drain():
+            try:
+                _, aid, _ = self.keys.parse(key)
+                if aid is None or aid not in self.view.index:
+                    raise wire.WireError(f"agent {aid} is not in the scenario")
+                self.view.obstacle_set(wire.obstacles_from_wire(payload, aid))
+            except wire.WireError as exc:
+                self.rej.reject(key, str(exc))
+
+    def close(self) -> None:
+        self.sub.undeclare()
+        self.view.close()

@@ -1,0 +1,115 @@
+"""ROS 2 mode's plant (simworld/ros2_io.Ros2World) against the unicycle's equations, the live view's
+knowledge scene, and the launcher's optional `--foxglove` value. No zenoh."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+from foxglove.messages import SceneUpdate
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+from monitor.live import knowledge_update
+from monitor.scene import GROUP_RGB
+from reconswarm.net.wire import ClockMode
+from reconswarm.scenario import load
+from reconswarm_bringup.cli_launch import FOXGLOVE_PORT, optional_values
+from simworld.ros2_io import Ros2World
+from tests.support import PAPER
+
+
+def _started(world: Ros2World) -> float:
+    for a in world.ids:
+        world.agent_up(a, True)
+    world.monitor_up(True)
+    now = 100.0
+    world.step(now)  # the readiness barrier passes
+    return now
+
+
+def test_twist_is_held_over_the_step_on_the_exact_arc():
+    s = load(PAPER)
+    world = Ros2World(s, speed=10.0)
+    assert world.clock == ClockMode.REALTIME
+    now = _started(world)
+    dt, l_m = s.meta.dt_s, s.head_offsets
+    st = world.step(now)  # publishes tick 0
+    assert st.out and st.out[0].clock.k == 0
+    s0 = np.array([[m.x, m.y] for m in st.out[0].states])
+    th0 = np.array([m.theta for m in st.out[0].states])
+    v, w = 3.0, 0.8
+    world.twist(world.ids[2], v, w, now)  # robot 3 only; the others get no command and stay put
+    st = world.step(now + 0.01)  # the tick is due (a period is dt / speed = 5 ms): apply and advance
+    st = world.step(now + 0.01)  # publish tick 1
+    s1 = np.array([[m.x, m.y] for m in st.out[0].states])
+    th1 = np.array([m.theta for m in st.out[0].states])
+    # eq. (1) with (v, ω) constant over dt: θ += ω dt; s moves by (v/ω)(sin θ1 - sin θ0, cos θ0 - cos θ1)
+    exp_x = s0[2, 0] + v / w * (math.sin(th0[2] + w * dt) - math.sin(th0[2]))
+    exp_y = s0[2, 1] + v / w * (math.cos(th0[2]) - math.cos(th0[2] + w * dt))
+    assert math.hypot(s1[2, 0] - exp_x, s1[2, 1] - exp_y) < 1e-12
+    assert abs(math.remainder(th1[2] - th0[2] - w * dt, 2 * math.pi)) < 1e-12
+    others = [i for i in range(len(world.ids)) if i != 2]
+    assert np.array_equal(s1[others], s0[others]) and np.array_equal(th1[others], th0[others])
+    assert tuple(world.vw[2]) == (v, w) and not world.vw[others].any()
+    # the head point is the body point plus l [cos θ, sin θ]
+    p1 = np.array([[m.px, m.py] for m in st.out[0].states])
+    assert np.allclose(p1 - s1, l_m[:, None] * np.stack([np.cos(th1), np.sin(th1)], axis=1), atol=1e-12)
+
+
+def test_a_robot_without_cmd_vel_for_hold_time_stops():
+    s = load(PAPER)
+    world = Ros2World(s, speed=10.0)
+    now = _started(world)
+    world.step(now)
+    world.twist(world.ids[0], 2.0, 0.0, now)
+    hold_ticks = round(world.timing.hold_sim_s / s.meta.dt_s)
+    moving = []
+    for _ in range(hold_ticks + 3):
+        now += 0.01
+        world.step(now)  # apply tick k
+        world.step(now)  # publish tick k + 1
+        moving.append(bool(world.vw[0, 0]))
+    assert moving == [True] * (hold_ticks + 1) + [False] * 2  # held for hold_sim_s, then stopped
+
+
+def test_twist_from_an_unknown_robot_is_refused():
+    world = Ros2World(load(PAPER), speed=10.0)
+    with pytest.raises(ValueError, match="not in the scenario"):
+        world.twist(99, 1.0, 0.0, 0.0)
+
+
+def _decoded(msg: SceneUpdate) -> Any:
+    """The message as a reader decodes it: protobuf, with the schema the SDK publishes."""
+    schema = SceneUpdate.get_schema()
+    pool = descriptor_pool.DescriptorPool()
+    for f in descriptor_pb2.FileDescriptorSet.FromString(schema.data).file:
+        pool.Add(f)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name)).FromString(msg.encode())
+
+
+def test_knowledge_scene_has_every_agents_hulls_in_its_group_colour():
+    tri = np.array([[0.0, 0.0], [4.0, 0.0], [0.0, 3.0]])
+    sq = np.array([[10.0, 10.0], [12.0, 10.0], [12.0, 12.0], [10.0, 12.0]])
+    upd = _decoded(knowledge_update({2: {"a": tri, "b": sq}, 5: {"a": tri}, 7: {}}, {2: 1, 5: 0},
+                                    1_700_000_000_123_456_789))
+    ents = {e.id: e for e in upd.entities}
+    assert set(ents) == {"knowledge/2", "knowledge/5", "knowledge/7"}
+    assert [[[p.x, p.y] for p in ln.points] for ln in ents["knowledge/2"].lines] == [tri.tolist(), sq.tolist()]
+    assert all(ln.type == 1 for ln in ents["knowledge/2"].lines)  # foxglove.LinePrimitive.Type LINE_LOOP
+    c2, c5 = ents["knowledge/2"].lines[0].color, ents["knowledge/5"].lines[0].color
+    assert (c2.r, c2.g, c2.b) == pytest.approx(GROUP_RGB[1]) and (c5.r, c5.g, c5.b) == pytest.approx(GROUP_RGB[0])
+    assert len(ents["knowledge/7"].lines) == 0
+    assert (upd.entities[0].timestamp.seconds, upd.entities[0].timestamp.nanos) == (1_700_000_000, 123_456_789)
+    assert len(upd.deletions) == 1  # each update replaces the previous one
+
+
+@pytest.mark.parametrize(("argv", "expected"), [
+    (["--foxglove"], ["--foxglove", str(FOXGLOVE_PORT)]),
+    (["--foxglove", "-n", "3"], ["--foxglove", str(FOXGLOVE_PORT), "-n", "3"]),
+    (["--foxglove", "9000", "-n", "3"], ["--foxglove", "9000", "-n", "3"]),
+    (["-n", "3"], ["-n", "3"]),
+])
+def test_foxglove_takes_an_optional_port(argv, expected):
+    assert optional_values(argv) == expected
