@@ -2,26 +2,16 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
 from reconswarm.generate import generate
 from reconswarm.scenario import check, parse
 from tests.support import PAPER
 from tests.support import reconswarm as cli
+from tests.unit import test_scenario as unit
 from tests.unit.test_scenario import BAD, CHECK_IN_SUBPROCESS, sub
 
-
-@pytest.fixture(scope="module")
-def bad_files(tmp_path_factory) -> dict[str, Path]:
-    d = tmp_path_factory.mktemp("bad")
-    out = {}
-    for name, text, _ in BAD:
-        f = d / f"{name}.toml"
-        f.write_text(text)
-        out[name] = f
-    return out
+bad_files = unit.bad_files  # the same files as the in-process table (a module-scoped fixture)
 
 
 @pytest.mark.parametrize("name", CHECK_IN_SUBPROCESS)
