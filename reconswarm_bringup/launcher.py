@@ -28,12 +28,12 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from reconswarm.errors import BadInput
 from reconswarm.generate import generate
 from reconswarm.net import wire
-from reconswarm.net.session import ZenohOptions, open_session
+from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions, open_session
 from reconswarm.net.timing import TIMING
 from reconswarm.record.store import RunRecord
 from reconswarm.record.summary import render, summarize
 from reconswarm.scenario import Scenario, load, parse, to_toml, warnings
-from reconswarm_bringup import chaos, netns, validate
+from reconswarm_bringup import chaos, netns, runid, validate
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.console import mission_exit_code
 from reconswarm_bringup.fleet import ROOT, Fleet, Proc
@@ -106,7 +106,7 @@ def run(cfg: LaunchConfig) -> int:
     if any(f.action == "partition" for f in cfg.faults) and cfg.hosts != 2:
         raise BadInput("--fault partition@...: needs --hosts 2 (two hosts to cut apart)")
     s = prepare_scenario(cfg)  # refused before anything of a previous run in OUTDIR is touched
-    for stale in ("processes.tsv", "faults.tsv", "run.db", "run.db-wal", "run.db-shm"):
+    for stale in ("processes.tsv", "faults.tsv", "run.db", "run.db-wal", "run.db-shm", runid.RUN_ID_FILE):
         (cfg.out / stale).unlink(missing_ok=True)
     scen_path = cfg.out / "scenario.toml"  # every process reads the same file
     scen_path.write_text(to_toml(s))
@@ -126,28 +126,35 @@ def run(cfg: LaunchConfig) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, on_signal)
 
+    # One launch, one run: the run id names every key of this run (swarm/<run>/...), so two launches never
+    # hear each other; it is in OUTDIR/run_id before any process starts.
+    run_id = runid.new_run_id(s.meta.name)
+    runid.write_run_id(cfg.out, run_id)
+    lock = runid.EndpointLock(cfg.router or DEFAULT_ROUTER)
     net: Net | None = None
     watch: ClockWatch | None = None
     code = 3
     try:
-        net = plan_network(cfg, s)
+        net = plan_network(cfg, s, run_id, lock)
+        log.info("run %s", run_id)
         fleet.zopt = net.zopt
+        run_arg = ["--run", run_id]
         for ident, args, prefix in net.routers:
             fleet.start("router", ident, args, prefix)
         prefix, zargs = net.zopt("monitor")
         live = [] if cfg.foxglove_port is None else ["--foxglove", str(cfg.foxglove_port)]
         mon = fleet.start("monitor", "-", ["monitor", "record", "--scenario", str(scen_path), "--db",
-                                           str(cfg.out / "run.db"), "--no-live", *live, *zargs], prefix)
+                                           str(cfg.out / "run.db"), "--no-live", *live, *run_arg, *zargs], prefix)
         ros = [] if cfg.ros_domain_id is None else ["--ros2", "--ros-domain-id", str(cfg.ros_domain_id)]
         for a in s.agents:
             prefix, zargs = net.zopt("agent", str(a.id))
-            fleet.start("agent", str(a.id), ["agent", "--id", str(a.id), "--scenario", str(scen_path), *ros, *zargs],
-                        prefix)
+            fleet.start("agent", str(a.id), ["agent", "--id", str(a.id), "--scenario", str(scen_path), *ros,
+                                             *run_arg, *zargs], prefix)
         prefix, zargs = net.zopt("simworld")
         world = fleet.start("simworld", "-", ["simworld", "--scenario", str(scen_path), "--clock", cfg.clock,
                                               "--speed", str(cfg.speed), "--start-timeout", str(cfg.start_timeout_s),
-                                              *ros, *zargs], prefix)
-        watch = ClockWatch(s.meta.name, net.watch)
+                                              *ros, *run_arg, *zargs], prefix)
+        watch = ClockWatch(run_id, net.watch)
         code = _supervise(cfg, s, fleet, world, mon, watch, stop_sig)
     finally:
         if watch is not None:
@@ -156,6 +163,7 @@ def run(cfg: LaunchConfig) -> int:
         if net is not None and net.hosts is not None:
             net.hosts.delete()
             netns.ACTIVE.clear()
+        lock.release()
     if stop_sig:
         log.warning("stopped by signal %d", stop_sig[0])
         return 128 + stop_sig[0]

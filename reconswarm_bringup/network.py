@@ -11,7 +11,7 @@ from typing import Any
 from reconswarm.errors import BadInput, ProcessFailure
 from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions
 from reconswarm.scenario import Scenario
-from reconswarm_bringup import netns, secure
+from reconswarm_bringup import netns, runid, secure
 from reconswarm_bringup.config import LaunchConfig
 
 log = logging.getLogger("reconswarm.launch")
@@ -45,12 +45,16 @@ class Net:
         return self.reach.get((role, ident), ([], self.default))
 
 
-def plan_network(cfg: LaunchConfig, s: Scenario) -> Net:
+def plan_network(cfg: LaunchConfig, s: Scenario, run: str, lock: runid.EndpointLock | None = None) -> Net:
+    """How the run reaches its router(s). `lock`, when given, is taken on the endpoint first (one launch per
+    router endpoint); a plain router already listening there is used only if no run's world is alive on it."""
     endpoint = cfg.router or DEFAULT_ROUTER
     if cfg.secure and cfg.hosts > 1:
         raise BadInput("--secure with --hosts 2 is not supported")
+    if lock is not None and cfg.hosts == 1:
+        lock.acquire(run)
     if cfg.secure:
-        sec = secure.create(cfg.out / "secrets", s, endpoint)
+        sec = secure.create(cfg.out / "secrets", s, endpoint, run)
         reach: dict[tuple[str, str], tuple[list[str], list[str]]] = {
             ("monitor", "-"): ([], ["--zenoh-config", str(sec.config_for("monitor", "-"))]),
                  ("simworld", "-"): ([], ["--zenoh-config", str(sec.config_for("simworld", "-"))]),
@@ -58,7 +62,8 @@ def plan_network(cfg: LaunchConfig, s: Scenario) -> Net:
         reach |= {("agent", str(a.id)): ([], ["--zenoh-config", str(sec.config_for("agent", str(a.id)))])
                   for a in s.agents}
         if not _port_free(sec.endpoint):  # a router already there holds another run's CA: it cannot serve us
-            raise ProcessFailure(f"router: {sec.endpoint} is in use; secure mode starts its own router")
+            raise BadInput(f"{sec.endpoint}: in use by a router this launch did not start; secure mode starts "
+                           f"its own router: pass another --router port")
         routers: list[tuple[str, list[str], list[str]]] = [
             ("-", ["router", "--zenoh-config", str(sec.router_config)], [])]
         return Net(sec.observer_options(), routers, reach, [])
@@ -80,6 +85,7 @@ def plan_network(cfg: LaunchConfig, s: Scenario) -> Net:
     elif cfg.router is None:
         raise ProcessFailure(f"router: {endpoint} is in use (another run?); stop it or pass --router EP")
     else:
-        log.info("using the router already listening on %s", endpoint)
+        runid.refuse_if_live(endpoint)
+        log.info("using the router already listening on %s (no run's world is alive on it)", endpoint)
         routers = []
     return Net(ZenohOptions.build([endpoint], None, "client", None), routers, {}, ["--connect", endpoint])

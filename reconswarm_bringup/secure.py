@@ -96,8 +96,10 @@ def tls_endpoint(endpoint: str) -> str:
     return f"tls/{addr}"
 
 
-def create(secrets_dir: Path, scenario: Scenario, endpoint: str) -> Secrets:
-    """Create the CA, every credential and configuration of one secure run under secrets_dir."""
+def create(secrets_dir: Path, scenario: Scenario, endpoint: str, run: str | None = None) -> Secrets:
+    """Create the CA, every credential and configuration of one secure run under secrets_dir.
+
+    run: the run id of the key prefix `swarm/<run>` the access rules name (default: the scenario name)."""
     ep = tls_endpoint(endpoint)
     host = ep.partition("/")[2].rpartition(":")[0].strip("[]")
     secrets_dir = Path(secrets_dir).resolve()
@@ -106,9 +108,9 @@ def create(secrets_dir: Path, scenario: Scenario, endpoint: str) -> Secrets:
         if old.is_file() and old.suffix in (".pem", ".json5"):
             old.unlink()
     ids = tuple(a.id for a in scenario.agents)
-    sec = Secrets(secrets_dir, ep, scenario.meta.name, ids)
+    sec = Secrets(secrets_dir, ep, run or scenario.meta.name, ids)
 
-    ca_key, ca_cert = _make_ca(scenario.meta.name)
+    ca_key, ca_cert = _make_ca(sec.run)
     _write(sec.ca, _cert_pem(ca_cert))
     names = ["monitor", "simworld", *(f"agent-{i}" for i in ids), "observer", "intruder"]
     _issue(secrets_dir, "router", ca_key, ca_cert, server_names=_server_names(host))

@@ -158,3 +158,13 @@ def view_of(p: np.ndarray, n_rows: int, n_cols: int, entries: list[tuple[int, in
     rows = np.array([e[0] for e in entries], dtype=np.int64)
     cols = np.array([e[1] for e in entries], dtype=np.int64)
     return obstacle_view(p, n_rows, n_cols, rows, cols, Edges.of([e[2] for e in entries]))
+
+
+def read_run_id(out: Path) -> str:
+    """The run id a launch wrote to OUTDIR/run_id (its keys are `swarm/<run id>/...`)."""
+    return (out / "run_id").read_text().strip()
+
+
+def run_keys(out: Path) -> str:
+    """`swarm/<run id>` of a launch."""
+    return f"swarm/{read_run_id(out)}"

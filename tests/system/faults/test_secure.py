@@ -32,12 +32,12 @@ from tests.support import (
     assert_all_gone,
     free_port,
     launcher_cmd,
+    read_run_id,
     reconswarm,
     run_launcher,
     tick_count,
 )
 
-RUN = "swarm/paper"
 SETTLE_S = 1.5  # declarations reaching the router and the other sessions
 
 
@@ -93,7 +93,8 @@ def test_create_writes_private_credentials_and_configs(tmp_path: Path) -> None:
     d = tmp_path / "secrets"
     d.mkdir(mode=0o755)
     (d / "agent-99.json5").write_text("{}")  # a stale file from an earlier run with more agents
-    sec = secure.create(d, s, "tcp/127.0.0.1:7447")
+    sec = secure.create(d, s, "tcp/127.0.0.1:7447", "paper-0a1b2c")
+    run = "swarm/paper-0a1b2c"  # the ACL names the run id's keys, not the scenario name's
     assert sec.endpoint == "tls/127.0.0.1:7447"
     assert _mode(d) == 0o700
     files = sorted(d.iterdir())
@@ -119,8 +120,8 @@ def test_create_writes_private_credentials_and_configs(tmp_path: Path) -> None:
     (pol3,) = [p for p in acl["policies"] if p["subjects"] == ["agent-3"]]
     sent = {k for rid in pol3["rules"] for k in rules[rid]["key_exprs"]
             if "ingress" in rules[rid]["flows"] and set(rules[rid]["messages"]) & {"put", "reply", "liveliness_token"}}
-    assert sent == {f"{RUN}/agent/3/cmd", f"{RUN}/agent/3/beacon", f"{RUN}/agent/3/obstacles",
-                    f"{RUN}/alive/agent/3"}
+    assert sent == {f"{run}/agent/3/cmd", f"{run}/agent/3/beacon", f"{run}/agent/3/obstacles",
+                    f"{run}/alive/agent/3"}
     assert "intruder" not in {c for sub in acl["subjects"] for c in sub["cert_common_names"]}
     with pytest.raises(Exception, match="no credentials for agent 42"):
         sec.config_for("agent", "42")
@@ -168,6 +169,11 @@ class Live:
     def tls(self) -> str:
         return f"tls/127.0.0.1:{self.port}"
 
+    @property
+    def prefix(self) -> str:
+        """`swarm/<run id>`: this launch's keys (OUTDIR/run_id)."""
+        return f"swarm/{read_run_id(self.out)}"
+
 
 @pytest.fixture(scope="module")
 def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Live]:
@@ -196,10 +202,11 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Live]:
 
 
 def test_anonymous_sessions_receive_nothing(live: Live) -> None:
+    run = live.prefix
     # A trusted session shows that the run is publishing while the others listen.
     trusted = _open(live.secrets / "monitor.json5")
     clock = Catch()
-    trusted.declare_subscriber(f"{RUN}/clock", clock)
+    trusted.declare_subscriber(f"{run}/clock", clock)
     attempts = {
         "tls, no certificate": _anonymous_config(live.tls),
         "tls, the run's CA but no client certificate": _anonymous_config(
@@ -227,10 +234,10 @@ def test_anonymous_sessions_receive_nothing(live: Live) -> None:
         intruder = _open(live.secrets / "intruder.json5")
         got = Catch()
         intruder.declare_subscriber("swarm/**", got)
-        intruder.declare_subscriber(f"{RUN}/clock", got)
-        intruder.liveliness().declare_subscriber(f"{RUN}/alive/**", got, history=True)
+        intruder.declare_subscriber(f"{run}/clock", got)
+        intruder.liveliness().declare_subscriber(f"{run}/alive/**", got, history=True)
         time.sleep(3.0)
-        tokens = list(intruder.liveliness().get(f"{RUN}/alive/**", timeout=2.0))
+        tokens = list(intruder.liveliness().get(f"{run}/alive/**", timeout=2.0))
         intruder.close()
         received["intruder (CA-signed, no grant)"] = len(got) + sum(1 for r in tokens if r.ok is not None)
     finally:
@@ -243,24 +250,25 @@ def test_anonymous_sessions_receive_nothing(live: Live) -> None:
 
 
 def test_agent_credentials_cannot_impersonate_another_agent(live: Live) -> None:
+    run = live.prefix
     sec = live.secrets
     observers = [_open(sec / "monitor.json5"), _open(sec / "simworld.json5"), _open(sec / "agent-2.json5")]
     mon, sim, a2 = observers
     beacons, cmds, sets, alive, clock, reads = Catch(), Catch(), Catch(), Catch(), Catch(), Catch()
     a3 = _open(sec / "agent-3.json5")
     try:
-        mon.declare_subscriber(f"{RUN}/agent/*/beacon", beacons)
-        mon.declare_subscriber(f"{RUN}/clock", clock)
-        mon.liveliness().declare_subscriber(f"{RUN}/alive/**", alive, history=True)
-        sim.declare_subscriber(f"{RUN}/agent/*/cmd", cmds)
-        a3.declare_subscriber(f"{RUN}/agent/5/state", reads)  # not agent 3's to read
-        a3.declare_subscriber(f"{RUN}/agent/3/state", reads)  # its own: allowed
+        mon.declare_subscriber(f"{run}/agent/*/beacon", beacons)
+        mon.declare_subscriber(f"{run}/clock", clock)
+        mon.liveliness().declare_subscriber(f"{run}/alive/**", alive, history=True)
+        sim.declare_subscriber(f"{run}/agent/*/cmd", cmds)
+        a3.declare_subscriber(f"{run}/agent/5/state", reads)  # not agent 3's to read
+        a3.declare_subscriber(f"{run}/agent/3/state", reads)  # its own: allowed
         # Agent 3's credentials, agent 5's keys: beacon, command, obstacle set (an advanced publisher whose
         # cache answers late joiners), liveliness token; and a token for an agent that does not exist.
-        fake_set = ext.declare_advanced_publisher(a3, f"{RUN}/agent/5/obstacles", cache=ext.CacheConfig(max_samples=1))
-        own_set = ext.declare_advanced_publisher(a3, f"{RUN}/agent/3/obstacles", cache=ext.CacheConfig(max_samples=1))
-        tokens = [a3.liveliness().declare_token(f"{RUN}/alive/agent/5"),
-                  a3.liveliness().declare_token(f"{RUN}/alive/agent/11")]
+        fake_set = ext.declare_advanced_publisher(a3, f"{run}/agent/5/obstacles", cache=ext.CacheConfig(max_samples=1))
+        own_set = ext.declare_advanced_publisher(a3, f"{run}/agent/3/obstacles", cache=ext.CacheConfig(max_samples=1))
+        tokens = [a3.liveliness().declare_token(f"{run}/alive/agent/5"),
+                  a3.liveliness().declare_token(f"{run}/alive/agent/11")]
         time.sleep(SETTLE_S)
         k = wire.clock_from_wire(clock.items[-1][1]).k if len(clock) else 0
         sent: dict[str, list[bytes]] = {}
@@ -273,19 +281,19 @@ def test_agent_credentials_cannot_impersonate_another_agent(live: Live) -> None:
             sent.setdefault(key, []).append(payload)
 
         for n in range(20):  # valid-looking messages for the ticks to come
-            send(f"{RUN}/agent/5/beacon", wire.beacon_to_wire(wire.Beacon(5, k + n, 0.0, 123.0, 45.0, 2.6)))
-            send(f"{RUN}/agent/5/cmd", wire.cmd_to_wire(wire.Cmd(5, k + n, 100.0, 0.0)))
+            send(f"{run}/agent/5/beacon", wire.beacon_to_wire(wire.Beacon(5, k + n, 0.0, 123.0, 45.0, 2.6)))
+            send(f"{run}/agent/5/cmd", wire.cmd_to_wire(wire.Cmd(5, k + n, 100.0, 0.0)))
             hull: dict[str, tuple[tuple[float, float], ...]] = {"fake": ((0.0, 0.0), (10.0, 0.0), (0.0, 10.0))}
-            send(f"{RUN}/agent/5/obstacles", wire.obstacles_to_wire(wire.ObstacleSet(5, k + n, 99, hull)), fake_set)
+            send(f"{run}/agent/5/obstacles", wire.obstacles_to_wire(wire.ObstacleSet(5, k + n, 99, hull)), fake_set)
             # the control: the same session on agent 3's own keys
-            send(f"{RUN}/agent/3/beacon", wire.beacon_to_wire(wire.Beacon(3, 0, 0.0, -77.0, 0.0, 2.6)))
-            send(f"{RUN}/agent/3/cmd", wire.cmd_to_wire(wire.Cmd(3, 0, 0.0, 0.0)))
+            send(f"{run}/agent/3/beacon", wire.beacon_to_wire(wire.Beacon(3, 0, 0.0, -77.0, 0.0, 2.6)))
+            send(f"{run}/agent/3/cmd", wire.cmd_to_wire(wire.Cmd(3, 0, 0.0, 0.0)))
             time.sleep(0.1)
         own_payload = wire.obstacles_to_wire(wire.ObstacleSet(3, 0, 99, {"own": ((5.0, 5.0), (6.0, 5.0), (5.0, 6.0))}))
-        send(f"{RUN}/agent/3/obstacles", own_payload, own_set)
+        send(f"{run}/agent/3/obstacles", own_payload, own_set)
         time.sleep(0.5)
         # A late joiner with agent 2's credentials asks the publishers' caches for their obstacle sets.
-        ext.declare_advanced_subscriber(a2, f"{RUN}/agent/*/obstacles", sets,
+        ext.declare_advanced_subscriber(a2, f"{run}/agent/*/obstacles", sets,
                                         history=ext.HistoryConfig(detect_late_publishers=True))
         time.sleep(SETTLE_S + 1.0)
         for t in tokens:
@@ -299,15 +307,15 @@ def test_agent_credentials_cannot_impersonate_another_agent(live: Live) -> None:
     arrived = {key: sum(1 for x in seen[key.rsplit("/", 1)[1]].payloads(key) if x in payloads)
                for key, payloads in sent.items()}
     print("messages from agent 3's credentials that arrived, per key:", arrived)
-    for key in (f"{RUN}/agent/5/beacon", f"{RUN}/agent/5/cmd", f"{RUN}/agent/5/obstacles"):
+    for key in (f"{run}/agent/5/beacon", f"{run}/agent/5/cmd", f"{run}/agent/5/obstacles"):
         assert arrived[key] == 0, f"a message from agent 3's credentials arrived on {key}"
-    assert f"{RUN}/alive/agent/11" not in alive.key_set()
-    assert [kind for key, _, kind in alive.items if key == f"{RUN}/alive/agent/5"] == ["SampleKind.PUT"]
-    assert f"{RUN}/agent/5/state" not in reads.key_set()
+    assert f"{run}/alive/agent/11" not in alive.key_set()
+    assert [kind for key, _, kind in alive.items if key == f"{run}/alive/agent/5"] == ["SampleKind.PUT"]
+    assert f"{run}/agent/5/state" not in reads.key_set()
     # The same credentials do work on agent 3's own keys: nothing above passes because all is blocked.
-    assert arrived[f"{RUN}/agent/3/beacon"] > 0 and arrived[f"{RUN}/agent/3/cmd"] > 0
-    assert arrived[f"{RUN}/agent/3/obstacles"] >= 1  # through the publisher's cache, to a late joiner
-    assert f"{RUN}/agent/3/state" in reads.key_set()
+    assert arrived[f"{run}/agent/3/beacon"] > 0 and arrived[f"{run}/agent/3/cmd"] > 0
+    assert arrived[f"{run}/agent/3/obstacles"] >= 1  # through the publisher's cache, to a late joiner
+    assert f"{run}/agent/3/state" in reads.key_set()
     assert len(clock) > 10
 
 
