@@ -40,12 +40,20 @@ def attraction(p: Array, center: Array, offset: Array, k_att: float, r_c: float)
     return np.where(inside[:, None], -k_att * e, out)
 
 
-def repulsion_speed(d: Array, d_min: Array, d_max: Array, psi: float) -> Array:
+def repulsion_speed(d: Array, d_min: Array, d_max: Array, psi: float, d_contact: Array) -> Array:
     """Magnitude of one repulsive term of eq. (11): -Ψ (d_max - d) / (d_max - d_min) for d <= d_max.
 
-    |Ψ| at d = d_min, 0 at d_max, linear between and continuing upward below d_min. Shapes broadcast.
+    |Ψ| at d = d_min, 0 at d_max, linear between and continuing upward below d_min down to contact
+    (d = d_contact, the surface gap 0), where it stays: once in contact the push keeps its contact value
+    |Ψ| (d_max - d_contact) / (d_max - d_min) instead of growing without bound. A run without contact
+    (the paper's) is unchanged bit for bit. Shapes broadcast.
     """
-    return np.where(d <= d_max, -psi * (d_max - d) / (d_max - d_min), 0.0)
+    return np.where(d <= d_max, -psi * (d_max - np.maximum(d, d_contact)) / (d_max - d_min), 0.0)
+
+
+def max_repulsion_speed(psi: float, d_safe: float, d_max: float) -> float:
+    """The largest magnitude of one repulsive term: its contact value |Ψ| d_max / (d_max - d_safe)."""
+    return -psi * d_max / (d_max - d_safe)
 
 
 def _accumulate(terms: Array, valid: Mask) -> Array:
@@ -73,7 +81,7 @@ def agent_repulsion(p: Array, r: Array, nb_p: Array, nb_r: Array, nb_valid: Mask
     rr = r[:, None] + nb_r
     dmin = rr + d_safe
     dmax = rr + d_max
-    mag = repulsion_speed(d, dmin, dmax, psi)
+    mag = repulsion_speed(d, dmin, dmax, psi, rr)
     pos = d > 0.0
     safe = np.where(pos, d, 1.0)
     # Coincident centres have no direction: push along +x (a measure-zero case, but never NaN).
@@ -96,7 +104,7 @@ def obstacle_repulsion(r: Array, ob_d: Array, ob_n: Array, ob_valid: Mask,
         return np.zeros((ob_d.shape[0], 2))
     dmin = r[:, None] + d_safe
     dmax = r[:, None] + d_max
-    mag = repulsion_speed(ob_d, dmin, dmax, psi)
+    mag = repulsion_speed(ob_d, dmin, dmax, psi, r[:, None])
     terms = mag[..., None] * ob_n
     return _accumulate(terms, ob_valid & (ob_d <= dmax))
 
@@ -111,7 +119,7 @@ def containment(p: Array, r: Array, center: Array, r_c: float, d_safe: float, d_
     rel = center - p
     dist = norm2(rel)
     d = r_c - dist
-    mag = repulsion_speed(d, r + d_safe, r + d_max, psi)
+    mag = repulsion_speed(d, r + d_safe, r + d_max, psi, r)
     mag = np.where(dist <= r_c, mag, 0.0)
     safe = np.where(dist > 0.0, dist, 1.0)
     return np.stack([mag * rel[:, 0] / safe, mag * rel[:, 1] / safe], axis=1)

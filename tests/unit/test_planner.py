@@ -24,6 +24,7 @@ from reconswarm.paper.planner import (
     command,
     containment,
     errors,
+    max_repulsion_speed,
     neighbour_table,
     obstacle_repulsion,
     repulsion_speed,
@@ -47,11 +48,15 @@ def u_att(p: np.ndarray, c: np.ndarray, delta: np.ndarray, k: float, rc: float) 
     return rc * k * r - 0.5 * k * rc * rc
 
 
-def u_rep_term(d: float, d_min: float, d_max: float, psi: float) -> float:
-    """One summand of eq. (10), expanded exactly as printed in the paper."""
+def u_rep_term(d: float, d_min: float, d_max: float, psi: float, d_contact: float) -> float:
+    """One summand of eq. (10), expanded exactly as printed in the paper, for d >= d_contact (surface gap
+    >= 0); inside contact it continues along its tangent (the bounded repulsion: constant force)."""
     if d > d_max:
         return 0.0
     den = d_min - d_max
+    if d < d_contact:
+        slope = psi / den * d_contact - psi * d_max / den
+        return u_rep_term(d_contact, d_min, d_max, psi, d_contact) + slope * (d - d_contact)
     return psi / (2 * den) * d * d - psi * d_max / den * d + psi * d_max * d_max / (2 * den)
 
 
@@ -189,12 +194,19 @@ def test_attraction_switch_and_batch_rows():
 def test_repulsion_speed_profile(d_min, width, mag, frac):
     d_max = d_min + width
     psi = -mag
-    at = lambda d: float(repulsion_speed(np.array(d), np.array(d_min), np.array(d_max), psi))  # noqa: E731
+    contact = d_min - width  # d_safe = width here: contact lies one width below d_min
+    at = lambda d: float(repulsion_speed(np.array(d), np.array(d_min), np.array(d_max), psi,  # noqa: E731
+                                         np.array(contact)))
     assert at(d_min) == pytest.approx(mag, rel=1e-15)  # |Ψ| at d_min
     assert at(d_max) == 0.0  # zero at d_max
     assert at(d_max + width * frac + 1e-9) == 0.0  # and beyond
     assert at(d_min + frac * width) == pytest.approx(mag * (1 - frac), rel=1e-9, abs=1e-9)  # linear
-    assert at(d_min - frac * width) == pytest.approx(mag * (1 + frac), rel=1e-9)  # continues upward
+    assert at(d_min - frac * width) == pytest.approx(mag * (1 + frac), rel=1e-9)  # continues upward to contact
+    # ... and stays at its contact value inside it: bounded, |Ψ| d_max / (d_max - d_safe) (= 2 |Ψ| here).
+    cap = max_repulsion_speed(psi, width, 2 * width)
+    assert cap == pytest.approx(2 * mag, rel=1e-12)
+    for inside in (contact, contact - frac * width, contact - 1e6, -1e300):
+        assert at(inside) == pytest.approx(cap, rel=1e-9)
 
 
 @SETTINGS
@@ -205,15 +217,15 @@ def test_agent_repulsion_is_minus_gradient_of_eq10(case):
     def u_rep(q: np.ndarray) -> float:
         total = 0.0
         for pj, rj in zip(nb_p, nb_r, strict=True):
-            total += u_rep_term(math.hypot(*(q - pj)), ri + rj + d_safe, ri + rj + d_max, psi)
+            total += u_rep_term(math.hypot(*(q - pj)), ri + rj + d_safe, ri + rj + d_max, psi, ri + rj)
         return total
 
     valid = np.ones((1, len(nb_r)), dtype=bool)
     got = agent_repulsion(p[None], np.array([ri]), nb_p[None], nb_r[None], valid, d_safe, d_max, psi)[0]
     want = -grad_fd(u_rep, p)
     np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-6)
-    # Bounded by design (no 1/d blow-up): each term at most |Ψ| d_max,ij / (d_max,ij - d_min,ij), its value at d = 0.
-    bound = sum(abs(psi) * (ri + rj + d_max) / (d_max - d_safe) for rj in nb_r)
+    # Bounded (no 1/d blow-up, and no growth inside contact): each term at most |Ψ| d_max / (d_max - d_safe).
+    bound = len(nb_r) * abs(psi) * d_max / (d_max - d_safe)
     assert math.hypot(*got) <= bound * (1 + 1e-12)
 
 
@@ -338,7 +350,7 @@ def test_obstacle_repulsion_is_minus_gradient_with_surface_distance(poly, ri, d_
     assert d_true == pytest.approx(d, rel=1e-9, abs=1e-9)  # the construction is right (shapely agrees)
 
     def u_rep(x: np.ndarray) -> float:
-        return u_rep_term(poly_distance(shape, x), ri + d_safe, ri + d_max, psi)
+        return u_rep_term(poly_distance(shape, x), ri + d_safe, ri + d_max, psi, ri)
 
     view = view_of(p[None], 1, 1, [(0, 0, poly)])
     got = obstacle_repulsion(np.array([ri]), view.d, view.n, view.valid, d_safe, d_max, psi)[0]
@@ -348,7 +360,7 @@ def test_obstacle_repulsion_is_minus_gradient_with_surface_distance(poly, ri, d_
     want = -grad_fd(u_rep, p, h=1e-7)
     np.testing.assert_allclose(got, want, rtol=2e-5, atol=2e-5)
     # Magnitude from the surface distance; direction from the nearest point of the polygon to p.
-    expect_mag = mag * ((ri + d_max) - d) / (d_max - d_safe)
+    expect_mag = mag * ((ri + d_max) - max(d, ri)) / (d_max - d_safe)  # constant once in contact (d < r_i)
     assert math.hypot(*got) == pytest.approx(expect_mag, rel=1e-9, abs=1e-9)
     np.testing.assert_allclose(got, expect_mag * n, atol=1e-8)
 
@@ -366,11 +378,15 @@ def test_obstacle_repulsion_bounds_against_a_face():
     np.testing.assert_allclose(rep(ri + d_max), [0.0, 0.0], atol=0)  # 0 at d_max = r + d_max
     assert np.array_equal(rep(ri + d_max + 0.5), np.zeros(2))
     np.testing.assert_allclose(rep(ri + d_safe + 2.0), [65.0 * 6 / 8, 0.0], atol=1e-12)  # linear
-    # Inside the obstacle (d < 0) the line continues upward and still pushes out through the near face.
-    view = view_of(np.array([[9.0, 4.0]]), 1, 1, [(0, 0, sq)])
-    assert view.d[0, 0] == pytest.approx(-1.0)
-    u = obstacle_repulsion(np.array([ri]), view.d, view.n, view.valid, d_safe, d_max, psi)[0]
-    np.testing.assert_allclose(u, [65.0 * (13 + 1) / 8, 0.0], atol=1e-12)
+    # Between d_min and contact (surface gap 0, d = r_i) the line continues upward ...
+    np.testing.assert_allclose(rep(ri + 0.5), [65.0 * 9.5 / 8, 0.0], atol=1e-12)
+    # ... and stops there: in contact, or inside the obstacle (d < 0), the push keeps its contact value
+    # |Ψ| d_max / (d_max - d_safe) and still points out through the near face.
+    for d in (ri, ri - 1.0, -1.0):
+        view = view_of(np.array([[10.0 + d, 4.0]]), 1, 1, [(0, 0, sq)])
+        assert view.d[0, 0] == pytest.approx(d)
+        u = obstacle_repulsion(np.array([ri]), view.d, view.n, view.valid, d_safe, d_max, psi)[0]
+        np.testing.assert_allclose(u, [65.0 * 10 / 8, 0.0], atol=1e-12)
     # Near a corner the push points from the corner to the agent.
     p = np.array([[10.0 + 3.0, 10.0 + 4.0]])  # 5 m from (10, 10)
     view = view_of(p, 1, 1, [(0, 0, sq)])
@@ -408,7 +424,7 @@ def test_containment_is_minus_gradient_of_wall_potential(rc, ri, a, frac):
     p = c + (rc - d) * np.array([math.cos(a), math.sin(a)])
 
     def u_wall(q: np.ndarray) -> float:
-        return u_rep_term(rc - math.hypot(*(q - c)), ri + d_safe, ri + d_max, psi)
+        return u_rep_term(rc - math.hypot(*(q - c)), ri + d_safe, ri + d_max, psi, ri)
 
     got = containment(p[None], np.array([ri]), c[None], rc, d_safe, d_max, psi)[0]
     np.testing.assert_allclose(got, -grad_fd(u_wall, p), rtol=1e-6, atol=1e-6)
@@ -449,8 +465,9 @@ def test_command_is_minus_gradient_of_total_potential(seed, px, py):
     def total(q: np.ndarray) -> float:
         u = u_att(q, c, delta, CFG.k_att, CFG.target_radius_m)
         for pj, rj in zip(nb_p, nb_r, strict=True):
-            u += u_rep_term(math.hypot(*(q - pj)), ri + rj + CFG.d_safe_m, ri + rj + CFG.d_max_m, CFG.psi_mps)
-        u += u_rep_term(poly_distance(shape, q), ri + CFG.d_safe_m, ri + CFG.d_max_m, CFG.psi_mps)
+            u += u_rep_term(math.hypot(*(q - pj)), ri + rj + CFG.d_safe_m, ri + rj + CFG.d_max_m, CFG.psi_mps,
+                              ri + rj)
+        u += u_rep_term(poly_distance(shape, q), ri + CFG.d_safe_m, ri + CFG.d_max_m, CFG.psi_mps, ri)
         return u
 
     nb = Neighbours(nb_p[None], nb_r[None], np.ones((1, 3), bool))

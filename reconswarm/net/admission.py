@@ -1,0 +1,301 @@
+"""Admission: can a well-formed message belong to this run? Pure rules, no zenoh.
+
+The wire decoders (wire.py) refuse what is malformed. This module refuses what is well formed but that the
+run cannot contain, from what the scenario says and what has been seen; each refusal is an `Intrusion`,
+which the receiver drops, counts (`IntrusionTally`) and logs. The rules:
+
+- agents: only the scenario's ids; a beacon's radius is the scenario's radius for that id; a position lies
+  inside the scenario's extent grown by what the fastest possible motion covers by then, and within the
+  same bound of that agent's previous beacon (`reach_m`);
+- obstacle sets: only the scenario's obstacle ids (so never more ids than it has); a hull has at most as
+  many vertices as the sensor samples on that obstacle, and every vertex lies on the true obstacle's
+  boundary within `HULL_TOL_M`: agents only share hulls of sensed contour points, which lie on the true
+  boundary, so a shared hull is never larger than the real obstacle whoever sent it;
+- commands: |u| at most `command_bound_mps` (what the planner can output with bounded repulsion) and for a
+  tick the world has published;
+- the world's messages (clock, state, scan, truth): only from the world's session, pinned at its first
+  clock; the clock keeps its mode and speed, and t = k dt;
+- an agent's messages (beacon, cmd): only from the session that agent speaks from (`Pins`, pinned at first
+  sight; another session may take over only once the pinned one has been silent `repin_after_s`, as a
+  restarted agent's new session does);
+- membership (`Membership`): an agent is alive while its liveliness token is there AND its own session's
+  data keeps coming; a token anyone can declare decides nothing alone.
+
+Sources are the publishers' zenoh session ids, which our processes attach to every put (zenoh's
+`SourceInfo`). In open mode any client on the port can still copy a session id it has seen, so these rules
+stop confused or naive clients and bound what a malicious one can do (no unbounded force, no impossible
+obstacle, no unknown robot); they do not authenticate. `--secure` (mutual TLS and access control) does.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+from reconswarm.geometry import distance_to_polygon, sample_boundary
+from reconswarm.net import wire
+from reconswarm.paper.planner import max_repulsion_speed
+from reconswarm.scenario import Scenario
+from reconswarm.sim.sensing import SAMPLE_SPACING_M
+
+HULL_TOL_M = 1e-3  # a shared vertex must lie within this of the true boundary (float error is ~1e-12 m)
+RADIUS_RTOL = 1e-9
+POSITION_MARGIN_M = 1.0
+COMMAND_TOL = 1e-9  # relative
+UNATTRIBUTED = "unattributed"  # the source of a message that carries no publisher id
+
+
+class IntrusionKind(Enum):
+    UNKNOWN_AGENT = "unknown_agent"  # an agent id the scenario does not have
+    RADIUS = "radius"  # a beacon's radius differs from the scenario's
+    POSITION = "position"  # a position the robot cannot have reached
+    UNKNOWN_OBSTACLE = "unknown_obstacle"  # an obstacle id the scenario does not have
+    HULL = "hull"  # a hull off the true obstacle, or with more vertices than can be sensed
+    COMMAND = "command"  # a command above what the planner can output, or for a tick not yet published
+    NOT_FROM_WORLD = "not_from_world"  # clock, state, scan or truth from a session other than the world's
+    CLOCK = "clock"  # the world's clock changing mode or speed, or t != k dt
+    IMPERSONATION = "impersonation"  # an agent's message from a session other than that agent's
+
+
+@dataclass(frozen=True)
+class Intrusion:
+    kind: IntrusionKind
+    source: str
+    key: str
+    detail: str
+
+
+def command_bound_mps(s: Scenario) -> float:
+    """The largest |u| the planner can output (eq. 7 with bounded repulsion), plus Remark 1's perturbation.
+
+    Attraction: at most R_c k_att (outside B(p*, R_c) exactly that; inside k_att |e| which the scenario keeps
+    below it for agents that start inside). Each repulsive term (every other agent, every obstacle) at most
+    `max_repulsion_speed`. The virtual-leader benchmark adds the leader's velocity (its own attraction and
+    obstacle repulsion) and the containment wall.
+    """
+    p = s.planner
+    offsets = max((math.hypot(*a.offset_m) for a in s.agents), default=0.0)
+    att = p.k_att * max(p.target_radius_m, p.target_radius_m + offsets)
+    rep = max_repulsion_speed(p.psi_mps, p.d_safe_m, p.d_max_m)
+    u = att + rep * (len(s.agents) - 1 + len(s.obstacles)) + p.perturbation_mps
+    if p.kind == "virtual-leader":
+        u += att + rep * len(s.obstacles) + rep
+    if s.world.max_speed_mps > 0:
+        u = max(u, s.world.max_speed_mps)
+    return u
+
+
+@dataclass
+class Pins:
+    """Which session speaks for whom: the world (pinned at its first clock) and each agent."""
+
+    repin_after_s: float = 1.0
+    world: str | None = None
+    agents: dict[int, tuple[str, float]] = field(default_factory=dict)  # id -> (source, last heard, wall s)
+
+    def agent(self, agent_id: int, source: str, now: float) -> bool:
+        """True if `source` speaks for the agent (pinning it if nobody does, or the pinned one fell silent)."""
+        pinned = self.agents.get(agent_id)
+        if pinned is None or pinned[0] == source or now - pinned[1] >= self.repin_after_s:
+            if source == UNATTRIBUTED:
+                return False
+            self.agents[agent_id] = (source, now)
+            return True
+        return False
+
+
+class Admission:
+    """The rules above for one scenario; `check_*` return None (admitted) or the Intrusion."""
+
+    def __init__(self, s: Scenario, pins: Pins | None = None) -> None:
+        self.s = s
+        self.pins = pins or Pins()
+        self.radius = {a.id: a.radius_m for a in s.agents}
+        self.polygons = {o.id: s.polygon(k) for k, o in enumerate(s.obstacles)}
+        self.max_vertices = {o: int(sample_boundary(poly, SAMPLE_SPACING_M).shape[0])
+                             for o, poly in self.polygons.items()}
+        self.u_max = command_bound_mps(s)
+        # The scenario's extent: starts (body centres; heads lie within head_offset), slots, obstacles.
+        pts = [s.starts, np.array(s.target_m)[None, :] + s.offsets, *self.polygons.values()]
+        allp = np.concatenate([p.reshape(-1, 2) for p in pts])
+        grow = float(s.head_offsets.max(initial=0.0)) + POSITION_MARGIN_M
+        self.lo = allp.min(axis=0) - grow
+        self.hi = allp.max(axis=0) + grow
+        self.clock_mode: tuple[str, float] | None = None
+        self.last_beacon: dict[int, tuple[float, float, float]] = {}  # id -> (t, px, py)
+
+    # -- helpers -------------------------------------------------------------------------------------
+
+    def reach_m(self, dt_s: float) -> float:
+        """How far a head point can move in dt_s of simulated time (|ṗ| = |u| for the unicycle's head)."""
+        return self.u_max * max(0.0, dt_s) + POSITION_MARGIN_M
+
+    def _position(self, px: float, py: float, t: float) -> str | None:
+        r = self.reach_m(t)
+        if not (self.lo[0] - r <= px <= self.hi[0] + r and self.lo[1] - r <= py <= self.hi[1] + r):
+            return f"({px:.6g}, {py:.6g}) outside the reachable area at t = {t:.6g} s"
+        return None
+
+    def _agent(self, agent_id: int, source: str, key: str, now: float) -> Intrusion | None:
+        if agent_id not in self.radius:
+            return Intrusion(IntrusionKind.UNKNOWN_AGENT, source, key, f"agent {agent_id} is not in the scenario")
+        if not self.pins.agent(agent_id, source, now):
+            who = self.pins.agents.get(agent_id, ("nobody", 0.0))[0]
+            return Intrusion(IntrusionKind.IMPERSONATION, source, key, f"agent {agent_id} speaks from session {who}")
+        return None
+
+    # -- agent messages -------------------------------------------------------------------------------
+
+    def check_beacon(self, b: wire.Beacon, source: str, key: str, now: float) -> Intrusion | None:
+        if b.id not in self.radius:
+            return Intrusion(IntrusionKind.UNKNOWN_AGENT, source, key, f"agent {b.id} is not in the scenario")
+        want = self.radius[b.id]
+        if abs(b.radius - want) > RADIUS_RTOL * max(1.0, want):
+            return Intrusion(IntrusionKind.RADIUS, source, key, f"radius {b.radius:.6g} m, the scenario's is {want} m")
+        bad = self._position(b.px, b.py, b.t)
+        if bad is None and b.id in self.last_beacon:
+            t0, x0, y0 = self.last_beacon[b.id]
+            jump = math.hypot(b.px - x0, b.py - y0)
+            if jump > self.reach_m(abs(b.t - t0)):
+                bad = f"moved {jump:.6g} m in {abs(b.t - t0):.6g} s"
+        if bad is not None:
+            return Intrusion(IntrusionKind.POSITION, source, key, bad)
+        who = self._agent(b.id, source, key, now)
+        if who is None:
+            self.last_beacon[b.id] = (b.t, b.px, b.py)
+        return who
+
+    def check_cmd(self, c: wire.Cmd, source: str, key: str, now: float, world_k: int) -> Intrusion | None:
+        """A command as the world receives it; world_k: the newest tick it has published."""
+        u = math.hypot(c.ux, c.uy)
+        if u > self.u_max * (1.0 + COMMAND_TOL):
+            return Intrusion(IntrusionKind.COMMAND, source, key, f"|u| = {u:.6g} m/s above the bound {self.u_max:.6g}")
+        if c.k > world_k:
+            return Intrusion(IntrusionKind.COMMAND, source, key, f"command for tick {c.k}, newest tick is {world_k}")
+        return self._agent(c.id, source, key, now)
+
+    def check_obstacles(self, o: wire.ObstacleSet, source: str, key: str) -> Intrusion | None:
+        """An obstacle set: its content alone decides (a truthful set does no harm whoever sends it)."""
+        if o.id not in self.radius:
+            return Intrusion(IntrusionKind.UNKNOWN_AGENT, source, key, f"agent {o.id} is not in the scenario")
+        unknown = [oid for oid in o.obstacles if oid not in self.polygons]
+        if unknown:
+            return Intrusion(IntrusionKind.UNKNOWN_OBSTACLE, source, key,
+                             f"{len(unknown)} obstacle id(s) not in the scenario, e.g. {unknown[0][:40]!r}")
+        for oid, hull in o.obstacles.items():
+            bad = self.hull_problem(oid, hull)
+            if bad is not None:
+                return Intrusion(IntrusionKind.HULL, source, key, f"obstacle {oid!r}: {bad}")
+        return None
+
+    def hull_problem(self, oid: str, hull: tuple[tuple[float, float], ...]) -> str | None:
+        if len(hull) > self.max_vertices[oid]:
+            return f"{len(hull)} vertices, at most {self.max_vertices[oid]} can be sensed"
+        if not hull:
+            return None
+        d, _ = distance_to_polygon(np.asarray(hull, dtype=np.float64).reshape(-1, 2), self.polygons[oid])
+        worst = float(np.abs(d).max())
+        if not worst <= HULL_TOL_M:
+            return f"a vertex {worst:.6g} m off the obstacle's boundary"
+        return None
+
+    # -- the world's messages -------------------------------------------------------------------------
+
+    def check_world_source(self, source: str, key: str) -> Intrusion | None:
+        """State, scan, truth: only from the world's session (pinned by `check_clock`)."""
+        if self.pins.world is None or source != self.pins.world:
+            return Intrusion(IntrusionKind.NOT_FROM_WORLD, source, key,
+                             f"the world speaks from session {self.pins.world or '(none yet)'}")
+        return None
+
+    def check_clock(self, c: wire.Clock, source: str, key: str) -> Intrusion | None:
+        if source == UNATTRIBUTED:
+            return Intrusion(IntrusionKind.NOT_FROM_WORLD, source, key, "a clock without a publisher id")
+        if self.pins.world is not None and source != self.pins.world:
+            return Intrusion(IntrusionKind.NOT_FROM_WORLD, source, key,
+                             f"the world speaks from session {self.pins.world}"
+                             + (f" (this one claims end: {c.reason!r})" if c.end else ""))
+        dt = self.s.meta.dt_s
+        if abs(c.t - c.k * dt) > 1e-9 * max(1.0, abs(c.t)):
+            return Intrusion(IntrusionKind.CLOCK, source, key, f"t = {c.t:.9g} s at tick {c.k} (dt {dt} s)")
+        if self.clock_mode is not None and self.clock_mode != (c.mode, c.speed):
+            return Intrusion(IntrusionKind.CLOCK, source, key,
+                             f"mode {c.mode} x{c.speed:g}, the run's is {self.clock_mode[0]} x{self.clock_mode[1]:g}")
+        self.pins.world = source
+        self.clock_mode = (c.mode, c.speed)
+        return None
+
+
+@dataclass
+class Membership:
+    """Who is alive: a liveliness token AND that agent's own data (beacons or commands) still coming.
+
+    Before `started`, a token alone counts (nobody sends data before the first tick). Afterwards an agent
+    with a token counts while it was heard within `fresh_s` (wall seconds), or for `grace_s` after its token
+    appeared or the mission started when it has not been heard yet. The caller decides what `now` is (a
+    wall clock that stops while the world holds, if silence then is not death).
+    """
+
+    fresh_s: float = 2.0
+    grace_s: float = 10.0
+    started: float | None = None
+    tokens: dict[int, float] = field(default_factory=dict)  # id -> when the token appeared
+    heard: dict[int, float] = field(default_factory=dict)  # id -> last data from its pinned session
+
+    def start(self, now: float) -> None:
+        if self.started is None:
+            self.started = now
+
+    def token(self, agent_id: int, present: bool, now: float) -> None:
+        if present:
+            self.tokens.setdefault(agent_id, now)
+        else:
+            self.tokens.pop(agent_id, None)
+
+    def data(self, agent_id: int, now: float) -> None:
+        self.heard[agent_id] = now
+
+    def alive(self, agent_id: int, now: float) -> bool:
+        since = self.tokens.get(agent_id)
+        if since is None:
+            return False
+        if self.started is None:
+            return True
+        last = self.heard.get(agent_id)
+        if last is not None and last >= since and now - last <= self.fresh_s:
+            return True
+        return (last is None or last < since) and now - max(since, self.started) <= self.grace_s
+
+    def alive_ids(self, now: float) -> list[int]:
+        return sorted(a for a in self.tokens if self.alive(a, now))
+
+
+@dataclass
+class IntrusionTally:
+    """Counts per (kind, source), with the first time each was seen; `add` says whether to log it."""
+
+    rows: dict[tuple[str, str], list[float]] = field(default_factory=dict)  # -> [count, first_t]
+    max_rows: int = 256
+
+    def add(self, i: Intrusion, t: float) -> bool:
+        k = (i.kind.value, i.source)
+        row = self.rows.get(k)
+        if row is None:
+            if len(self.rows) >= self.max_rows:  # an attacker cycling session ids: fold the rest into one row
+                k = (i.kind.value, "(other sources)")
+                row = self.rows.setdefault(k, [0, t])
+            else:
+                row = self.rows[k] = [0, t]
+        row[0] += 1
+        return row[0] == 1
+
+    @property
+    def total(self) -> int:
+        return int(sum(r[0] for r in self.rows.values()))
+
+    def as_rows(self) -> list[tuple[str, str, int, float]]:
+        """(kind, source, count, first_t), as the run record stores them."""
+        return [(k, s, int(r[0]), float(r[1])) for (k, s), r in sorted(self.rows.items())]

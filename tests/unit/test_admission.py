@@ -1,0 +1,202 @@
+"""Admission rules (reconswarm/net/admission.py) against the attacks of issue 11 and against what the run
+really sends (real commands, real shared hulls, the world's real clock): the attacks are refused with the
+right kind, the run's own messages are all admitted."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from reconswarm.geometry import convex_hull, norm2, pairs_within
+from reconswarm.net import wire
+from reconswarm.net.admission import (
+    UNATTRIBUTED,
+    Admission,
+    Intrusion,
+    IntrusionKind,
+    IntrusionTally,
+    Membership,
+    command_bound_mps,
+)
+from reconswarm.paper.knowledge import obstacle_view
+from reconswarm.paper.planner import command, max_repulsion_speed, neighbour_table
+from reconswarm.scenario import load
+from reconswarm.sim.sensing import ContourField
+from tests.support import PAPER
+
+S = load(PAPER)
+KEYS = wire.Keys("paper-0a1b2c")
+WORLD, A2, A5, X = "world-zid", "agent2-zid", "agent5-zid", "intruder-zid"
+K = IntrusionKind
+
+
+def kind(i: Intrusion | None) -> IntrusionKind | None:
+    return None if i is None else i.kind
+
+
+def beacon(aid: int, px: float, py: float, t: float = 10.0, radius: float | None = None) -> wire.Beacon:
+    r = radius if radius is not None else S.radii[S.agent_index(aid)]
+    return wire.Beacon(aid, round(t / S.meta.dt_s), t, px, py, float(r))
+
+
+def clock(k: int, **kw: object) -> wire.Clock:
+    return wire.Clock(k, k * S.meta.dt_s, tuple(a.id for a in S.agents), **kw)  # type: ignore[arg-type]
+
+
+def started() -> Admission:
+    adm = Admission(S)
+    assert adm.check_clock(clock(0), WORLD, KEYS.clock) is None  # pins the world
+    assert adm.check_beacon(beacon(2, 40.0, 0.0), A2, KEYS.beacon(2), now=0.0) is None  # pins agent 2
+    assert adm.check_cmd(wire.Cmd(2, 0, 1.0, 0.0), A2, KEYS.cmd(2), now=0.0, world_k=0) is None
+    return adm
+
+
+def test_forged_cmd_for_agent_2_is_refused() -> None:
+    adm = started()
+    # Steering agent 2 into agent 5: a plausible command, but not from agent 2's session.
+    steer = wire.Cmd(2, 1, -5.0, 3.0)
+    got = adm.check_cmd(steer, X, KEYS.cmd(2), now=0.1, world_k=1)
+    assert kind(got) is K.IMPERSONATION and got is not None and got.source == X and got.key == KEYS.cmd(2)
+    assert adm.check_cmd(steer, A2, KEYS.cmd(2), now=0.1, world_k=1) is None  # the real agent 2 is fine
+    assert kind(adm.check_cmd(steer, UNATTRIBUTED, KEYS.cmd(2), now=0.1, world_k=1)) is K.IMPERSONATION
+    # Whoever sends it: no command above what the planner can output, none for a tick not yet published.
+    big = adm.u_max * 1.01
+    assert kind(adm.check_cmd(wire.Cmd(2, 1, big, 0.0), A2, KEYS.cmd(2), 0.1, 1)) is K.COMMAND
+    assert kind(adm.check_cmd(wire.Cmd(2, 9, 1.0, 0.0), A2, KEYS.cmd(2), 0.1, 1)) is K.COMMAND
+    # A restarted agent's new session takes over once the old one has been silent for repin_after_s.
+    assert kind(adm.check_cmd(steer, "agent2-new", KEYS.cmd(2), now=0.5, world_k=1)) is K.IMPERSONATION
+    assert adm.check_cmd(steer, "agent2-new", KEYS.cmd(2), now=1.2, world_k=1) is None
+
+
+def test_phantom_beacons_are_refused() -> None:
+    adm = started()
+    got = adm.check_beacon(beacon(99, 100.0, 0.0, radius=1e6), X, KEYS.beacon(99), now=1.0)
+    assert kind(got) is K.UNKNOWN_AGENT
+    assert kind(adm.check_beacon(beacon(3, 100.0, 0.0, radius=1e6), X, KEYS.beacon(3), now=1.0)) is K.RADIUS
+    # A phantom 60 m ahead of the swarm: an unknown id, or a real one from another session.
+    assert kind(adm.check_beacon(beacon(99, 100.0, 0.0, radius=2.6), X, KEYS.beacon(99), now=1.0)) is K.UNKNOWN_AGENT
+    assert kind(adm.check_beacon(beacon(2, 100.0, 0.0, t=12.0), X, KEYS.beacon(2), now=0.5)) is K.IMPERSONATION
+    # Impossible positions: 1,000 km away at t = 10 s; a jump no robot can make between two beacons.
+    assert kind(adm.check_beacon(beacon(5, 1e6, 0.0), A5, KEYS.beacon(5), now=1.0)) is K.POSITION
+    assert adm.check_beacon(beacon(5, 40.0, 20.0, t=10.0), A5, KEYS.beacon(5), now=1.0) is None
+    jump = adm.reach_m(0.05) + 1.0
+    got = adm.check_beacon(beacon(5, 40.0 + jump, 20.0, t=10.05), A5, KEYS.beacon(5), now=1.1)
+    assert kind(got) is K.POSITION
+
+
+def _sensed_hull(field: ContourField, m: int, p: np.ndarray, rv: float) -> np.ndarray:
+    block = field.samples[field.start[m]:field.start[m] + field.count[m]]
+    seen = block[norm2(block - p) <= rv]
+    return convex_hull(seen)
+
+
+def test_hulls_must_lie_on_the_true_obstacle() -> None:
+    adm = started()
+    field = ContourField.from_scenario(S)
+    rng = np.random.default_rng(0)
+    admitted = 0
+    for m, oid in enumerate(field.ids):  # what agents really share: hulls of sensed contour points, merged
+        poly = field.polygons[m]
+        hull = np.zeros((0, 2))
+        for _ in range(20):
+            p = poly.mean(axis=0) + rng.uniform(-80.0, 80.0, 2)
+            seen = _sensed_hull(field, m, p, S.planner.sensing_range_m)
+            if seen.shape[0]:
+                hull = convex_hull(np.concatenate([hull, seen]))
+                o = wire.ObstacleSet(2, 1, 1, {oid: tuple((float(x), float(y)) for x, y in hull)})
+                assert adm.check_obstacles(o, X, KEYS.obstacles(2)) is None  # whoever sends the truth
+                admitted += 1
+    assert admitted > 20
+    oid = field.ids[0]
+    x0, y0 = field.polygons[0].mean(axis=0)
+    slab = ((x0, y0 - 5.0), (x0 + 10_000.0, y0 - 5.0), (x0 + 10_000.0, y0 + 5.0), (x0, y0 + 5.0))
+    got = adm.check_obstacles(wire.ObstacleSet(2, 1, 1, {oid: slab}), X, KEYS.obstacles(2))
+    assert kind(got) is K.HULL and got is not None and "off the obstacle's boundary" in got.detail
+    # The same slab from the phantom: refused for its id already.
+    got = adm.check_obstacles(wire.ObstacleSet(99, 1, 1, {oid: slab}), X, KEYS.obstacles(99))
+    assert kind(got) is K.UNKNOWN_AGENT
+    # More vertices than the sensor can produce on that obstacle (all on its boundary).
+    edge = field.polygons[0][:2]
+    line = edge[0] + np.linspace(0, 1, adm.max_vertices[oid] + 1)[:, None] * (edge[1] - edge[0])
+    many = tuple((float(x), float(y)) for x, y in line)
+    assert kind(adm.check_obstacles(wire.ObstacleSet(2, 1, 1, {oid: many}), X, KEYS.obstacles(2))) is K.HULL
+
+
+def test_an_obstacle_set_with_4000_ids_is_refused() -> None:
+    adm = started()
+    tri: tuple[tuple[float, float], ...] = ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))
+    flood = {f"o{i}": tri for i in range(4000)}
+    got = adm.check_obstacles(wire.ObstacleSet(2, 1, 1, flood), A2, KEYS.obstacles(2))
+    assert kind(got) is K.UNKNOWN_OBSTACLE and got is not None and "4000 obstacle id(s)" in got.detail
+
+
+def test_clock_only_from_the_world() -> None:
+    adm = started()
+    spoof = clock(7, end=True, reason="converged")
+    got = adm.check_clock(spoof, X, KEYS.clock)
+    assert kind(got) is K.NOT_FROM_WORLD and got is not None and "converged" in got.detail
+    assert kind(adm.check_clock(spoof, UNATTRIBUTED, KEYS.clock)) is K.NOT_FROM_WORLD
+    # A clock switching to realtime, even from the world's own session id: the run's mode does not change.
+    got = adm.check_clock(clock(8, mode="realtime", speed=10.0), WORLD, KEYS.clock)
+    assert kind(got) is K.CLOCK
+    assert kind(adm.check_clock(wire.Clock(9, 123.0, ()), WORLD, KEYS.clock)) is K.CLOCK  # t != k dt
+    assert adm.check_clock(clock(9, end=True, reason="converged"), WORLD, KEYS.clock) is None
+    # State, scan and truth likewise come from the world alone.
+    assert adm.check_world_source(WORLD, KEYS.state(2)) is None
+    assert kind(adm.check_world_source(X, KEYS.state(2))) is K.NOT_FROM_WORLD
+    assert kind(Admission(S).check_world_source(WORLD, KEYS.state(2))) is K.NOT_FROM_WORLD  # none pinned yet
+
+
+def test_a_forged_liveliness_token_does_not_keep_a_dead_agent_alive() -> None:
+    m = Membership(fresh_s=2.0, grace_s=10.0)
+    for a in (3, 4):
+        m.token(a, True, now=0.0)
+    assert m.alive_ids(0.5) == [3, 4]  # before the start, tokens are enough
+    m.start(1.0)
+    for t in np.arange(1.0, 20.0, 0.5):
+        m.data(3, float(t))
+        m.data(4, float(t))
+    # Agent 3 is killed at t = 20; an intruder's token for agent 3 stays (the token view never goes away).
+    for t in np.arange(20.0, 30.0, 0.5):
+        m.data(4, float(t))
+    assert m.alive(3, 21.4) and not m.alive(3, 21.6)  # its last data at 19.5, fresh_s = 2
+    assert m.alive_ids(30.0) == [4]
+    # A token with no data at all after the start counts only for the grace period.
+    m.token(99, True, now=30.0)
+    assert m.alive(99, 39.0) and not m.alive(99, 40.5)
+    m.token(4, False, now=30.0)  # a token gone: gone, whatever the data
+    assert not m.alive(4, 30.0)
+
+
+def test_command_bound_holds_for_the_planner_even_in_contact() -> None:
+    """|u| of eq. (7) with every agent and obstacle repelling at once stays below command_bound_mps."""
+    s, rng = S, np.random.default_rng(1)
+    cfg, n = s.planner, len(s.agents)
+    bound = command_bound_mps(s)
+    cap = max_repulsion_speed(cfg.psi_mps, cfg.d_safe_m, cfg.d_max_m)
+    assert bound == pytest.approx(cfg.k_att * (cfg.target_radius_m + max(math.hypot(*o) for o in s.offsets))
+                                  + cap * (n - 1 + len(s.obstacles)))
+    worst = 0.0
+    polys = [s.polygon(k) for k in range(len(s.obstacles))]
+    for trial in range(200):
+        centre = polys[trial % len(polys)].mean(axis=0)
+        p = centre + rng.uniform(-15.0, 15.0, (n, 2)) * (1.0 if trial % 2 else 100.0)  # crowded, in contact
+        nb = neighbour_table(p, s.radii, pairs_within(p, 1e9), cfg.d_max_m)
+        ob = obstacle_view(p, n, len(polys), [(i, j, polys[j]) for i in range(n) for j in range(len(polys))])
+        u = command(cfg, p, s.radii, s.offsets, np.array(s.target_m), nb, ob, np.zeros((n, 2)))
+        worst = max(worst, float(norm2(u).max()))
+    assert worst <= bound
+    print(f"largest |u| in 200 crowded configurations: {worst:.1f} m/s (bound {bound:.1f})")
+
+
+def test_tally_counts_per_kind_and_source() -> None:
+    tally = IntrusionTally(max_rows=3)
+    i1 = Intrusion(K.COMMAND, X, KEYS.cmd(2), "x")
+    assert tally.add(i1, 1.0) and not tally.add(i1, 2.0)
+    assert tally.add(Intrusion(K.CLOCK, X, KEYS.clock, "y"), 3.0)
+    for n in range(5):  # an attacker cycling session ids fills no more than max_rows rows
+        tally.add(Intrusion(K.COMMAND, f"s{n}", KEYS.cmd(2), "z"), 4.0 + n)
+    assert tally.total == 8 and len(tally.rows) == 4
+    assert ("command", X, 2, 1.0) in tally.as_rows() and ("command", "(other sources)", 4, 5.0) in tally.as_rows()
