@@ -39,6 +39,8 @@ CREATE TABLE IF NOT EXISTS contacts (seq INTEGER PRIMARY KEY AUTOINCREMENT, kind
 CREATE INDEX IF NOT EXISTS contacts_open ON contacts (a, b, kind, t_end);
 CREATE TABLE IF NOT EXISTS counters (process TEXT PRIMARY KEY, messages_rejected INTEGER NOT NULL);
 CREATE TABLE IF NOT EXISTS gaps (t_from REAL NOT NULL, t_to REAL NOT NULL, note TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS intrusions (process TEXT NOT NULL, kind TEXT NOT NULL, source TEXT NOT NULL,
+    count INTEGER NOT NULL, first_t REAL NOT NULL, PRIMARY KEY (process, kind, source));
 """
 
 Array = NDArray[np.float64]
@@ -131,6 +133,11 @@ class RunWriter:
 
     def counters(self, counts: dict[str, int]) -> None:
         self.db.executemany("INSERT OR REPLACE INTO counters VALUES (?, ?)", list(counts.items()))
+
+    def intrusions(self, process: str, rows: list[tuple[str, str, int, float]]) -> None:
+        """A process's intrusion tally so far: (kind, source, count, first_t) rows, replacing earlier ones."""
+        self.db.executemany("INSERT OR REPLACE INTO intrusions VALUES (?, ?, ?, ?, ?)",
+                            [(process, k, s, int(n), float(t)) for k, s, n, t in rows])
 
     def note_gap(self, t_from: float, t_to: float, note: str) -> None:
         self.db.execute("INSERT INTO gaps VALUES (?, ?, ?)", (t_from, t_to, note))
@@ -295,6 +302,15 @@ class RunRecord:
         if not all(isinstance(p, str) and type(n) is int for p, n in rows):
             raise self._bad("counters: a column of the wrong type")
         return dict(rows)
+
+    def intrusions(self) -> list[dict[str, Any]]:
+        """Well-formed messages refused by admission: {process, kind, source, count, first_t} rows."""
+        cols = ("process", "kind", "source", "count", "first_t")
+        try:
+            rows = self.db.execute(f"SELECT {', '.join(cols)} FROM intrusions ORDER BY first_t, process, kind")
+        except sqlite3.OperationalError:  # a record written before the table existed
+            return []
+        return [dict(zip(cols, r, strict=True)) for r in rows]
 
     def gaps(self) -> list[dict[str, Any]]:
         rows = self._rows("SELECT t_from, t_to, note FROM gaps")

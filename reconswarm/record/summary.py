@@ -10,7 +10,7 @@ from reconswarm.record.store import RunRecord
 
 FIELDS = ("scenario", "planner", "mode", "agents", "duration_s", "converged", "convergence_time_s",
           "final_max_error_m", "min_agent_gap_m", "min_obstacle_gap_m", "collisions", "safety_violations",
-          "splits", "merges", "agents_lost", "messages_rejected", "path_length_m", "wall_time_s")
+          "splits", "merges", "agents_lost", "messages_rejected", "intrusions", "path_length_m", "wall_time_s")
 
 
 def _r(v: float | None, nd: int = 3) -> float | None:
@@ -51,6 +51,10 @@ def summarize(rec: RunRecord) -> dict[str, Any]:
     else:
         path = np.zeros(len(rec.ids))
     counters = rec.counters()
+    intrusions = rec.intrusions()
+    by_kind: dict[str, int] = {}
+    for row in intrusions:
+        by_kind[row["kind"]] = by_kind.get(row["kind"], 0) + int(row["count"])
     wall = rec.meta.get("wall_time_s")
     out: dict[str, Any] = {
         "scenario": rec.meta.get("scenario", s.meta.name),
@@ -70,6 +74,7 @@ def summarize(rec: RunRecord) -> dict[str, Any]:
         "merges": sum(1 for e in events if e["kind"] == "merge"),
         "agents_lost": lost_agents(events),
         "messages_rejected": int(sum(counters.values())),
+        "intrusions": int(sum(by_kind.values())),
         "path_length_m": {str(int(i)): _r(float(v), 2) for i, v in zip(rec.ids, path, strict=True)},
         "wall_time_s": _r(float(wall)) if wall is not None else None,
         # Beyond the documented fields:
@@ -78,6 +83,8 @@ def summarize(rec: RunRecord) -> dict[str, Any]:
         "finished": rec.meta.get("finished") == "1",
         "messages_rejected_by_process": counters,
         "record_gaps": rec.gaps(),
+        "intrusions_by_kind": by_kind,
+        "intrusion_sources": sorted({row["source"] for row in intrusions}),
     }
     extra = rec.meta_json("extra", {})
     if isinstance(extra, dict):
@@ -96,7 +103,8 @@ def render(summary: dict[str, Any]) -> Any:
     for key, val in summary.items():
         if key == "messages_rejected_by_process":
             val = {k: v for k, v in val.items() if v}
-        if key in ("path_length_m", "messages_rejected_by_process", "record_gaps"):
+        if key in ("path_length_m", "messages_rejected_by_process", "record_gaps", "intrusions_by_kind",
+                   "intrusion_sources"):
             if isinstance(val, dict) and val:
                 nums = [v for v in val.values() if isinstance(v, int | float)]
                 if key == "path_length_m" and nums:

@@ -20,7 +20,7 @@ CLI = [str(_SCRIPT)] if _SCRIPT.exists() else [sys.executable, "-m", "reconswarm
 
 SUMMARY_FIELDS = ("scenario", "planner", "mode", "agents", "duration_s", "converged", "convergence_time_s",
                   "final_max_error_m", "min_agent_gap_m", "min_obstacle_gap_m", "collisions", "safety_violations",
-                  "splits", "merges", "agents_lost", "messages_rejected", "path_length_m", "wall_time_s")
+                  "splits", "merges", "agents_lost", "messages_rejected", "intrusions", "path_length_m", "wall_time_s")
 
 
 def cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
