@@ -15,15 +15,15 @@
 
 The rules (`R` = `swarm/<run>`) allow, per subject and nothing else:
 
-- agent i: put `R/agent/i/{cmd,beacon,obstacles}`; token `R/alive/agent/i`; the advanced publisher's cache
-  (queryable `R/agent/i/obstacles/@adv/pub/**`, replies on `R/agent/i/obstacles`); subscribe (and receive)
-  `R/agent/i/{state,scan}`, `R/clock`, `R/agent/*/beacon`, `R/agent/*/obstacles`; history queries on
-  `R/agent/*/obstacles/@adv/**`; liveliness subscriptions on `R/alive/**` and
-  `R/agent/*/obstacles/@adv/pub/**`;
-- simworld: put `R/clock`, `R/truth`, `R/agent/*/state`, `R/agent/*/scan`; token `R/alive/simworld`;
-  subscribe `R/agent/*/cmd`, liveliness `R/alive/**`;
+- agent i: put `R/agent/i/{cmd,beacon,obstacles}`, its intrusion report `R/report/agent-i`; token
+  `R/alive/agent/i`; the advanced publisher's cache (queryable `R/agent/i/obstacles/@adv/pub/**`, replies
+  on `R/agent/i/obstacles`); subscribe (and receive) `R/agent/i/{state,scan}`, `R/clock`,
+  `R/agent/*/beacon`, `R/agent/*/obstacles`; history queries on `R/agent/*/obstacles/@adv/**`; liveliness
+  subscriptions on `R/alive/**` and `R/agent/*/obstacles/@adv/pub/**`;
+- simworld: put `R/clock`, `R/truth`, `R/agent/*/state`, `R/agent/*/scan`, `R/report/simworld`; token
+  `R/alive/simworld`; subscribe `R/agent/*/cmd`, liveliness `R/alive/**`;
 - monitor: put `R/event`; token `R/alive/monitor`; subscribe `R/truth`, `R/agent/*/beacon`, `R/clock`,
-  liveliness `R/alive/**`;
+  `R/report/*`, liveliness `R/alive/**`;
 - observer: subscribe `R/clock`, `R/event`;
 - intruder, or any other certificate of the CA: nothing.
 
@@ -208,8 +208,8 @@ def access_control(run: str, agent_ids: tuple[int, ...]) -> dict[str, Any]:
         a = f"{r}/agent/{i}"
         grant(f"agent-{i}", [
             *agents_common,
-            *publish(f"agent-{i}-pub", [f"{a}/cmd", f"{a}/beacon", f"{a}/obstacles"],
-                     [f"{r}/agent/*/cmd", f"{r}/agent/*/beacon", obstacles]),
+            *publish(f"agent-{i}-pub", [f"{a}/cmd", f"{a}/beacon", f"{a}/obstacles", f"{r}/report/agent-{i}"],
+                     [f"{r}/agent/*/cmd", f"{r}/agent/*/beacon", obstacles, f"{r}/report/*"]),
             *subscribe(f"agent-{i}-own", [f"{a}/state", f"{a}/scan"]),
             *membership(f"agent-{i}", f"{r}/alive/agent/{i}"),
             # its advanced publisher's cache: a queryable under its own key, replies with its own set only
@@ -217,13 +217,14 @@ def access_control(run: str, agent_ids: tuple[int, ...]) -> dict[str, Any]:
             rule(f"agent-{i}-cache-reply", ["reply"], ("ingress",), [f"{a}/obstacles"]),
         ])
     grant("simworld", [
-        *publish("simworld-pub", [f"{r}/clock", f"{r}/truth", f"{r}/agent/*/state", f"{r}/agent/*/scan"]),
+        *publish("simworld-pub", [f"{r}/clock", f"{r}/truth", f"{r}/agent/*/state", f"{r}/agent/*/scan",
+                                  f"{r}/report/simworld"], [f"{r}/report/*"]),
         *subscribe("simworld-sub", [f"{r}/agent/*/cmd"]),
         *membership("simworld", f"{r}/alive/simworld"),
     ])
     grant("monitor", [
         *publish("monitor-pub", [f"{r}/event"]),
-        *subscribe("monitor-sub", [f"{r}/truth", f"{r}/agent/*/beacon", f"{r}/clock"]),
+        *subscribe("monitor-sub", [f"{r}/truth", f"{r}/agent/*/beacon", f"{r}/clock", f"{r}/report/*"]),
         *membership("monitor", f"{r}/alive/monitor"),
     ])
     grant("observer", subscribe("observer-sub", [f"{r}/clock", f"{r}/event"]))

@@ -68,9 +68,18 @@ class Keys:
     def truth(self) -> str:
         return f"{self.prefix}/truth"
 
+    def report(self, process: str) -> str:
+        """A process's intrusion report (`simworld`, `agent-<id>`)."""
+        return f"{self.prefix}/report/{process}"
+
+    @property
+    def report_all(self) -> str:
+        return f"{self.prefix}/report/*"
+
     def parse(self, key: str) -> tuple[str, int | None, str]:
         """Classify a key: ("agent", id, leaf) | ("clock", None, "") | ("event", None, "") |
-        ("truth", None, "") | ("alive", id or None, "agent" | "simworld" | "monitor").
+        ("truth", None, "") | ("alive", id or None, "agent" | "simworld" | "monitor") |
+        ("report", agent id or None, "agent-<id>" | "simworld").
         Raises WireError for anything else."""
         hit = self._parsed.get(key)
         if hit is not None:
@@ -95,6 +104,9 @@ class Keys:
             return "agent", _key_id(parts[1], key), parts[2]
         if len(parts) == 3 and parts[:2] == ["alive", "agent"]:
             return "alive", _key_id(parts[2], key), "agent"
+        if len(parts) == 2 and parts[0] == "report" and (parts[1] == "simworld" or (
+                parts[1].startswith("agent-") and parts[1][6:].isdigit() and len(parts[1]) <= 16)):
+            return "report", int(parts[1][6:]) if parts[1] != "simworld" else None, parts[1]
         if len(parts) == 2 and parts[0] == "alive" and parts[1] in ("simworld", "monitor"):
             return "alive", None, parts[1]
         raise WireError(f"unexpected key {key!r}")

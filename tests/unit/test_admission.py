@@ -200,3 +200,21 @@ def test_tally_counts_per_kind_and_source() -> None:
         tally.add(Intrusion(K.COMMAND, f"s{n}", KEYS.cmd(2), "z"), 4.0 + n)
     assert tally.total == 8 and len(tally.rows) == 4
     assert ("command", X, 2, 1.0) in tally.as_rows() and ("command", "(other sources)", 4, 5.0) in tally.as_rows()
+
+
+def test_report_round_trip_and_key() -> None:
+    from reconswarm.net.report import Report, report_from_wire, report_to_wire
+
+    tally = IntrusionTally()
+    tally.add(Intrusion(K.COMMAND, X, KEYS.cmd(2), "x"), 1.5)
+    m = Report("agent-3", tuple(tally.as_rows()))
+    assert report_from_wire(report_to_wire(m), "agent-3") == m
+    with pytest.raises(wire.WireError):
+        report_from_wire(report_to_wire(m), "agent-4")  # another process's key
+    with pytest.raises(wire.WireError):
+        report_from_wire(report_to_wire(Report("simworld", (("k", "s", -1, 0.0),))))
+    assert KEYS.parse(KEYS.report("agent-3")) == ("report", 3, "agent-3")
+    assert KEYS.parse(KEYS.report("simworld")) == ("report", None, "simworld")
+    for bad in ("monitor", "agent-x", "agent-1/x"):
+        with pytest.raises(wire.WireError):
+            KEYS.parse(KEYS.report(bad))

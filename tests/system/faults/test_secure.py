@@ -121,7 +121,7 @@ def test_create_writes_private_credentials_and_configs(tmp_path: Path) -> None:
     sent = {k for rid in pol3["rules"] for k in rules[rid]["key_exprs"]
             if "ingress" in rules[rid]["flows"] and set(rules[rid]["messages"]) & {"put", "reply", "liveliness_token"}}
     assert sent == {f"{run}/agent/3/cmd", f"{run}/agent/3/beacon", f"{run}/agent/3/obstacles",
-                    f"{run}/alive/agent/3"}
+                    f"{run}/report/agent-3", f"{run}/alive/agent/3"}
     assert "intruder" not in {c for sub in acl["subjects"] for c in sub["cert_common_names"]}
     with pytest.raises(Exception, match="no credentials for agent 42"):
         sec.config_for("agent", "42")
