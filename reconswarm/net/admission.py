@@ -21,10 +21,14 @@ which the receiver drops, counts (`IntrusionTally`) and logs. The rules:
 - membership (`Membership`): an agent is alive while its liveliness token is there AND its own session's
   data keeps coming; a token anyone can declare decides nothing alone.
 
-Sources are the publishers' zenoh session ids, which our processes attach to every put (zenoh's
-`SourceInfo`). In open mode any client on the port can still copy a session id it has seen, so these rules
-stop confused or naive clients and bound what a malicious one can do (no unbounded force, no impossible
-obstacle, no unknown robot); they do not authenticate. `--secure` (mutual TLS and access control) does.
+Sources are the publishers' zenoh session ids as their samples carry them: the id in the sample's
+timestamp (`session.sample_source`), which every session of the run stamps (timestamping is on in all of
+them; a router stamps what arrives unstamped with its own id). zenoh-python 1.10.2 also offers
+`SourceInfo`, but only when the publisher sets it on each put (an unstable API that the advanced publisher
+of obstacle sets does not take), and it is no harder to forge. In open mode any client on the port can
+stamp a session id it has overheard, so these rules stop confused or naive clients and bound what a
+malicious one can do (no unbounded force, no impossible obstacle, no unknown robot); they do not
+authenticate. `--secure` (mutual TLS and access control) does.
 """
 
 from __future__ import annotations
