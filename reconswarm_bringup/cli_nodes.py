@@ -26,7 +26,7 @@ Connect = Annotated[list[str] | None, typer.Option("--connect", help="Zenoh endp
 Listen = Annotated[list[str] | None, typer.Option("--listen", help="Zenoh endpoint to listen on (repeatable).")]
 Mode = Annotated[str, typer.Option("--mode", help="Zenoh mode: peer | client | router.")]
 ZConfig = Annotated[Path | None, typer.Option("--zenoh-config", help="Zenoh JSON5 configuration file.")]
-RunId = Annotated[str | None, typer.Option("--run", help="Run name in key expressions (default: scenario name).")]
+RunId = Annotated[str | None, typer.Option("--run", help="Run id in key expressions (default: the scenario name).")]
 Ros2 = Annotated[bool, typer.Option("--ros2", help="The motion interface as ROS 2 topics (odom, cmd_vel) over Zenoh.")]
 RosDomain = Annotated[int | None, typer.Option("--ros-domain-id", metavar="D",
                                                help="ROS 2 domain (default: ROS_DOMAIN_ID, else 0).")]
@@ -118,7 +118,7 @@ def router_cmd(
 
 
 def flood_cmd(
-    run_id: Annotated[str, typer.Option("--run", help="Run name (the scenario name) whose keys to flood.")],
+    run_id: Annotated[str, typer.Option("--run", help="Run id whose keys to flood (a launch's OUTDIR/run_id).")],
     count: Annotated[int, typer.Option("--count", help="How many malformed payloads.", min=1)] = 10_000,
     scenario: Annotated[Path | None, typer.Option("--scenario", help="Scenario (for the agent ids).")] = None,
     connect: Connect = None, listen: Listen = None, mode: Mode = "client", zenoh_config: ZConfig = None,
