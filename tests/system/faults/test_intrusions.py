@@ -1,0 +1,142 @@
+"""Open mode, attacked from an outside zenoh session with schema-correct messages (issue 11, "Open mode
+trusts any local client"): forged commands for agent 2 steering it into agent 5, a phantom agent 99 of
+radius 1e6 and a phantom with agent 4's id 60 m ahead, a 10 x 10,000 m hull and a 4,000-id obstacle set,
+a clock ending the mission ("converged") and one switching to realtime, a second liveliness token for agent
+3 (then agent 3 killed). The run must stay contact-free, record agent 3's loss, finish by itself, and count
+every refused message as an intrusion with the attacker's session as the source.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from reconswarm.net import wire
+from reconswarm.net.session import ZenohOptions
+from reconswarm.scenario import load
+from tests.support import PAPER, ROOT, assert_all_gone, events, free_port, launcher_cmd, read_run_id, tick_count
+
+KILL_AT_S = 90.0
+
+
+class Attacker:
+    """An outside client on the run's router: follows the truth and the clock, sends forgeries."""
+
+    def __init__(self, endpoint: str, run: str) -> None:
+        self.z: Any = zenoh.open(ZenohOptions.build([endpoint], None, "client", None).config())
+        self.zid = str(self.z.zid())
+        self.keys = wire.Keys(run)
+        self.lock = threading.Lock()
+        self.truth: wire.Truth | None = None
+        self.clock: wire.Clock | None = None
+        self.z.declare_subscriber(self.keys.truth, self._on_truth)
+        self.z.declare_subscriber(self.keys.clock, self._on_clock)
+
+    def _on_truth(self, s: Any) -> None:
+        with self.lock:
+            self.truth = wire.truth_from_wire(s.payload.to_bytes())
+
+    def _on_clock(self, s: Any) -> None:
+        c = wire.clock_from_wire(s.payload.to_bytes())
+        with self.lock:
+            if not c.end:
+                self.clock = c
+
+    def now(self) -> tuple[wire.Truth, wire.Clock]:
+        while True:
+            with self.lock:
+                if self.truth is not None and self.clock is not None:
+                    return self.truth, self.clock
+            time.sleep(0.05)
+
+    def put(self, key: str, payload: bytes) -> None:
+        self.z.put(key, payload)
+
+    def close(self) -> None:
+        self.z.close()
+
+
+def _attack(a: Attacker, until_t_s: float, timeout_s: float = 600.0) -> dict[str, int]:
+    """Attack every 0.1 s of wall time until the run's clock passes until_t_s (simulated)."""
+    s = load(PAPER)
+    sent: dict[str, int] = {}
+
+    def put(what: str, key: str, payload: bytes) -> None:
+        a.put(key, payload)
+        sent[what] = sent.get(what, 0) + 1
+
+    token = a.z.liveliness().declare_token(a.keys.alive_agent(3))  # a second token for agent 3, kept
+    oid = s.obstacles[0].id
+    x0, y0 = s.polygon(0).mean(axis=0)
+    slab = {oid: ((x0, y0 - 5.0), (x0 + 10_000.0, y0 - 5.0), (x0 + 10_000.0, y0 + 5.0), (x0, y0 + 5.0))}
+    many = {f"o{i}": ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0)) for i in range(4000)}
+    t_end = time.monotonic() + timeout_s
+    while time.monotonic() < t_end:
+        tr, c = a.now()
+        if c.t > until_t_s:
+            break
+        idx = {aid: n for n, aid in enumerate(tr.ids)}
+        p2 = (tr.px[idx[2]], tr.py[idx[2]])
+        p5 = (tr.px[idx[5]], tr.py[idx[5]])
+        d = math.hypot(p5[0] - p2[0], p5[1] - p2[1]) or 1.0
+        u = (40.0 * (p5[0] - p2[0]) / d, 40.0 * (p5[1] - p2[1]) / d)  # 40 m/s into agent 5
+        for k in (c.k, c.k + 1):
+            put("cmd", a.keys.cmd(2), wire.cmd_to_wire(wire.Cmd(2, k, *u)))
+        cx, cy = sum(tr.px) / len(tr.px), sum(tr.py) / len(tr.py)
+        put("beacon", a.keys.beacon(99), wire.beacon_to_wire(wire.Beacon(99, c.k, c.t, cx, cy, 1e6)))
+        put("beacon", a.keys.beacon(4), wire.beacon_to_wire(wire.Beacon(4, c.k, c.t, cx + 60.0, cy, 2.6)))
+        put("obstacles", a.keys.obstacles(99), wire.obstacles_to_wire(wire.ObstacleSet(99, c.k, 1, slab)))
+        put("obstacles", a.keys.obstacles(4), wire.obstacles_to_wire(wire.ObstacleSet(4, c.k, 99, slab)))
+        put("obstacles", a.keys.obstacles(4), wire.obstacles_to_wire(wire.ObstacleSet(4, c.k, 98, many)))
+        put("clock", a.keys.clock, wire.clock_to_wire(wire.Clock(c.k + 1, c.t + s.meta.dt_s, c.alive,
+                                                                 end=True, reason="converged")))
+        put("clock", a.keys.clock, wire.clock_to_wire(wire.Clock(c.k + 1, c.t + s.meta.dt_s, c.alive,
+                                                                 mode="realtime", speed=10.0)))
+        time.sleep(0.1)
+    token.undeclare()
+    return sent
+
+
+def test_outside_client_cannot_steer_phantom_end_or_hide_a_death(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    port = free_port()
+    err = tmp_path / "launcher.err"
+    with err.open("wb") as fh:
+        proc = subprocess.Popen(launcher_cmd(out, "--json", "--fault", f"kill:agent:3@{KILL_AT_S:g}", port=port),
+                                cwd=ROOT, stdout=subprocess.PIPE, stderr=fh)
+    attacker: Attacker | None = None
+    try:
+        deadline = time.monotonic() + 180
+        while tick_count(out / "run.db") < 20:
+            assert proc.poll() is None and time.monotonic() < deadline, err.read_text()[-2000:]
+            time.sleep(0.2)
+        attacker = Attacker(f"tcp/127.0.0.1:{port}", read_run_id(out))
+        zid = attacker.zid
+        sent = _attack(attacker, KILL_AT_S + 20.0)  # from t ~ 1 s to 20 s past agent 3's death
+        stdout, _ = proc.communicate(timeout=900)
+    finally:
+        if attacker is not None:
+            attacker.close()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        assert_all_gone(out)
+    assert proc.returncode == 0, err.read_text()[-3000:]
+    s = json.loads(stdout)
+    print("sent:", sent, "summary:", {k: s[k] for k in ("converged", "convergence_time_s", "collisions",
+                                                         "agents_lost", "intrusions", "intrusions_by_kind")})
+    assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == [3]
+    assert [e["kind"] for e in events(out / "run.db") if e.get("agent") == 3] == ["agent_lost"]
+    assert s["duration_s"] > KILL_AT_S  # not ended by the spoofed clock
+    by_kind = s["intrusions_by_kind"]
+    for kind in ("impersonation", "unknown_agent", "not_from_world", "unknown_obstacle"):
+        assert by_kind.get(kind, 0) > 0, by_kind
+    assert zid in s["intrusion_sources"]
+    assert s["intrusions"] >= sent["cmd"]  # every forged command refused by the world (and counted)
