@@ -74,9 +74,12 @@ def _attack(a: Attacker, until_t_s: float, timeout_s: float = 600.0) -> dict[str
 
     token = a.z.liveliness().declare_token(a.keys.alive_agent(3))  # a second token for agent 3, kept
     oid = s.obstacles[0].id
-    x0, y0 = s.polygon(0).mean(axis=0)
-    slab = {oid: ((x0, y0 - 5.0), (x0 + 10_000.0, y0 - 5.0), (x0 + 10_000.0, y0 + 5.0), (x0, y0 + 5.0))}
-    many = {f"o{i}": ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0)) for i in range(4000)}
+    x0, y0 = (float(v) for v in s.polygon(0).mean(axis=0))
+    Hull = tuple[tuple[float, float], ...]
+    box: Hull = ((x0, y0 - 5.0), (x0 + 10_000.0, y0 - 5.0), (x0 + 10_000.0, y0 + 5.0), (x0, y0 + 5.0))
+    tri: Hull = ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))
+    slab = {oid: box}
+    many = {f"o{i}": tri for i in range(4000)}
     t_end = time.monotonic() + timeout_s
     while time.monotonic() < t_end:
         tr, c = a.now()
