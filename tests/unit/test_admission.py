@@ -218,3 +218,27 @@ def test_report_round_trip_and_key() -> None:
     for bad in ("monitor", "agent-x", "agent-1/x"):
         with pytest.raises(wire.WireError):
             KEYS.parse(KEYS.report(bad))
+
+
+def test_gate_delivers_the_runs_messages_and_counts_logs_and_reports_the_rest(caplog: pytest.LogCaptureFixture) -> None:
+    from reconswarm.net.gate import Gate
+
+    g = Gate(S, "agent-3")
+    assert g.admit(clock(0), WORLD, KEYS.clock, 0.0) and g.world_k == 0
+    assert g.admit(wire.State(3, 0, 0.0, 0.0, 0.0, 0.0, 0.5, 0.0), WORLD, KEYS.state(3), 0.0)
+    assert g.admit(beacon(2, 40.0, 0.0, t=0.0), A2, KEYS.beacon(2), 0.0)
+    assert g.report(0.0) is None  # nothing refused yet
+    with caplog.at_level("WARNING", logger="reconswarm.admission"):
+        assert not g.admit(wire.State(3, 1, 0.05, 9.0, 9.0, 0.0, 9.5, 9.0), X, KEYS.state(3), 0.1)
+        for n in range(5):
+            assert not g.admit(clock(2 + n, end=True, reason="converged"), X, KEYS.clock, 0.2 + 0.01 * n)
+        assert not g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.beacon(99), 0.3)
+    assert g.count == 7 and g.world_k == 0  # the spoofed clocks did not advance the world's tick
+    lines = [r.getMessage() for r in caplog.records]
+    assert len(lines) == 2 and all(X in ln for ln in lines)  # first of each (kind, source) at once, rest quiet
+    r = g.report(1.5)
+    assert r is not None and r.process == "agent-3"
+    assert {(k, s, n) for k, s, n, _ in r.rows} == {("not_from_world", X, 6), ("unknown_agent", X, 1)}
+    assert g.report(1.6) is None  # unchanged
+    g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.beacon(99), 1.7)
+    assert g.report(1.8) is None and g.report(2.6) is not None  # changed, but at most once a second

@@ -1,0 +1,79 @@
+"""A process's gate: admission of decoded messages, the tally of intrusions, their log and reports.
+
+Pure (no zenoh): the adapter decodes a sample, passes it here with its source (`session.sample_source`),
+and delivers it to its node only if `admit` says so. Refusals are counted per (kind, source), logged (the
+first of each kind and source at once, then at most one line a second), and summed up in a `Report` that
+the adapter publishes on `swarm/<run>/report/<process>` at most once a second when it changed.
+"""
+
+from __future__ import annotations
+
+import logging
+
+from reconswarm.net import wire
+from reconswarm.net.admission import Admission, Intrusion, IntrusionTally
+from reconswarm.net.report import Report
+from reconswarm.scenario import Scenario
+
+log = logging.getLogger("reconswarm.admission")
+Message = wire.Beacon | wire.Cmd | wire.ObstacleSet | wire.Clock | wire.State | wire.Scan | wire.Truth
+
+
+class Gate:
+    def __init__(self, s: Scenario, process: str, report_every_s: float = 1.0) -> None:
+        self.process = process
+        self.adm = Admission(s)
+        self.tally = IntrusionTally()
+        self.t = 0.0  # simulated time of the newest admitted clock (first_t of the intrusions)
+        self.world_k = -1  # newest tick of the admitted clocks
+        self.report_every_s = report_every_s
+        self._reported = 0  # nothing to report before the first intrusion
+        self._last_report = -1e9
+        self._last_log = -1e9
+        self._unlogged = 0
+
+    @property
+    def count(self) -> int:
+        return self.tally.total
+
+    def admit(self, m: Message, source: str, key: str, now_s: float) -> bool:
+        """True: deliver m. False: it was refused, counted and logged."""
+        adm = self.adm
+        got: Intrusion | None
+        if isinstance(m, wire.Clock):
+            got = adm.check_clock(m, source, key)
+            if got is None:
+                self.t, self.world_k = max(self.t, m.t), max(self.world_k, m.k)
+        elif isinstance(m, wire.Beacon):
+            got = adm.check_beacon(m, source, key, now_s)
+        elif isinstance(m, wire.Cmd):
+            got = adm.check_cmd(m, source, key, now_s, self.world_k)
+        elif isinstance(m, wire.ObstacleSet):
+            got = adm.check_obstacles(m, source, key)
+        else:  # state, scan, truth: the world's
+            got = adm.check_world_source(source, key)
+        if got is None:
+            return True
+        self.refuse(got, now_s)
+        return False
+
+    def refuse(self, i: Intrusion, now_s: float) -> None:
+        first = self.tally.add(i, self.t)
+        if first or now_s - self._last_log >= 1.0:
+            more = f" (+{self._unlogged} more since the last line)" if self._unlogged else ""
+            log.warning("%s: intrusion refused: %s from %s on %s: %s%s [total %d]", self.process, i.kind.value,
+                        i.source, i.key, i.detail, more, self.tally.total)
+            self._last_log = now_s
+            self._unlogged = 0
+        else:
+            self._unlogged += 1
+
+    def report(self, now_s: float, force: bool = False) -> Report | None:
+        """The tally to publish, at most every report_every_s and only when it changed (or `force`)."""
+        total = self.tally.total
+        if total == self._reported and not force:
+            return None
+        if not force and now_s - self._last_report < self.report_every_s:
+            return None
+        self._reported, self._last_report = total, now_s
+        return Report(self.process, tuple(self.tally.as_rows()))
