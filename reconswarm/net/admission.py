@@ -237,44 +237,49 @@ class Admission:
 class Membership:
     """Who is alive: a liveliness token AND that agent's own data (beacons or commands) still coming.
 
-    Before `started`, a token alone counts (nobody sends data before the first tick). Afterwards an agent
-    with a token counts while it was heard within `fresh_s` (wall seconds), or for `grace_s` after its token
-    appeared or the mission started when it has not been heard yet. The caller decides what `now` is (a
-    wall clock that stops while the world holds, if silence then is not death).
+    Before `start`, a token alone counts (nobody sends data before the first tick). Afterwards an agent
+    with a token counts until it has been silent both `fresh_s` of wall time and `fresh_sim_s` of
+    simulated time (so neither a stalled world, during which nobody sends, nor a fast realtime clock makes
+    a live agent look dead); an agent not heard since its token appeared (or since the start) gets
+    `grace_s` / `grace_sim_s` likewise. Times: `wall` (the caller's monotonic seconds), `sim` (the newest
+    simulated time it knows).
     """
 
     fresh_s: float = 2.0
+    fresh_sim_s: float = 2.0
     grace_s: float = 10.0
-    started: float | None = None
-    tokens: dict[int, float] = field(default_factory=dict)  # id -> when the token appeared
-    heard: dict[int, float] = field(default_factory=dict)  # id -> last data from its pinned session
+    grace_sim_s: float = 5.0
+    started: tuple[float, float] | None = None
+    tokens: dict[int, tuple[float, float]] = field(default_factory=dict)  # id -> (wall, sim) it appeared
+    heard: dict[int, tuple[float, float]] = field(default_factory=dict)  # id -> (wall, sim) of its last data
 
-    def start(self, now: float) -> None:
+    def start(self, wall: float, sim: float) -> None:
         if self.started is None:
-            self.started = now
+            self.started = (wall, sim)
 
-    def token(self, agent_id: int, present: bool, now: float) -> None:
+    def token(self, agent_id: int, present: bool, wall: float, sim: float) -> None:
         if present:
-            self.tokens.setdefault(agent_id, now)
+            self.tokens.setdefault(agent_id, (wall, sim))
         else:
             self.tokens.pop(agent_id, None)
 
-    def data(self, agent_id: int, now: float) -> None:
-        self.heard[agent_id] = now
+    def data(self, agent_id: int, wall: float, sim: float) -> None:
+        self.heard[agent_id] = (wall, sim)
 
-    def alive(self, agent_id: int, now: float) -> bool:
+    def alive(self, agent_id: int, wall: float, sim: float) -> bool:
         since = self.tokens.get(agent_id)
         if since is None:
             return False
         if self.started is None:
             return True
         last = self.heard.get(agent_id)
-        if last is not None and last >= since and now - last <= self.fresh_s:
-            return True
-        return (last is None or last < since) and now - max(since, self.started) <= self.grace_s
+        if last is not None and last[0] >= since[0]:
+            return wall - last[0] <= self.fresh_s or sim - last[1] <= self.fresh_sim_s
+        ref = (max(since[0], self.started[0]), max(since[1], self.started[1]))
+        return wall - ref[0] <= self.grace_s or sim - ref[1] <= self.grace_sim_s
 
-    def alive_ids(self, now: float) -> list[int]:
-        return sorted(a for a in self.tokens if self.alive(a, now))
+    def alive_ids(self, wall: float, sim: float) -> list[int]:
+        return sorted(a for a in self.tokens if self.alive(a, wall, sim))
 
 
 @dataclass

@@ -150,24 +150,30 @@ def test_clock_only_from_the_world() -> None:
 
 
 def test_a_forged_liveliness_token_does_not_keep_a_dead_agent_alive() -> None:
-    m = Membership(fresh_s=2.0, grace_s=10.0)
+    m = Membership(fresh_s=2.0, fresh_sim_s=2.0, grace_s=10.0, grace_sim_s=5.0)
     for a in (3, 4):
-        m.token(a, True, now=0.0)
-    assert m.alive_ids(0.5) == [3, 4]  # before the start, tokens are enough
-    m.start(1.0)
-    for t in np.arange(1.0, 20.0, 0.5):
-        m.data(3, float(t))
-        m.data(4, float(t))
-    # Agent 3 is killed at t = 20; an intruder's token for agent 3 stays (the token view never goes away).
-    for t in np.arange(20.0, 30.0, 0.5):
-        m.data(4, float(t))
-    assert m.alive(3, 21.4) and not m.alive(3, 21.6)  # its last data at 19.5, fresh_s = 2
-    assert m.alive_ids(30.0) == [4]
+        m.token(a, True, 0.0, 0.0)
+    assert m.alive_ids(0.5, 0.0) == [3, 4]  # before the start, tokens are enough
+    m.start(1.0, 0.0)
+    # wall and simulated time run together here (sim = 2 x wall - 2)
+    for w in np.arange(1.0, 20.0, 0.5):
+        m.data(3, float(w), 2 * float(w) - 2)
+        m.data(4, float(w), 2 * float(w) - 2)
+    # Agent 3 is killed at wall 20; an intruder's token for agent 3 stays (no token event ever comes).
+    for w in np.arange(20.0, 30.0, 0.5):
+        m.data(4, float(w), 2 * float(w) - 2)
+    assert m.alive(3, 20.0, 38.0)
+    assert not m.alive(3, 21.6, 41.2)  # silent 2.1 s of wall and 4.2 s simulated: dead
+    assert m.alive_ids(30.0, 58.0) == [4]
+    # A stalled world: nobody sends and simulated time stands still, however long: nobody dies of it.
+    assert m.alive(4, 29.5 + 60.0, 57.0)
+    # A fast realtime clock: 4 s simulated in 0.4 s of wall time is no death either.
+    assert m.alive(4, 29.9, 61.0)
     # A token with no data at all after the start counts only for the grace period.
-    m.token(99, True, now=30.0)
-    assert m.alive(99, 39.0) and not m.alive(99, 40.5)
-    m.token(4, False, now=30.0)  # a token gone: gone, whatever the data
-    assert not m.alive(4, 30.0)
+    m.token(99, True, 30.0, 58.0)
+    assert m.alive(99, 39.0, 62.0) and not m.alive(99, 40.5, 63.5)
+    m.token(4, False, 30.0, 58.0)  # a token gone: gone, whatever the data
+    assert not m.alive(4, 30.0, 58.0)
 
 
 def test_command_bound_holds_for_the_planner_even_in_contact() -> None:
