@@ -28,7 +28,8 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from reconswarm.errors import BadInput
 from reconswarm.generate import generate
 from reconswarm.net import wire
-from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions, open_session
+from reconswarm.net.admission import Admission
+from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions, open_session, sample_source
 from reconswarm.net.timing import TIMING
 from reconswarm.record.store import RunRecord
 from reconswarm.record.summary import render, summarize
@@ -71,8 +72,9 @@ class ClockWatch:
     the launcher polls, so this process does not wake for every tick.
     """
 
-    def __init__(self, run: str, zopts: ZenohOptions) -> None:
+    def __init__(self, run: str, zopts: ZenohOptions, s: Scenario) -> None:
         self.keys = wire.Keys(run)
+        self.admission = Admission(s)  # a clock counts only from the world's session (an `end` above all)
         self.session = open_session(zopts, "run_local")
         self.clock_sub = self.session.declare_subscriber(self.keys.clock, zenoh.handlers.RingChannel(1))
         self.event_sub = self.session.declare_subscriber(self.keys.event, zenoh.handlers.FifoChannel(10_000))
@@ -87,10 +89,11 @@ class ClockWatch:
             sample = self.clock_sub.try_recv()
             if sample is not None:
                 c = wire.clock_from_wire(sample.payload.to_bytes())
-                if c.k >= self.k:
-                    self.t, self.k, self.alive = c.t, c.k, len(c.alive)
-                if c.end:
-                    self.end = c
+                if self.admission.check_clock(c, sample_source(sample), self.keys.clock) is None:
+                    if c.k >= self.k:
+                        self.t, self.k, self.alive = c.t, c.k, len(c.alive)
+                    if c.end:
+                        self.end = c
         while (sample := self.event_sub.try_recv()) is not None:
             with contextlib.suppress(wire.WireError):
                 self.events.append(wire.event_from_wire(sample.payload.to_bytes()))
@@ -154,7 +157,7 @@ def run(cfg: LaunchConfig) -> int:
         world = fleet.start("simworld", "-", ["simworld", "--scenario", str(scen_path), "--clock", cfg.clock,
                                               "--speed", str(cfg.speed), "--start-timeout", str(cfg.start_timeout_s),
                                               *ros, *run_arg, *zargs], prefix)
-        watch = ClockWatch(run_id, net.watch)
+        watch = ClockWatch(run_id, net.watch, s)
         code = _supervise(cfg, s, fleet, world, mon, watch, stop_sig)
     finally:
         if watch is not None:
