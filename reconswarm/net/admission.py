@@ -209,26 +209,26 @@ class Admission:
     # -- the world's messages -------------------------------------------------------------------------
 
     def check_world_source(self, source: str, key: str) -> Intrusion | None:
-        """State, scan, truth: only from the world's session (pinned by `check_clock`)."""
-        if self.pins.world is None or source != self.pins.world:
+        """Clock, state, scan, truth: only from the world's session, pinned at the first of them."""
+        if self.pins.world is None and source != UNATTRIBUTED:
+            self.pins.world = source
+        if source != self.pins.world:
             return Intrusion(IntrusionKind.NOT_FROM_WORLD, source, key,
                              f"the world speaks from session {self.pins.world or '(none yet)'}")
         return None
 
     def check_clock(self, c: wire.Clock, source: str, key: str) -> Intrusion | None:
-        if source == UNATTRIBUTED:
-            return Intrusion(IntrusionKind.NOT_FROM_WORLD, source, key, "a clock without a publisher id")
-        if self.pins.world is not None and source != self.pins.world:
-            return Intrusion(IntrusionKind.NOT_FROM_WORLD, source, key,
-                             f"the world speaks from session {self.pins.world}"
-                             + (f" (this one claims end: {c.reason!r})" if c.end else ""))
+        bad = self.check_world_source(source, key)
+        if bad is not None:
+            if c.end:
+                return Intrusion(bad.kind, source, key, f"{bad.detail} (this one claims the end: {c.reason!r})")
+            return bad
         dt = self.s.meta.dt_s
         if abs(c.t - c.k * dt) > 1e-9 * max(1.0, abs(c.t)):
             return Intrusion(IntrusionKind.CLOCK, source, key, f"t = {c.t:.9g} s at tick {c.k} (dt {dt} s)")
         if self.clock_mode is not None and self.clock_mode != (c.mode, c.speed):
             return Intrusion(IntrusionKind.CLOCK, source, key,
                              f"mode {c.mode} x{c.speed:g}, the run's is {self.clock_mode[0]} x{self.clock_mode[1]:g}")
-        self.pins.world = source
         self.clock_mode = (c.mode, c.speed)
         return None
 

@@ -68,12 +68,12 @@ class Gate:
         else:
             self._unlogged += 1
 
-    def report(self, now_s: float, force: bool = False) -> Report | None:
-        """The tally to publish, at most every report_every_s and only when it changed (or `force`)."""
+    def report(self, now_s: float, final: bool = False) -> Report | None:
+        """The tally to publish when it changed: at most every report_every_s, or now if `final`."""
         total = self.tally.total
-        if total == self._reported and not force:
+        if total == self._reported:
             return None
-        if not force and now_s - self._last_report < self.report_every_s:
+        if not final and now_s - self._last_report < self.report_every_s:
             return None
         self._reported, self._last_report = total, now_s
         return Report(self.process, tuple(self.tally.as_rows()))

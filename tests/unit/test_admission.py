@@ -146,7 +146,10 @@ def test_clock_only_from_the_world() -> None:
     # State, scan and truth likewise come from the world alone.
     assert adm.check_world_source(WORLD, KEYS.state(2)) is None
     assert kind(adm.check_world_source(X, KEYS.state(2))) is K.NOT_FROM_WORLD
-    assert kind(Admission(S).check_world_source(WORLD, KEYS.state(2))) is K.NOT_FROM_WORLD  # none pinned yet
+    fresh = Admission(S)  # the first message only the world sends pins the world's session, whichever it is
+    assert fresh.check_world_source(WORLD, KEYS.state(2)) is None
+    assert kind(fresh.check_clock(clock(0), X, KEYS.clock)) is K.NOT_FROM_WORLD
+    assert kind(Admission(S).check_world_source(UNATTRIBUTED, KEYS.state(2))) is K.NOT_FROM_WORLD
 
 
 def test_a_forged_liveliness_token_does_not_keep_a_dead_agent_alive() -> None:
