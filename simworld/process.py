@@ -66,7 +66,7 @@ class WorldAdapter(Member):
                      z.liveliness().declare_subscriber(k.alive_all, self.inbox.callback, history=True)]
         self.token = z.liveliness().declare_token(k.alive_simworld)
 
-    def handle(self, key: str, payload: bytes, kind: str) -> None:
+    def handle(self, key: str, payload: bytes, kind: str, source: str = "") -> None:
         if self.ros2 is not None and self.ros2.owns(key):
             try:
                 self.ros2.command(key, payload, time.monotonic())

@@ -131,26 +131,29 @@ class Stopper:
         return self.event.is_set()
 
 
+Item = tuple[str, bytes, str, str]  # key, payload, kind (PUT | DELETE), source (`sample_source`)
+
+
 class Inbox:
-    """Samples from zenoh callbacks, queued as (key, payload bytes, kind) for the main loop."""
+    """Samples from zenoh callbacks, queued as (key, payload bytes, kind, source) for the main loop."""
 
     def __init__(self) -> None:
-        self.q: queue.SimpleQueue[tuple[str, bytes, str]] = queue.SimpleQueue()
+        self.q: queue.SimpleQueue[Item] = queue.SimpleQueue()
 
     def callback(self, sample: Any) -> None:
         try:
             kind = "DELETE" if str(sample.kind).endswith("DELETE") else "PUT"
-            self.q.put((str(sample.key_expr), sample.payload.to_bytes(), kind))
+            self.q.put((str(sample.key_expr), sample.payload.to_bytes(), kind, sample_source(sample)))
         except Exception as exc:  # never raise into zenoh
             log.error("inbox: cannot queue a sample: %s", exc)
 
-    def get(self, timeout: float | None) -> tuple[str, bytes, str] | None:
+    def get(self, timeout: float | None) -> Item | None:
         try:
             return self.q.get(timeout=timeout) if timeout is None or timeout > 0 else self.q.get_nowait()
         except queue.Empty:
             return None
 
-    def drain(self, limit: int = 100_000) -> list[tuple[str, bytes, str]]:
+    def drain(self, limit: int = 100_000) -> list[Item]:
         out = []
         for _ in range(limit):
             try:
