@@ -23,6 +23,8 @@ from agent.node import AgentNode, Exit, Input, Invalid, Joined, Left, Output, Re
 from agent.ros2_io import AgentRos2
 from reconswarm.errors import BadInput
 from reconswarm.net import wire
+from reconswarm.net.gate import Gate
+from reconswarm.net.report import report_to_wire
 from reconswarm.net.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.scenario import load
@@ -49,9 +51,9 @@ class AgentLink(Member):
             self.ros2.close()
         super().close()
 
-    def __init__(self, node: AgentNode, keys: wire.Keys, session: zenoh.Session, rej: Rejections,
+    def __init__(self, node: AgentNode, keys: wire.Keys, session: zenoh.Session, rej: Rejections, gate: Gate,
                  ros2_domain_id: int | None = None) -> None:
-        self.node, self.keys, self.z, self.rej = node, keys, session, rej
+        self.node, self.keys, self.z, self.rej, self.gate = node, keys, session, rej, gate
         self.id = node.id
         self.inbox = Inbox()
         block = zenoh.CongestionControl.BLOCK
@@ -62,6 +64,7 @@ class AgentLink(Member):
         self.ros2 = None if ros2_domain_id is None else AgentRos2(
             z, ros2_domain_id, self.id, l_m, node.s.meta.dt_s, self.inbox.callback)
         self.pub_cmd = None if self.ros2 else z.declare_publisher(k.cmd(self.id), congestion_control=block)
+        self.pub_report = z.declare_publisher(k.report(gate.process))
         self.pub_obs = ext.declare_advanced_publisher(z, k.obstacles(self.id), cache=ext.CacheConfig(max_samples=1))
         cb = self.inbox.callback
         remote = zenoh.Locality.REMOTE
@@ -78,13 +81,22 @@ class AgentLink(Member):
         # Declared last: the token tells the world this agent is ready to receive.
         self.token = z.liveliness().declare_token(k.alive_agent(self.id))
 
-    def decode(self, key: str, payload: bytes, kind: str) -> Input | None:
-        """The sample as a node input (None: not for us); a malformed one becomes Invalid (and is logged)."""
+    def decode(self, key: str, payload: bytes, kind: str, source: str) -> Input | None:
+        """The sample as a node input (None: not for us, or refused by admission, which counts and logs it);
+        a malformed one becomes Invalid (and is logged)."""
         if self.ros2 is not None and self.ros2.owns(key):
             m = self.ros2.decode(key, payload)
             if isinstance(m, Invalid):
                 self.rej.reject(key, m.reason)
             return m
+        if key.endswith("/obstacles") and not self.gate.admit_set_bytes(len(payload), source, key, time.monotonic()):
+            return None
+        m = self._decode(key, payload, kind)
+        if isinstance(m, Invalid | Joined | Left) or m is None:
+            return m
+        return m if self.gate.admit(m, source, key, time.monotonic()) else None
+
+    def _decode(self, key: str, payload: bytes, kind: str) -> Input | None:
         try:
             what, aid, leaf = self.keys.parse(key)
             if what == "alive":
@@ -137,11 +149,20 @@ class AgentLink(Member):
                 batch += self.ros2.take_invalid()
             for out in node.step(batch, time.monotonic()):
                 if isinstance(out, Exit):
+                    self.report(final=True)
                     return out.code
                 if isinstance(out, Reconnect):
                     return RECONNECT
                 self.publish(out)
+            self.report()
+        self.report(final=True)
         return 0
+
+    def report(self, final: bool = False) -> None:
+        """Our intrusion tally to the monitor (when it changed; at most once a second unless final)."""
+        r = self.gate.report(time.monotonic(), final)
+        if r is not None:
+            self.pub_report.put(report_to_wire(r))
 
 
 def run(cfg: AgentConfig) -> int:
@@ -151,16 +172,18 @@ def run(cfg: AgentConfig) -> int:
     node = AgentNode(s, cfg.agent_id, time.monotonic(), cfg.timing)  # kept across new sessions
     keys = wire.Keys(cfg.run_id or s.meta.name)
     rej = Rejections(f"agent {cfg.agent_id}")
+    gate = Gate(s, f"agent-{cfg.agent_id}")  # kept across new sessions, like the node
     while True:
         with serving(cfg.zenoh, f"agent {cfg.agent_id}", cfg.timing.session_open_timeout_s) as (session, stop):
-            link = AgentLink(node, keys, session, rej, cfg.ros2_domain_id)
+            link = AgentLink(node, keys, session, rej, gate, cfg.ros2_domain_id)
             log.info("agent %d up (run %s)", cfg.agent_id, keys.run)
             code = link.run(stop)
             if node.ended and not stop.stopped:
                 time.sleep(cfg.timing.agent_end_linger_s)  # let the monitor see the end before our token goes
             link.close()
             if code != RECONNECT:
-                log.info("agent %d done: last tick %d, %d messages rejected", cfg.agent_id, node.k, node.rejected)
+                log.info("agent %d done: last tick %d, %d messages rejected, %d intrusions refused", cfg.agent_id,
+                         node.k, node.rejected, gate.count)
                 return code
             # We stopped acting although the mission goes on (seen after a router restart: a route to one of
             # our keys was not restored): a new session re-declares everything; the node keeps all it knows
