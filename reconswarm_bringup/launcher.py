@@ -142,8 +142,8 @@ def run(cfg: LaunchConfig) -> int:
         log.info("run %s", run_id)
         fleet.zopt = net.zopt
         run_arg = ["--run", run_id]
-        for ident, args, prefix in net.routers:
-            fleet.start("router", ident, args, prefix)
+        routers = [fleet.start("router", ident, args, prefix) for ident, args, prefix in net.routers]
+        net.wait_router(lambda: all(r.popen.poll() is None for r in routers))
         prefix, zargs = net.zopt("monitor")
         live = [] if cfg.foxglove_port is None else ["--foxglove", str(cfg.foxglove_port)]
         mon = fleet.start("monitor", "-", ["monitor", "record", "--scenario", str(scen_path), "--db",

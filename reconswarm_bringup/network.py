@@ -5,6 +5,8 @@ from __future__ import annotations
 import logging
 import os
 import socket
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -40,6 +42,21 @@ class Net:
     reach: dict[tuple[str, str], tuple[list[str], list[str]]]  # (role, id) -> (prefix, zenoh args)
     default: list[str]
     hosts: Any = None
+    wait_on: str | None = None  # the endpoint of the router we start here, to wait for before the rest
+
+    def wait_router(self, alive: Callable[[], bool], timeout_s: float = 120.0) -> None:
+        """Wait until our router accepts connections (on a busy machine its start takes seconds; the other
+        processes are started after it, and meanwhile do not compete with it for the CPU)."""
+        if self.wait_on is None:
+            return
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if not _port_free(self.wait_on):  # bound (it was free before): our router listens
+                return
+            if not alive():
+                raise ProcessFailure(f"router: exited before listening on {self.wait_on} (see logs/router.log)")
+            time.sleep(0.1)
+        raise ProcessFailure(f"router: not listening on {self.wait_on} after {timeout_s:.0f} s")
 
     def zopt(self, role: str, ident: str = "-") -> tuple[list[str], list[str]]:
         return self.reach.get((role, ident), ([], self.default))
@@ -66,7 +83,7 @@ def plan_network(cfg: LaunchConfig, s: Scenario, run: str, lock: runid.EndpointL
                            f"its own router: pass another --router port")
         routers: list[tuple[str, list[str], list[str]]] = [
             ("-", ["router", "--zenoh-config", str(sec.router_config)], [])]
-        return Net(sec.observer_options(), routers, reach, [])
+        return Net(sec.observer_options(), routers, reach, [], wait_on=sec.endpoint)
     if cfg.hosts == 2:
         hosts = netns.TwoHosts.for_run(os.getpid())
         hosts.create()
@@ -88,4 +105,5 @@ def plan_network(cfg: LaunchConfig, s: Scenario, run: str, lock: runid.EndpointL
         runid.refuse_if_live(endpoint)
         log.info("using the router already listening on %s (no run's world is alive on it)", endpoint)
         routers = []
-    return Net(ZenohOptions.build([endpoint], None, "client", None), routers, {}, ["--connect", endpoint])
+    return Net(ZenohOptions.build([endpoint], None, "client", None), routers, {}, ["--connect", endpoint],
+               wait_on=endpoint if routers else None)
