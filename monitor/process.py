@@ -23,7 +23,10 @@ from monitor.live import LiveFeed, LiveView
 from monitor.node import MonitorNode
 from reconswarm.errors import ProcessFailure
 from reconswarm.net import wire
-from reconswarm.net.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
+from reconswarm.net.admission import Intrusion, IntrusionKind, Membership
+from reconswarm.net.gate import Gate
+from reconswarm.net.report import report_from_wire
+from reconswarm.net.session import Inbox, Member, Rejections, Stopper, ZenohOptions, sample_source, serving
 from reconswarm.net.timing import TIMING
 from reconswarm.record.store import RunWriter
 from reconswarm.scenario import load
@@ -61,27 +64,64 @@ class MonitorAdapter(Member):
         # Data arrives in queues read by the loop in batches (the monitor is off the lockstep's critical
         # path, so it need not wake for every message); liveliness changes come through the inbox.
         self.channels = [z.declare_subscriber(key, zenoh.handlers.FifoChannel(CHANNEL_DEPTH))
-                         for key in (k.truth, k.all_agents("beacon"), k.clock)]
+                         for key in (k.truth, k.all_agents("beacon"), k.clock, k.report_all)]
+        # Admission (what the run cannot contain is refused and counted, with the other processes' reports);
+        # an agent is alive while its token is there AND its own beacons keep coming.
+        self.gate = Gate(node.s, "monitor")
+        self.members = Membership()
+        self.told: dict[int, bool] = {}
         self.subs = [z.liveliness().declare_subscriber(k.alive_all, self.inbox.callback, history=True)]
         self.token = z.liveliness().declare_token(k.alive_monitor)
 
-    def handle(self, key: str, payload: bytes, kind: str) -> None:
-        node, now = self.node, time.monotonic()
+    def handle(self, key: str, payload: bytes, kind: str, source: str) -> None:
+        node, gate, now = self.node, self.gate, time.monotonic()
         try:
             what, aid, leaf = self.keys.parse(key)
             if what == "alive":
                 if leaf == "agent" and aid is not None:
-                    node.agent_up(aid, kind != "DELETE", now)
+                    self.members.token(aid, kind != "DELETE", now, node.t)
+                    self.sync(now)
                 elif leaf == "simworld":
                     node.world_up(kind != "DELETE", now)
             elif what == "clock":
-                node.clock(wire.clock_from_wire(payload), now)
+                c = wire.clock_from_wire(payload)
+                if gate.admit(c, source, key, now):
+                    node.clock(c, now)
             elif what == "truth":
-                node.truth(wire.truth_from_wire(payload))
+                tr = wire.truth_from_wire(payload)
+                if gate.admit(tr, source, key, now):
+                    node.truth(tr)
             elif what == "agent" and aid is not None and leaf == "beacon":
-                node.beacon(wire.beacon_from_wire(payload, aid))
+                b = wire.beacon_from_wire(payload, aid)
+                if gate.admit(b, source, key, now):
+                    self.members.data(b.id, now, node.t)
+                    node.beacon(b)
+            elif what == "report":
+                self.report(key, leaf, aid, payload, source)
         except wire.WireError as exc:
             self.rej.reject(key, str(exc))
+
+    def report(self, key: str, process: str, aid: int | None, payload: bytes, source: str) -> None:
+        """Another process's intrusion tally, if it comes from that process's own session."""
+        r = report_from_wire(payload, process)
+        pins = self.gate.adm.pins
+        speaker = pins.world if aid is None else pins.agents.get(aid, ("", 0.0))[0]
+        if source != speaker:  # (a whole tally each time: the next one from the right session will do)
+            self.gate.refuse(Intrusion(IntrusionKind.IMPERSONATION, source, key,
+                                       f"{process} speaks from session {speaker or '(none yet)'}"), time.monotonic())
+            return
+        self.node.writer.intrusions(r.process, list(r.rows))
+
+    def sync(self, now: float) -> None:
+        """Tell the node who is alive by the membership rule (token AND own beacons), as it changes."""
+        node = self.node
+        if node.wall0 is not None:
+            self.members.start(now, node.t)
+        for aid in node.ids:
+            up = self.members.alive(aid, now, node.t)
+            if self.told.get(aid, False) != up:
+                self.told[aid] = up
+                node.agent_up(aid, up, now)
 
     def publish(self) -> None:
         for ev in self.node.take_events():
@@ -130,10 +170,11 @@ class MonitorAdapter(Member):
                 got = 0
                 for ch in self.channels:
                     while (sample := ch.try_recv()) is not None:
-                        self.handle(str(sample.key_expr), sample.payload.to_bytes(), "PUT")
+                        self.handle(str(sample.key_expr), sample.payload.to_bytes(), "PUT", sample_source(sample))
                         got += 1
                 if not got:
                     time.sleep(TIMING.monitor_poll_s)
+                self.sync(time.monotonic())
                 done = node.poll(time.monotonic())
                 self.publish()
                 self.feed_live(time.monotonic())
@@ -142,10 +183,12 @@ class MonitorAdapter(Member):
                 if time.monotonic() - last_counts > TIMING.commit_wall_s:
                     node.counts["monitor"] = self.rej.count
                     node.writer.counters(node.counts)
+                    node.writer.intrusions("monitor", self.gate.tally.as_rows())
                     node.writer.maybe_commit()
                     last_counts = time.monotonic()
                     if live is not None:
                         live.update(self.live_view())
+            node.writer.intrusions("monitor", self.gate.tally.as_rows())
             node.finish(time.monotonic(), self.rej.count)
             self.publish()
         except (sqlite3.Error, OSError) as exc:

@@ -16,6 +16,9 @@ import zenoh
 
 from reconswarm.errors import BadInput
 from reconswarm.net import ros2, wire
+from reconswarm.net.admission import Membership
+from reconswarm.net.gate import Gate
+from reconswarm.net.report import report_to_wire
 from reconswarm.net.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
 from reconswarm.net.wire import ClockMode
@@ -62,11 +65,18 @@ class WorldAdapter(Member):
         self.pub_state = {} if self.ros2 else {a: z.declare_publisher(k.state(a), congestion_control=block)
                                                 for a in node.ids}
         self.pub_scan = {a: z.declare_publisher(k.scan(a), congestion_control=block) for a in node.ids}
+        # Admission: commands only from each agent's own session, bounded, for ticks we published; an agent is
+        # alive while its token is there AND its commands keep coming (a token alone can be forged). In ROS 2
+        # mode commands come as cmd_vel, without our ids: membership by the tokens, as before.
+        self.gate = Gate(node.s, "simworld")
+        self.members = Membership()
+        self.told: dict[int, bool] = {}
+        self.pub_report = z.declare_publisher(k.report("simworld"))
         self.subs = [*([] if self.ros2 else [z.declare_subscriber(k.all_agents("cmd"), self.inbox.callback)]),
                      z.liveliness().declare_subscriber(k.alive_all, self.inbox.callback, history=True)]
         self.token = z.liveliness().declare_token(k.alive_simworld)
 
-    def handle(self, key: str, payload: bytes, kind: str, source: str = "") -> None:
+    def handle(self, key: str, payload: bytes, kind: str, source: str) -> None:
         if self.ros2 is not None and self.ros2.owns(key):
             try:
                 self.ros2.command(key, payload, time.monotonic())
@@ -74,18 +84,46 @@ class WorldAdapter(Member):
                 self.rej.reject(key, str(exc))
                 self.node.rejected = self.rej.count
             return
+        now, sim = time.monotonic(), self.node.k * self.node.s.meta.dt_s
         try:
             what, aid, leaf = self.keys.parse(key)
             if what == "alive":
                 if leaf == "monitor":
                     self.node.monitor_up(kind != "DELETE")
-                elif leaf == "agent" and aid is not None:
+                elif leaf == "agent" and aid is not None and self.ros2 is not None:
                     self.node.agent_up(aid, kind != "DELETE")
+                elif leaf == "agent" and aid is not None:
+                    self.members.token(aid, kind != "DELETE", now, sim)
+                    self.sync(now)
             elif what == "agent" and leaf == "cmd" and aid is not None:
-                self.node.command(wire.cmd_from_wire(payload, aid), time.monotonic())
+                c = wire.cmd_from_wire(payload, aid)
+                self.gate.world_k = self.node.k
+                if self.gate.admit(c, source, key, now):
+                    self.members.data(c.id, now, sim)
+                    if not self.told.get(c.id) and self.members.alive(c.id, now, sim):
+                        self.sync(now)
+                    self.node.command(c, now)
         except wire.WireError as exc:
             self.rej.reject(key, str(exc))
             self.node.rejected = self.rej.count
+
+    def sync(self, now: float) -> None:
+        """Tell the node who is alive by the membership rule (token AND own commands), as it changes."""
+        if self.ros2 is not None:
+            return
+        sim = self.node.k * self.node.s.meta.dt_s
+        if self.node.started:
+            self.members.start(now, sim)
+        for aid in self.node.ids:
+            up = self.members.alive(aid, now, sim)
+            if self.told.get(aid, False) != up:
+                self.told[aid] = up
+                self.node.agent_up(aid, up)
+
+    def report(self, final: bool = False) -> None:
+        r = self.gate.report(time.monotonic(), final)
+        if r is not None:
+            self.pub_report.put(report_to_wire(r))
 
     def put(self, out: TickOut) -> None:
         self.pub_clock.put(wire.clock_to_wire(out.clock))
@@ -106,10 +144,13 @@ class WorldAdapter(Member):
         while True:
             for item in self.inbox.drain():
                 self.handle(*item)
+            self.sync(time.monotonic())
+            self.report()
             st = self.node.step(time.monotonic(), stop.stopped)
             for out in st.out:
                 self.put(out)
             if st.ended is not None:
+                self.report(final=True)
                 return st.ended
             got = self.inbox.get(min(0.05, max(0.0, st.wake_s - time.monotonic())))
             if got is not None:

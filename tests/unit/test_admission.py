@@ -139,7 +139,7 @@ def test_clock_only_from_the_world() -> None:
     assert kind(got) is K.NOT_FROM_WORLD and got is not None and "converged" in got.detail
     assert kind(adm.check_clock(spoof, UNATTRIBUTED, KEYS.clock)) is K.NOT_FROM_WORLD
     # A clock switching to realtime, even from the world's own session id: the run's mode does not change.
-    got = adm.check_clock(clock(8, mode="realtime", speed=10.0), WORLD, KEYS.clock)
+    got = adm.check_clock(clock(8, mode=wire.ClockMode.REALTIME, speed=10.0), WORLD, KEYS.clock)
     assert kind(got) is K.CLOCK
     assert kind(adm.check_clock(wire.Clock(9, 123.0, ()), WORLD, KEYS.clock)) is K.CLOCK  # t != k dt
     assert adm.check_clock(clock(9, end=True, reason="converged"), WORLD, KEYS.clock) is None

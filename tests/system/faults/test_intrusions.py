@@ -101,7 +101,7 @@ def _attack(a: Attacker, until_t_s: float, timeout_s: float = 600.0) -> dict[str
         put("clock", a.keys.clock, wire.clock_to_wire(wire.Clock(c.k + 1, c.t + s.meta.dt_s, c.alive,
                                                                  end=True, reason="converged")))
         put("clock", a.keys.clock, wire.clock_to_wire(wire.Clock(c.k + 1, c.t + s.meta.dt_s, c.alive,
-                                                                 mode="realtime", speed=10.0)))
+                                                                 mode=wire.ClockMode.REALTIME, speed=10.0)))
         time.sleep(0.1)
     token.undeclare()
     return sent
