@@ -62,6 +62,7 @@ class IntrusionKind(Enum):
     NOT_FROM_WORLD = "not_from_world"  # clock, state, scan or truth from a session other than the world's
     CLOCK = "clock"  # the world's clock changing mode or speed, or t != k dt
     IMPERSONATION = "impersonation"  # an agent's message from a session other than that agent's
+    OVERSIZE = "oversize"  # an obstacle set larger than the scenario's full set (refused before decoding)
 
 
 @dataclass(frozen=True)
@@ -122,6 +123,9 @@ class Admission:
         self.max_vertices = {o: int(sample_boundary(poly, SAMPLE_SPACING_M).shape[0])
                              for o, poly in self.polygons.items()}
         self.u_max = command_bound_mps(s)
+        # The largest obstacle set the run can send: every obstacle with every sensed vertex, as msgpack
+        # (a map of id -> list of [x, y] float64 pairs, 19 bytes a vertex, plus headers and the fields).
+        self.max_set_bytes = 128 + sum(len(o.encode()) + 16 + 19 * n for o, n in self.max_vertices.items())
         # The scenario's extent: starts (body centres; heads lie within head_offset), slots, obstacles.
         pts = [s.starts, np.array(s.target_m)[None, :] + s.offsets, *self.polygons.values()]
         allp = np.concatenate([p.reshape(-1, 2) for p in pts])
@@ -180,6 +184,14 @@ class Admission:
         if c.k > world_k:
             return Intrusion(IntrusionKind.COMMAND, source, key, f"command for tick {c.k}, newest tick is {world_k}")
         return self._agent(c.id, source, key, now)
+
+    def check_set_size(self, n_bytes: int, source: str, key: str) -> Intrusion | None:
+        """Before decoding an obstacle set: no larger than the run's largest (decoding 4,000 ids ten times a
+        second starves an agent)."""
+        if n_bytes > self.max_set_bytes:
+            return Intrusion(IntrusionKind.OVERSIZE, source, key,
+                             f"an obstacle set of {n_bytes} bytes, the run's largest is {self.max_set_bytes}")
+        return None
 
     def check_obstacles(self, o: wire.ObstacleSet, source: str, key: str) -> Intrusion | None:
         """An obstacle set: its content alone decides (a truthful set does no harm whoever sends it)."""

@@ -57,6 +57,14 @@ class Gate:
         self.refuse(got, now_s)
         return False
 
+    def admit_set_bytes(self, n_bytes: int, source: str, key: str, now_s: float) -> bool:
+        """An obstacle set's payload, before it is decoded: False if larger than any the run can send."""
+        got = self.adm.check_set_size(n_bytes, source, key)
+        if got is None:
+            return True
+        self.refuse(got, now_s)
+        return False
+
     def refuse(self, i: Intrusion, now_s: float) -> None:
         first = self.tally.add(i, self.t)
         if first or now_s - self._last_log >= 1.0:

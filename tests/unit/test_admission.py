@@ -251,3 +251,17 @@ def test_gate_delivers_the_runs_messages_and_counts_logs_and_reports_the_rest(ca
     assert g.report(1.6) is None  # unchanged
     g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.beacon(99), 1.7)
     assert g.report(1.8) is None and g.report(2.6) is not None  # changed, but at most once a second
+
+
+def test_oversize_obstacle_sets_are_refused_before_decoding() -> None:
+    adm = started()
+    field = ContourField.from_scenario(S)
+    # The largest set the run can send: every obstacle with every contour sample as a vertex.
+    full = {oid: tuple((float(x), float(y)) for x, y in field.samples[field.start[m]:field.start[m] + field.count[m]])
+            for m, oid in enumerate(field.ids)}
+    biggest = wire.obstacles_to_wire(wire.ObstacleSet(10, 2**40, 2**40, full))
+    assert adm.check_set_size(len(biggest), A2, KEYS.obstacles(10)) is None
+    tri: tuple[tuple[float, float], ...] = ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))
+    flood = wire.obstacles_to_wire(wire.ObstacleSet(4, 1, 1, {f"o{i}": tri for i in range(4000)}))
+    got = adm.check_set_size(len(flood), X, KEYS.obstacles(4))
+    assert kind(got) is K.OVERSIZE and len(flood) > 200_000 > 10 * adm.max_set_bytes  # 255 kB vs 14 kB

@@ -139,7 +139,7 @@ def test_outside_client_cannot_steer_phantom_end_or_hide_a_death(tmp_path: Path)
     assert [e["kind"] for e in events(out / "run.db") if e.get("agent") == 3] == ["agent_lost"]
     assert s["duration_s"] > KILL_AT_S  # not ended by the spoofed clock
     by_kind = s["intrusions_by_kind"]
-    for kind in ("impersonation", "unknown_agent", "not_from_world", "unknown_obstacle"):
+    for kind in ("impersonation", "unknown_agent", "not_from_world", "radius", "hull", "oversize"):
         assert by_kind.get(kind, 0) > 0, by_kind
     assert zid in s["intrusion_sources"]
     assert s["intrusions"] >= sent["cmd"]  # every forged command refused by the world (and counted)
