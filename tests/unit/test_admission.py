@@ -20,11 +20,10 @@ from reconswarm.net.admission import (
     Membership,
     command_bound_mps,
 )
-from reconswarm.paper.knowledge import obstacle_view
 from reconswarm.paper.planner import command, max_repulsion_speed, neighbour_table
 from reconswarm.scenario import load
 from reconswarm.sim.sensing import ContourField
-from tests.support import PAPER
+from tests.support import PAPER, view_of
 
 S = load(PAPER)
 KEYS = wire.Keys("paper-0a1b2c")
@@ -193,7 +192,7 @@ def test_command_bound_holds_for_the_planner_even_in_contact() -> None:
         centre = polys[trial % len(polys)].mean(axis=0)
         p = centre + rng.uniform(-15.0, 15.0, (n, 2)) * (1.0 if trial % 2 else 100.0)  # crowded, in contact
         nb = neighbour_table(p, s.radii, pairs_within(p, 1e9), cfg.d_max_m)
-        ob = obstacle_view(p, n, len(polys), [(i, j, polys[j]) for i in range(n) for j in range(len(polys))])
+        ob = view_of(p, n, len(polys), [(i, j, polys[j]) for i in range(n) for j in range(len(polys))])
         u = command(cfg, p, s.radii, s.offsets, np.array(s.target_m), nb, ob, np.zeros((n, 2)))
         worst = max(worst, float(norm2(u).max()))
     assert worst <= bound
