@@ -85,10 +85,10 @@ class AgentLink(Member):
         """The sample as a node input (None: not for us, or refused by admission, which counts and logs it);
         a malformed one becomes Invalid (and is logged)."""
         if self.ros2 is not None and self.ros2.owns(key):
-            m = self.ros2.decode(key, payload)
-            if isinstance(m, Invalid):
-                self.rej.reject(key, m.reason)
-            return m
+            odom = self.ros2.decode(key, payload)
+            if isinstance(odom, Invalid):
+                self.rej.reject(key, odom.reason)
+            return odom
         if key.endswith("/obstacles") and not self.gate.admit_set_bytes(len(payload), source, key, time.monotonic()):
             return None
         m = self._decode(key, payload, kind)
