@@ -243,8 +243,6 @@ def test_random_ticks_swarm_bits_equal_per_agent_hulls(seed, n, ticks):
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(2, 9), st.integers(2, 15))
 def test_incremental_update_equals_add_then_share(seed, n, ticks):
-    if not hasattr(SwarmKnowledge, "update"):
-        pytest.skip("SwarmKnowledge.update not present")
     rng = np.random.default_rng(seed)
     a = swarm_for(FIELD, n)
     b = swarm_for(FIELD, n)
