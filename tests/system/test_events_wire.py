@@ -26,7 +26,8 @@ conf = zenoh.Config.from_json5(
 heard, done = [], threading.Event()
 signal.signal(signal.SIGTERM, lambda *_: done.set())
 with zenoh.open(conf) as z:
-    sub = z.declare_subscriber("swarm/paper/event", lambda s: heard.append(msgpack.unpackb(s.payload.to_bytes())))
+    sub = z.declare_subscriber("swarm/*/event",
+                               lambda s: heard.append([str(s.key_expr), msgpack.unpackb(s.payload.to_bytes())]))
     print("subscribed", flush=True)
     done.wait()
 json.dump(heard, sys.stdout)
@@ -55,7 +56,10 @@ def test_outside_subscriber_hears_every_recorded_event(tmp_path: Path, out: Path
             if proc is not None and proc.poll() is None:
                 proc.kill()
                 proc.wait()
-    heard = json.loads(heard_text)
+    run_id = (out / "run_id").read_text().strip()  # the launch's own run id (unique per launch)
+    keys = {key for key, _ in json.loads(heard_text)}
+    assert keys <= {f"swarm/{run_id}/event"}, keys
+    heard = [e for _, e in json.loads(heard_text)]
     assert all(e.pop("v") == 1 for e in heard)
     recorded = events(out / "run.db")
     (tmp_path / "events_wire_vs_record.json").write_text(json.dumps({"wire": heard, "record": recorded}, indent=1))
