@@ -33,13 +33,17 @@ class TableReader:
             if key not in data:
                 raise self.fail(join_path(path, key), "missing key")
 
+    def _default(self, where: str, default: Any) -> Any:
+        """A key that is absent: its default, or the one-line "missing key" error when it has none."""
+        if default is None:
+            raise self.fail(where, "missing key")
+        return default
+
     def number(self, data: dict[str, Any], path: str, key: str, default: float | None = None,
                check: Callable[[float], bool] | None = None, need: str = "") -> float:
         where = join_path(path, key)
         if key not in data:
-            if default is None:
-                raise self.fail(where, "missing key")
-            return default
+            return self._default(where, default)
         v = data[key]
         if isinstance(v, bool) or not isinstance(v, int | float):
             raise self.fail(where, f"expected a number, got {kind_of(v)}")
@@ -53,9 +57,7 @@ class TableReader:
                 lo: int | None = None) -> int:
         where = join_path(path, key)
         if key not in data:
-            if default is None:
-                raise self.fail(where, "missing key")
-            return default
+            return self._default(where, default)
         v = data[key]
         if isinstance(v, bool) or not isinstance(v, int):
             raise self.fail(where, f"expected an integer, got {kind_of(v)}")
@@ -66,9 +68,7 @@ class TableReader:
     def string(self, data: dict[str, Any], path: str, key: str, default: str | None = None) -> str:
         where = join_path(path, key)
         if key not in data:
-            if default is None:
-                raise self.fail(where, "missing key")
-            return default
+            return self._default(where, default)
         v = data[key]
         if not isinstance(v, str) or not v:
             raise self.fail(where, f"expected a non-empty string, got {kind_of(v)}")
@@ -90,9 +90,7 @@ class TableReader:
     def point_key(self, data: dict[str, Any], path: str, key: str,
                   default: tuple[float, float] | None = None) -> tuple[float, float]:
         if key not in data:
-            if default is None:
-                raise self.fail(join_path(path, key), "missing key")
-            return default
+            return self._default(join_path(path, key), default)
         return self.point(data[key], join_path(path, key))
 
 
