@@ -133,6 +133,25 @@ class AgentNode:
         self.last_act = now_s
         self._announce_set = self.brain.rev > 0
 
+    def awaiting(self, now_s: float) -> int | None:
+        """How many more messages the next tick needs at least (the adapter sleeps until that many are in, or
+        its own state, or a timeout); None: nothing but our own state will let us act."""
+        newest = max(self.states, default=-1)
+        k = self.k + 1 if self.mode != "realtime" and self.k >= 0 and (self.k + 1) in self.states else newest
+        st = self.states.get(k)
+        if st is None or k <= self.k:
+            return None
+        fresh = self.beacons.get(k, {})
+        clock = self.clocks.get(k)
+        peers = self.alive if clock is None or self.mode == "realtime" else self.alive.intersection(clock.alive)
+        silent = self.timing.peer_silent_s
+        need = sum(1 for a in peers if a != self.id and a not in fresh and now_s - self.heard.get(a, now_s) < silent)
+        if self.mode != "realtime":
+            need += (clock is None) + (st.scan_n > 0 and k not in self.scans)
+            if self._linked[0] == k:
+                need += sum(1 for a, rev in self._linked[1].items() if rev and rev not in self.sets.get(a, ()))
+        return max(1, need)
+
     def wake_at_s(self) -> float | None:
         """Realtime: when to step at the latest even if nothing arrives (None: no deadline)."""
         return self.act_at
@@ -205,13 +224,7 @@ class AgentNode:
         st, clock = self.states.get(k), self.clocks.get(k)
         if st is None:
             return False
-        if clock is None or (st.scan_n > 0 and k not in self.scans):
-            # The tick's clock or scan may have been lost (an outage): after a while, go on without it
-            # (the newest clock's list of agents; the next scan sees the same contour again).
-            first = self.state_at.setdefault(k, now)
-            if now - first < t.agent_wait_timeout_s or not self.clocks:
-                return False
-            clock = self.clocks[max(self.clocks)]
+        # Our beacon goes out as soon as our state is in: the peers wait for it (it needs neither clock nor scan).
         if self.beacon_sent < k or now > self.beacon_again:  # (again if peers may have lost it)
             self._out.append(self._beacon(st))
             if self.beacon_sent < k:
@@ -220,6 +233,13 @@ class AgentNode:
                 self._out.append(self._obstacle_set(k))
             self.beacon_sent = k
             self.beacon_again = now + t.beacon_again_s
+        if clock is None or (st.scan_n > 0 and k not in self.scans):
+            # The tick's clock or scan may have been lost (an outage): after a while, go on without it
+            # (the newest clock's list of agents; the next scan sees the same contour again).
+            first = self.state_at.setdefault(k, now)
+            if now - first < t.agent_wait_timeout_s or not self.clocks:
+                return False
+            clock = self.clocks[max(self.clocks)]
         if self.wait_since is not None and now - self.wait_since > t.agent_wait_timeout_s:
             log.warning("agent %d: tick %d: gave up waiting for peers' data", self.id, k)
             return True

@@ -62,14 +62,16 @@ class AgentLink(Member):
         self.pub_beacon = z.declare_publisher(k.beacon(self.id), congestion_control=block)
         l_m = float(node.s.head_offsets[node.s.agent_index(self.id)])
         self.ros2 = None if ros2_domain_id is None else AgentRos2(
-            z, ros2_domain_id, self.id, l_m, node.s.meta.dt_s, self.inbox.callback)
+            z, ros2_domain_id, self.id, l_m, node.s.meta.dt_s, self.inbox.urgent)
         self.pub_cmd = None if self.ros2 else z.declare_publisher(k.cmd(self.id), congestion_control=block)
         self.pub_report = z.declare_publisher(k.report(gate.process))
         self.pub_obs = ext.declare_advanced_publisher(z, k.obstacles(self.id), cache=ext.CacheConfig(max_samples=1))
-        cb = self.inbox.callback
+        cb = self.inbox.handler()
         remote = zenoh.Locality.REMOTE
         self.subs = [
-            *([] if self.ros2 else [z.declare_subscriber(k.state(self.id), cb)]),
+            # Our state starts a tick: it wakes the loop at once; the rest wakes it only once the node's
+            # count of what it still needs is in (one wake-up per tick, not one per message).
+            *([] if self.ros2 else [z.declare_subscriber(k.state(self.id), self.inbox.handler(urgent=True))]),
             z.declare_subscriber(k.scan(self.id), cb),
             z.declare_subscriber(k.clock, cb),
             # Our own announcements are not delivered back (REMOTE); anyone else's on our keys are checked.
@@ -142,8 +144,8 @@ class AgentLink(Member):
         node, poll_s = self.node, self.node.timing.agent_poll_s
         while not stop.stopped:
             wake = node.wake_at_s()
-            item = self.inbox.get(timeout=poll_s if wake is None else max(0.0, wake - time.monotonic()))
-            items = [] if item is None else [item, *self.inbox.drain()]
+            items = self.inbox.take(node.awaiting(time.monotonic()),
+                                    poll_s if wake is None else min(poll_s, max(0.0, wake - time.monotonic())))
             batch = [m for m in (self.decode(*it) for it in items) if m is not None]
             if self.ros2 is not None:
                 batch += self.ros2.take_invalid()

@@ -81,13 +81,15 @@ def grid_row(tmp: Path, n: int, sim_s: float, checkout: Path | None) -> dict[str
     use = role_usage(out)
     cpu = {r: [u["cpu_user_s"] + u["cpu_sys_s"] for u in v] for r, v in use.items()}
     msgs = [u["msgs_in"] for u in use.get("agent", []) if "msgs_in" in u]
+    wakes = [u["wakeups"] for u in use.get("agent", []) if "wakeups" in u]
     return {"n": n, "ticks": ticks, "sim_wall": s["duration_s"] / s["wall_time_s"],
             "agent_ms": 1000 * median(cpu.get("agent", [0.0])) / ticks,
             "agents_ms": 1000 * sum(cpu.get("agent", [0.0])) / ticks,
             "world_ms": 1000 * sum(cpu.get("simworld", [0.0])) / ticks,
             "monitor_ms": 1000 * sum(cpu.get("monitor", [0.0])) / ticks,
             "router_ms": 1000 * sum(cpu.get("router", [0.0])) / ticks,
-            "msgs_in": median(msgs) / ticks if msgs else float("nan")}
+            "msgs_in": median(msgs) / ticks if msgs else float("nan"),
+            "wakeups": median(wakes) / ticks if wakes else float("nan")}
 
 
 def main() -> int:
@@ -110,14 +112,16 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="bench_deploy_") as t:
         tmp = Path(t)
         print(f"\n## lockstep on a sparse grid (about 8 neighbours each), {args.grid_sim_s:g} s simulated per run")
-        print("CPU-ms per tick (user + sys, from each process's exit line); messages in per agent per tick")
+        print("CPU-ms per tick (user + sys, from each process's exit line); messages in and loop wake-ups per agent "
+              "per tick")
         print(f"{'version':>12s} {'N':>4s} {'sim/wall':>8s} {'agent':>7s} {'agents':>8s} {'world':>7s} "
-              f"{'monitor':>7s} {'router':>7s} {'msgs in':>7s}")
+              f"{'monitor':>7s} {'router':>7s} {'msgs in':>7s} {'wakeups':>7s}")
         for n in args.grid_agents:
             for name, co in versions:
                 r = grid_row(tmp, n, args.grid_sim_s, co)
                 print(f"{name[-12:]:>12s} {n:4d} {r['sim_wall']:8.2f} {r['agent_ms']:7.2f} {r['agents_ms']:8.1f} "
-                      f"{r['world_ms']:7.1f} {r['monitor_ms']:7.1f} {r['router_ms']:7.1f} {r['msgs_in']:7.1f}",
+                      f"{r['world_ms']:7.1f} {r['monitor_ms']:7.1f} {r['router_ms']:7.1f} {r['msgs_in']:7.1f} "
+                      f"{r['wakeups']:7.1f}",
                       flush=True)
         if args.paper:
             print("\n## the paper mission in lockstep (until it converges)")

@@ -26,13 +26,12 @@ from reconswarm.net import wire
 from reconswarm.net.admission import Intrusion, IntrusionKind, Membership
 from reconswarm.net.gate import Gate
 from reconswarm.net.report import report_from_wire
-from reconswarm.net.session import Inbox, Member, Rejections, Stopper, ZenohOptions, sample_source, serving
+from reconswarm.net.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
 from reconswarm.record.store import RunWriter
 from reconswarm.scenario import load
 
 log = logging.getLogger("reconswarm.monitor")
-CHANNEL_DEPTH = 1 << 20  # samples a queue holds (deep enough that zenoh never waits for the monitor)
 
 
 @dataclass(frozen=True)
@@ -61,16 +60,17 @@ class MonitorAdapter(Member):
         self.live_k = -1
         z = session
         self.pub_event = z.declare_publisher(k.event, congestion_control=zenoh.CongestionControl.BLOCK)
-        # Data arrives in queues read by the loop in batches (the monitor is off the lockstep's critical
-        # path, so it need not wake for every message); liveliness changes come through the inbox.
-        self.channels = [z.declare_subscriber(key, zenoh.handlers.FifoChannel(CHANNEL_DEPTH))
-                         for key in (k.truth, k.all_agents("beacon"), k.clock, k.report_all)]
+        # Everything arrives in the inbox, taken in one batch per tick: the world's truth wakes the loop, the
+        # rest (beacons, clock, reports, membership) waits for it (the monitor is off the critical path).
+        self.subs = [z.declare_subscriber(k.truth, self.inbox.handler(urgent=True)),
+                     *(z.declare_subscriber(key, self.inbox.handler())
+                       for key in (k.all_agents("beacon"), k.clock, k.report_all))]
         # Admission (what the run cannot contain is refused and counted, with the other processes' reports);
         # an agent is alive while its token is there AND its own beacons keep coming.
         self.gate = Gate(node.s, "monitor")
         self.members = Membership()
         self.told: dict[int, bool] = {}
-        self.subs = [z.liveliness().declare_subscriber(k.alive_all, self.inbox.callback, history=True)]
+        self.subs.append(z.liveliness().declare_subscriber(k.alive_all, self.inbox.handler(), history=True))
         self.token = z.liveliness().declare_token(k.alive_monitor)
 
     def handle(self, key: str, payload: bytes, kind: str, source: str) -> None:
@@ -165,15 +165,8 @@ class MonitorAdapter(Member):
         last_counts = time.monotonic()
         try:
             while not stop.stopped:
-                for item in self.inbox.drain():
+                for item in self.inbox.take(None, TIMING.monitor_wake_s):
                     self.handle(*item)
-                got = 0
-                for ch in self.channels:
-                    while (sample := ch.try_recv()) is not None:
-                        self.handle(str(sample.key_expr), sample.payload.to_bytes(), "PUT", sample_source(sample))
-                        got += 1
-                if not got:
-                    time.sleep(TIMING.monitor_poll_s)
                 self.sync(time.monotonic())
                 done = node.poll(time.monotonic())
                 self.publish()

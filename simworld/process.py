@@ -72,8 +72,8 @@ class WorldAdapter(Member):
         self.members = Membership()
         self.told: dict[int, bool] = {}
         self.pub_report = z.declare_publisher(k.report("simworld"))
-        self.subs = [*([] if self.ros2 else [z.declare_subscriber(k.all_agents("cmd"), self.inbox.callback)]),
-                     z.liveliness().declare_subscriber(k.alive_all, self.inbox.callback, history=True)]
+        self.subs = [*([] if self.ros2 else [z.declare_subscriber(k.all_agents("cmd"), self.inbox.handler())]),
+                     z.liveliness().declare_subscriber(k.alive_all, self.inbox.handler(), history=True)]
         self.token = z.liveliness().declare_token(k.alive_simworld)
 
     def handle(self, key: str, payload: bytes, kind: str, source: str) -> None:
@@ -141,8 +141,10 @@ class WorldAdapter(Member):
 
     def run(self, stop: Stopper) -> str:
         """Feed the node until it ends the mission; returns the end reason."""
+        wake_s, want = time.monotonic(), self.node.awaiting()
         while True:
-            for item in self.inbox.drain():
+            # One wake-up per batch: the commands the tick waits for, or its due time, or 50 ms at most.
+            for item in self.inbox.take(want, min(0.05, max(0.0, wake_s - time.monotonic()))):
                 self.handle(*item)
             self.sync(time.monotonic())
             self.report()
@@ -152,9 +154,7 @@ class WorldAdapter(Member):
             if st.ended is not None:
                 self.report(final=True)
                 return st.ended
-            got = self.inbox.get(min(0.05, max(0.0, st.wake_s - time.monotonic())))
-            if got is not None:
-                self.handle(*got)
+            wake_s, want = st.wake_s, self.node.awaiting()
 
 
 def run(cfg: SimworldConfig) -> int:

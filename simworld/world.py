@@ -220,6 +220,14 @@ class WorldNode:
         self.phase, self.deadline_s = Phase.WAIT_DUE, due
         return Step(out, due)
 
+    def awaiting(self) -> int | None:
+        """How many messages to wait for before stepping again (the adapter wakes then, or at `wake_s`): the
+        commands still missing while a lockstep tick waits for them; None while realtime waits for its due
+        time; 1 otherwise (membership changes)."""
+        if self.phase == Phase.WAIT_COMMANDS:
+            return max(1, len(self.missing()))
+        return None if self.phase == Phase.WAIT_DUE else 1
+
     def missing(self) -> list[int]:
         """Lockstep: agents the current tick still waits for."""
         got = self.cmds.get(self.k, {})

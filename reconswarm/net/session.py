@@ -3,17 +3,18 @@
 Every process takes the same options (`--connect EP`, `--listen EP`, `--mode peer|client|router`,
 `--zenoh-config FILE.json5`); multicast scouting is off unless a config file turns it on; clients wait
 for their router (and reconnect by themselves when it restarts). Samples are handed from zenoh's
-callbacks to the process's own loop through a queue: nothing blocks or calls zenoh inside a callback.
+callbacks to the process's own loop through an `Inbox`: nothing blocks or calls zenoh inside a callback.
 """
 
 from __future__ import annotations
 
 import json
 import logging
-import queue
+import math
 import signal
 import threading
 import time
+from collections import deque
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass
@@ -135,32 +136,68 @@ Item = tuple[str, bytes, str, str]  # key, payload, kind (PUT | DELETE), source 
 
 
 class Inbox:
-    """Samples from zenoh callbacks, queued as (key, payload bytes, kind, source) for the main loop."""
+    """Samples from zenoh, held raw until the main loop takes them all at once: one wake-up per batch.
+
+    `handler()` gives zenoh a callback that runs on zenoh's own receiving thread (zenoh-python runs a plain
+    callable in a Python thread of its own per subscriber instead: one more thread wake-up per sample); it
+    only appends the sample and, for an urgent subscriber (the tick's trigger) or once `want` samples wait,
+    wakes the loop. The loop converts and decodes the batch itself. Nothing blocks or calls zenoh in it."""
+
+    samples_in = 0  # over every inbox of the process (for its exit line: benchmarks read them)
+    wakeups = 0
 
     def __init__(self) -> None:
-        self.q: queue.SimpleQueue[Item] = queue.SimpleQueue()
+        self._samples: deque[Any] = deque()
+        self._ready = threading.Event()
+        self._want: float = 1
+        self._urgent = False  # an urgent sample came since the last take
+
+    def handler(self, urgent: bool = False) -> Any:
+        """A zenoh handler that feeds this inbox (urgent: each sample wakes the loop at once)."""
+        import zenoh
+
+        return zenoh.handlers.Callback(self.urgent if urgent else self.callback, indirect=False)
 
     def callback(self, sample: Any) -> None:
-        try:
-            kind = "DELETE" if str(sample.kind).endswith("DELETE") else "PUT"
-            self.q.put((str(sample.key_expr), sample.payload.to_bytes(), kind, sample_source(sample)))
-        except Exception as exc:  # never raise into zenoh
-            log.error("inbox: cannot queue a sample: %s", exc)
+        self._samples.append(sample)
+        if len(self._samples) >= self._want:
+            self._ready.set()
 
-    def get(self, timeout: float | None) -> Item | None:
-        try:
-            return self.q.get(timeout=timeout) if timeout is None or timeout > 0 else self.q.get_nowait()
-        except queue.Empty:
-            return None
+    def urgent(self, sample: Any) -> None:
+        self._samples.append(sample)
+        self._urgent = True
+        self._ready.set()
 
-    def drain(self, limit: int = 100_000) -> list[Item]:
+    def take(self, want: int | None, timeout: float | None) -> list[Item]:
+        """Every sample waiting, once an urgent one or `want` of them (None: only an urgent one) are in, or
+        once `timeout` seconds passed (at once if 0)."""
+        self._want = math.inf if want is None else max(1, want)
+        self._ready.clear()  # (set by samples an earlier take already had, or that were fewer than wanted then)
+        if not self._urgent and len(self._samples) < self._want and (timeout is None or timeout > 0):
+            self._ready.wait(timeout)
+        self._urgent = False
+        Inbox.wakeups += 1
+        return self.drain()
+
+    def drain(self) -> list[Item]:
+        """Every sample waiting, without waiting."""
         out = []
-        for _ in range(limit):
-            try:
-                out.append(self.q.get_nowait())
-            except queue.Empty:
-                break
+        while self._samples:
+            item = to_item(self._samples.popleft())
+            if item is not None:
+                out.append(item)
+        Inbox.samples_in += len(out)
         return out
+
+
+def to_item(sample: Any) -> Item | None:
+    """A zenoh sample as (key, payload bytes, PUT | DELETE, source)."""
+    try:
+        kind = "DELETE" if str(sample.kind).endswith("DELETE") else "PUT"
+        return str(sample.key_expr), sample.payload.to_bytes(), kind, sample_source(sample)
+    except Exception as exc:  # a sample zenoh could not give us: dropped, and said
+        log.error("inbox: cannot read a sample: %s", exc)
+        return None
 
 
 def sample_source(sample: Any) -> str:
@@ -229,12 +266,13 @@ def _watch_parent(parent: int, every_s: float, grace_s: float) -> None:
 
 
 def usage() -> dict[str, float]:
-    """CPU seconds and peak resident memory of this process (for logs and benchmarks)."""
+    """CPU seconds, peak resident memory, samples received and loop wake-ups of this process (for logs and
+    benchmarks)."""
     import resource
 
     ru = resource.getrusage(resource.RUSAGE_SELF)
     return {"cpu_user_s": round(ru.ru_utime, 3), "cpu_sys_s": round(ru.ru_stime, 3),
-            "max_rss_mb": round(ru.ru_maxrss / 1024.0, 1)}
+            "max_rss_mb": round(ru.ru_maxrss / 1024.0, 1), "msgs_in": Inbox.samples_in, "wakeups": Inbox.wakeups}
 
 
 def setup_logging(debug: bool = False) -> None:

@@ -54,8 +54,8 @@ class Timing:
     # --------------------------------------------------------------------------------------- monitor
     # After the world's last clock, how long to wait for the last states.
     end_grace_s: float = 3.0
-    # With nothing queued, the monitor looks again after this long.
-    monitor_poll_s: float = 0.002
+    # The monitor wakes for each tick's truth, and at least this often without one (end of mission, commits).
+    monitor_wake_s: float = 0.05
     # Agents lost (or back) within this much wall time of each other count as one network event.
     burst_s: float = 1.0
     # Commit the record at least every this much simulated time ...

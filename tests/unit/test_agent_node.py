@@ -64,9 +64,12 @@ def started(node_s: Scenario = S, peers: tuple[int, ...] = (B, C), timing: Timin
 
 def test_lockstep_waits_for_every_live_peer_then_acts_once() -> None:
     node = started()
+    assert node.awaiting(0.0) is None  # before our state nothing can let us act: the adapter sleeps on it
     out = node.step([clock(0), state(0, 100.0, 0.0)], 0.01)
     assert beacons(out) == [wire.Beacon(A, 0, 0.0, 100.0, 0.0, RADIUS[A], 0, 0)] and not cmds(out)
+    assert node.awaiting(0.01) == 2  # the beacons of B and C: the adapter wakes once both could be in
     assert not cmds(node.step([beacon(B, 0, 200.0, 0.0)], 0.02))  # C is still missing
+    assert node.awaiting(0.02) == 1
     assert "beacons of [3]" in node.waiting_for()
     out = node.step([beacon(C, 0, 300.0, 0.0)], 0.03)
     want = reference(0, (100.0, 0.0), [Peer(B, 200.0, 0.0, RADIUS[B]), Peer(C, 300.0, 0.0, RADIUS[C])])
@@ -77,7 +80,9 @@ def test_lockstep_waits_for_every_live_peer_then_acts_once() -> None:
 def test_lockstep_waits_for_the_scan_the_state_announces() -> None:
     node = started(peers=())
     pts = ((130.0, 0.0, "diamond"), (131.0, 1.0, "diamond"))
-    assert node.step([clock(0, (A,)), state(0, 100.0, 0.0, scan_n=2)], 0.0) == []  # not even the beacon
+    out = node.step([clock(0, (A,)), state(0, 100.0, 0.0, scan_n=2)], 0.0)
+    assert beacons(out) and not cmds(out)  # the beacon at once (peers wait for it), the command waits
+    assert node.awaiting(0.0) == 1  # for the scan
     out = node.step([wire.Scan(A, 0, 0.0, pts)], 0.1)
     scan = {"diamond": np.array([[130.0, 0.0], [131.0, 1.0]])}
     assert [(c.ux, c.uy) for c in cmds(out)] == [reference(0, (100.0, 0.0), [], scan=scan)]
@@ -89,7 +94,8 @@ def test_lockstep_goes_on_without_a_lost_clock_after_the_wait_timeout() -> None:
     node = started(peers=())
     node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
     assert node.k == 0
-    assert node.step([state(1, 100.1, 0.0)], 0.1) == []  # clock 1 lost
+    out = node.step([state(1, 100.1, 0.0)], 0.1)  # clock 1 lost
+    assert beacons(out) and not cmds(out)
     assert "clock" in node.waiting_for()
     out = node.step([], 0.1 + T.agent_wait_timeout_s + 0.01)
     assert [c.k for c in cmds(out)] == [1]

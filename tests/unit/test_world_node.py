@@ -88,8 +88,10 @@ def test_lockstep_waits_for_every_command_then_integrates() -> None:
     assert [m.id for m in tick.states] == IDS and tick.truth.ids == tuple(IDS)
     assert all(sc.points for sc in tick.scans)
     p0, th0 = node.p.copy(), node.theta.copy()
+    assert node.awaiting() == len(IDS)  # the adapter sleeps until every command could be in
     command_all(node, 0, (0.5, 0.2), 0.01, skip=(IDS[3],))
     assert node.step(0.02).out == [] and node.k == 0  # one command missing: no advance
+    assert node.awaiting() == 1
     node.command(wire.Cmd(IDS[3], 0, 0.5, 0.2), 0.03)
     node.step(0.04)
     assert node.k == 1

@@ -1,0 +1,67 @@
+"""The inbox (reconswarm/net/session.py) that hands zenoh's samples to a process's loop in batches: who wakes
+the loop and when. Driven by hand with sample-shaped objects (the zenoh side is exercised by tests/system)."""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+
+from reconswarm.net.session import Inbox
+
+
+@dataclass
+class Payload:
+    data: bytes
+
+    def to_bytes(self) -> bytes:
+        return self.data
+
+
+@dataclass
+class Sample:
+    key_expr: str
+    payload: Payload
+    kind: str = "SampleKind.PUT"
+    timestamp: None = None
+
+
+def sample(i: int, kind: str = "SampleKind.PUT") -> Sample:
+    return Sample(f"swarm/r/agent/{i}/beacon", Payload(bytes([i])), kind)
+
+
+def put_three(box: Inbox) -> None:
+    for i in range(3):
+        box.callback(sample(i))
+
+
+def test_the_loop_sleeps_until_the_count_it_waits_for_is_in() -> None:
+    box = Inbox()
+    for i in range(2):
+        box.callback(sample(i))
+    t0 = time.monotonic()
+    assert box.take(3, 0.2) == [(f"swarm/r/agent/{i}/beacon", bytes([i]), "PUT", "unattributed") for i in range(2)]
+    assert time.monotonic() - t0 >= 0.19  # two of three: it waited for its timeout
+    threading.Timer(0.05, put_three, args=(box,)).start()
+    t0 = time.monotonic()
+    assert len(box.take(3, 5.0)) == 3
+    assert time.monotonic() - t0 < 4.0  # woken by the third sample, not by the timeout
+
+
+def test_an_urgent_sample_wakes_the_loop_at_once_with_everything_waiting() -> None:
+    box = Inbox()
+    box.callback(sample(1))
+    threading.Timer(0.05, box.urgent, args=(sample(2),)).start()
+    t0 = time.monotonic()
+    got = box.take(None, 5.0)  # None: only an urgent sample (or the timeout) wakes it
+    assert [key for key, *_ in got] == ["swarm/r/agent/1/beacon", "swarm/r/agent/2/beacon"]
+    assert time.monotonic() - t0 < 4.0
+
+
+def test_a_deleted_sample_and_an_unreadable_one() -> None:
+    box = Inbox()
+    box.callback(sample(7, "SampleKind.DELETE"))
+    box.callback(Sample("k", None))  # type: ignore[arg-type]  # no payload: dropped (logged), the rest is kept
+    box.callback(sample(8))
+    assert [(key[-8:], kind) for key, _, kind, _ in box.take(1, 0)] == [("7/beacon", "DELETE"), ("8/beacon", "PUT")]
+    assert box.take(1, 0) == []
