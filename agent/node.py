@@ -95,6 +95,8 @@ class AgentNode:
         self.k = -1  # last tick commanded
         self.beacon_sent = -1
         self.wait_since: float | None = None
+        self.guessed_k = -1  # lockstep: the first tick acted on without all its data (-1: none)
+        self._guess = ""  # why the tick about to be acted on lacks data ("": it does not)
         self.mode = "lockstep"
         self.period_s = 0.0
         self.act_at: float | None = None
@@ -210,7 +212,8 @@ class AgentNode:
         return [fresh.get(a, b) for a, b in self.last_seen.items()]
 
     def _beacon(self, st: wire.State) -> wire.Beacon:
-        return wire.Beacon(self.id, st.k, st.t, st.px, st.py, self.radius, self.brain.rev, self.rejected)
+        return wire.Beacon(self.id, st.k, st.t, st.px, st.py, self.radius, self.brain.rev, self.rejected,
+                           self.guessed_k)
 
     def _link(self, k: int, p: np.ndarray) -> None:
         """Which peers' sets tick k merges: those within link range of p by their beacons at k."""
@@ -233,6 +236,9 @@ class AgentNode:
                 self._out.append(self._obstacle_set(k))
             self.beacon_sent = k
             self.beacon_again = now + t.beacon_again_s
+        # Each way on without some of the tick's data is a guess: the command may differ from the in-process
+        # engine's from here on, so the node says so (`guessed_k` in its beacons, then the record's summary).
+        self._guess = ""
         if clock is None or (st.scan_n > 0 and k not in self.scans):
             # The tick's clock or scan may have been lost (an outage): after a while, go on without it
             # (the newest clock's list of agents; the next scan sees the same contour again).
@@ -240,14 +246,18 @@ class AgentNode:
             if now - first < t.agent_wait_timeout_s or not self.clocks:
                 return False
             clock = self.clocks[max(self.clocks)]
+            self._guess = "the tick's clock or scan never came"
         if self.wait_since is not None and now - self.wait_since > t.agent_wait_timeout_s:
-            log.warning("agent %d: tick %d: gave up waiting for peers' data", self.id, k)
+            self._guess = f"gave up waiting {t.agent_wait_timeout_s:g} s for peers' data"
             return True
         fresh = self.beacons.get(k, {})
-        # A peer silent for peer_silent_s (alive by its token, but saying nothing) is not waited for.
-        if any(a not in fresh and now - self.heard.get(a, now) < t.peer_silent_s
-               for a in clock.alive if a != self.id and a in self.alive):
+        # Peers alive by their tokens whose beacon for k is not in: wait, unless one has said nothing for
+        # peer_silent_s (a token without data: a frozen process before its lease ends, or a forged token).
+        missing = [a for a in clock.alive if a != self.id and a in self.alive and a not in fresh]
+        if any(now - self.heard.get(a, now) < t.peer_silent_s for a in missing):
             return False
+        if missing:
+            self._guess = f"agents {missing} alive but silent for {t.peer_silent_s:g} s"
         if self._linked[0] != k:
             self._link(k, np.array([st.px, st.py]))
         need = {a: b.rev for a, b in fresh.items()} if self.brain.leader is not None else self._linked[1]
@@ -277,6 +287,11 @@ class AgentNode:
 
     def _act(self, k: int, now: float) -> None:
         st = self.states[k]
+        if self._guess and self.guessed_k < 0:
+            self.guessed_k = k
+            log.warning("agent %d: tick %d: %s: acting without them; lockstep is no longer deterministic",
+                        self.id, k, self._guess)
+        self._guess = ""
         p = np.array([st.px, st.py])
         peers = [Peer(b.id, b.px, b.py, b.radius) for b in self._peers(k)]
         if self.mode == "lockstep":  # exactly the peers' sets at k-1, as their beacons at k announce

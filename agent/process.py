@@ -83,7 +83,7 @@ class AgentLink(Member):
         # Declared last: the token tells the world this agent is ready to receive.
         self.token = z.liveliness().declare_token(k.alive_agent(self.id))
 
-    def decode(self, key: str, payload: bytes, kind: str, source: str) -> Input | None:
+    def decode(self, key: str, payload: bytes, kind: str, source: str, _at_s: float) -> Input | None:
         """The sample as a node input (None: not for us, or refused by admission, which counts and logs it);
         a malformed one becomes Invalid (and is logged)."""
         if self.ros2 is not None and self.ros2.owns(key):

@@ -143,7 +143,7 @@ class LiveFeed:
                                                    history=ext.HistoryConfig(detect_late_publishers=True))
 
     def poll(self) -> None:
-        for key, payload, _kind, _source in self.inbox.drain():
+        for key, payload, _kind, _source, _at in self.inbox.drain():
             try:
                 _, aid, _ = self.keys.parse(key)
                 if aid is None or aid not in self.view.index:

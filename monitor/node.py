@@ -61,6 +61,7 @@ class MonitorNode:
         self.end: wire.Clock | None = None
         self.end_at = 0.0
         self.mode: str | None = None
+        self.guessed_k = -1  # the first tick an agent acted on without all its data (lockstep; -1: none)
         self.wall0: float | None = None  # when the first clock came
         self.min_gap = float("inf")
         self.burst_lost: list[int] = []  # agents lost in the current burst (network split detection)
@@ -198,6 +199,11 @@ class MonitorNode:
         if b.id not in self.index:
             raise wire.WireError(f"agent {b.id} is not in the scenario")
         self.counts[f"agent {b.id}"] = b.rejected
+        if b.guessed_k >= 0 and (self.guessed_k < 0 or b.guessed_k < self.guessed_k):
+            if self.guessed_k < 0:
+                log.warning("agent %d acted on tick %d without all its data: lockstep is no longer deterministic",
+                            b.id, b.guessed_k)
+            self.guessed_k = b.guessed_k
         if b.k > self.written:
             self.beacons.setdefault(b.k, {})[b.id] = b
 
@@ -260,6 +266,9 @@ class MonitorNode:
             extra["end_reason"] = "world lost"
             if self.deferred:
                 log.info("not judged (the world was lost): tokens of agents %s", sorted(self.deferred))
+        # Lockstep equals the in-process engine unless an agent had to act without all of a tick's data.
+        extra["deterministic"] = self.mode == "lockstep" and self.guessed_k < 0
+        extra["determinism_lost_at_s"] = round(self.guessed_k * self.s.meta.dt_s, 9) if self.guessed_k >= 0 else None
         meta: dict[str, Any] = {"extra": extra, "finished": "1" if self.end is not None else "0"}
         start = self.writer.get_meta("mission_start_unix")
         if start is not None:  # from the first clock, whichever monitor incarnation saw it

@@ -73,8 +73,8 @@ class MonitorAdapter(Member):
         self.subs.append(z.liveliness().declare_subscriber(k.alive_all, self.inbox.handler(), history=True))
         self.token = z.liveliness().declare_token(k.alive_monitor)
 
-    def handle(self, key: str, payload: bytes, kind: str, source: str) -> None:
-        node, gate, now = self.node, self.gate, time.monotonic()
+    def handle(self, key: str, payload: bytes, kind: str, source: str, at_s: float) -> None:
+        node, gate, now = self.node, self.gate, at_s
         try:
             what, aid, leaf = self.keys.parse(key)
             if what == "alive":

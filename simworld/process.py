@@ -76,15 +76,16 @@ class WorldAdapter(Member):
                      z.liveliness().declare_subscriber(k.alive_all, self.inbox.handler(), history=True)]
         self.token = z.liveliness().declare_token(k.alive_simworld)
 
-    def handle(self, key: str, payload: bytes, kind: str, source: str) -> None:
+    def handle(self, key: str, payload: bytes, kind: str, source: str, at_s: float) -> None:
+        """A sample, as of the time it arrived (commands are taken in batches: their latency counts from then)."""
         if self.ros2 is not None and self.ros2.owns(key):
             try:
-                self.ros2.command(key, payload, time.monotonic())
+                self.ros2.command(key, payload, at_s)
             except (ros2.Ros2Error, wire.WireError) as exc:
                 self.rej.reject(key, str(exc))
                 self.node.rejected = self.rej.count
             return
-        now, sim = time.monotonic(), self.node.k * self.node.s.meta.dt_s
+        now, sim = at_s, self.node.k * self.node.s.meta.dt_s
         try:
             what, aid, leaf = self.keys.parse(key)
             if what == "alive":

@@ -132,7 +132,7 @@ class Stopper:
         return self.event.is_set()
 
 
-Item = tuple[str, bytes, str, str]  # key, payload, kind (PUT | DELETE), source (`sample_source`)
+Item = tuple[str, bytes, str, str, float]  # key, payload, kind (PUT | DELETE), source (`sample_source`), arrival
 
 
 class Inbox:
@@ -147,7 +147,7 @@ class Inbox:
     wakeups = 0
 
     def __init__(self) -> None:
-        self._samples: deque[Any] = deque()
+        self._samples: deque[tuple[Any, float]] = deque()  # (sample, monotonic time it arrived)
         self._ready = threading.Event()
         self._want: float = 1
         self._urgent = False  # an urgent sample came since the last take
@@ -159,12 +159,12 @@ class Inbox:
         return zenoh.handlers.Callback(self.urgent if urgent else self.callback, indirect=False)
 
     def callback(self, sample: Any) -> None:
-        self._samples.append(sample)
+        self._samples.append((sample, time.monotonic()))
         if len(self._samples) >= self._want:
             self._ready.set()
 
     def urgent(self, sample: Any) -> None:
-        self._samples.append(sample)
+        self._samples.append((sample, time.monotonic()))
         self._urgent = True
         self._ready.set()
 
@@ -183,18 +183,18 @@ class Inbox:
         """Every sample waiting, without waiting."""
         out = []
         while self._samples:
-            item = to_item(self._samples.popleft())
+            item = to_item(*self._samples.popleft())
             if item is not None:
                 out.append(item)
         Inbox.samples_in += len(out)
         return out
 
 
-def to_item(sample: Any) -> Item | None:
-    """A zenoh sample as (key, payload bytes, PUT | DELETE, source)."""
+def to_item(sample: Any, at_s: float) -> Item | None:
+    """A zenoh sample that arrived at at_s (monotonic) as (key, payload bytes, PUT | DELETE, source, at_s)."""
     try:
         kind = "DELETE" if str(sample.kind).endswith("DELETE") else "PUT"
-        return str(sample.key_expr), sample.payload.to_bytes(), kind, sample_source(sample)
+        return str(sample.key_expr), sample.payload.to_bytes(), kind, sample_source(sample), at_s
     except Exception as exc:  # a sample zenoh could not give us: dropped, and said
         log.error("inbox: cannot read a sample: %s", exc)
         return None

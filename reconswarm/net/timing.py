@@ -13,10 +13,13 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class Timing:
     # ---------------------------------------------------------------------------------------- agent
-    # Lockstep: longest wait for a peer's beacon or obstacle set (and for a tick's lost clock or scan).
-    agent_wait_timeout_s: float = 1.0
-    # A peer whose beacons stopped this long ago (alive by its token, but silent) is not waited for.
-    peer_silent_s: float = 2.0
+    # Lockstep: longest wait for a peer's beacon or obstacle set (and for a tick's lost clock or scan); going
+    # on without them is a guess (the summary's `deterministic` turns false). Longer than the lease, so that a
+    # peer that is gone is dropped by its membership (its token's end) first.
+    agent_wait_timeout_s: float = 3.0
+    # A peer whose beacons stopped this long ago (alive by its token, but silent) is not waited for (a guess
+    # too); longer than the lease for the same reason.
+    peer_silent_s: float = 3.0
     # Lockstep: while stuck on a tick, announce the beacon (and obstacle set) again this often.
     beacon_again_s: float = 0.5
     # No command for this long (though the world re-sends a waiting tick every `republish_s`): the agent

@@ -85,6 +85,10 @@ def summarize(rec: RunRecord) -> dict[str, Any]:
         "record_gaps": rec.gaps(),
         "intrusions_by_kind": by_kind,
         "intrusion_sources": sorted({row["source"] for row in intrusions}),
+        # The engine is deterministic; lockstep is unless an agent acted without all of a tick's data (the
+        # monitor's extra below says so, with the simulated time it happened); realtime is not, by design.
+        "deterministic": rec.meta.get("mode") == "inprocess",
+        "determinism_lost_at_s": None,
     }
     extra = rec.meta_json("extra", {})
     if isinstance(extra, dict):

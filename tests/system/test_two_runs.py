@@ -64,9 +64,14 @@ def _check_undisturbed(rc: int, out: str, err: str, converged_at: float) -> None
     assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
     # Nobody else's message got in (a second run on the same keys showed as tens of thousands of rejections).
     assert s["messages_rejected"] == 0 and s["intrusions"] == 0
-    # Lockstep equals the in-process run bit for bit, unless the machine is so loaded that agents gave up
-    # waiting 1 s for a peer (seen at load average 120 on 2 cores: 222.2 s instead of 222.25 s).
-    assert abs(s["convergence_time_s"] - converged_at) <= 0.5, (s["convergence_time_s"], converged_at)
+    # Lockstep equals the in-process run bit for bit, unless the machine is so loaded that an agent gave up
+    # waiting for a peer (seen at load average 120 on 2 cores: 222.2 s instead of 222.25 s); then the
+    # summary says so.
+    if s["deterministic"]:
+        assert s["determinism_lost_at_s"] is None and s["convergence_time_s"] == converged_at, s
+    else:
+        assert s["determinism_lost_at_s"] is not None, s
+        assert abs(s["convergence_time_s"] - converged_at) <= 0.5, (s["convergence_time_s"], converged_at)
 
 
 def _check_refused(rc: int, err: str, port: int, winner: Path, loser: Path) -> None:

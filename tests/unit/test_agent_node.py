@@ -99,6 +99,8 @@ def test_lockstep_goes_on_without_a_lost_clock_after_the_wait_timeout() -> None:
     assert "clock" in node.waiting_for()
     out = node.step([], 0.1 + T.agent_wait_timeout_s + 0.01)
     assert [c.k for c in cmds(out)] == [1]
+    assert node.guessed_k == 1  # without its clock: said, from tick 1 on
+    assert beacons(node.step([state(2, 100.2, 0.0), clock(2, (A,))], 2 * T.agent_wait_timeout_s))[0].guessed_k == 1
 
 
 def test_a_late_peer_is_waited_for_and_the_node_acts_when_it_arrives() -> None:
@@ -107,6 +109,7 @@ def test_a_late_peer_is_waited_for_and_the_node_acts_when_it_arrives() -> None:
     assert not cmds(node.step([], 0.9 * T.agent_wait_timeout_s))
     out = node.step([beacon(B, 0, 110.0, 0.0)], 0.95 * T.agent_wait_timeout_s)
     assert [(c.ux, c.uy) for c in cmds(out)] == [reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B])])]
+    assert node.guessed_k == -1  # late, but complete: no guess
 
 
 def test_a_peer_that_never_answers_is_given_up_after_the_wait_timeout() -> None:
@@ -115,6 +118,7 @@ def test_a_peer_that_never_answers_is_given_up_after_the_wait_timeout() -> None:
     assert not cmds(node.step([], T.agent_wait_timeout_s * 0.99))
     out = node.step([], T.agent_wait_timeout_s + 0.01)
     assert [(c.ux, c.uy) for c in cmds(out)] == [reference(0, (100.0, 0.0), [])]
+    assert node.guessed_k == 0  # acted without B's beacon: determinism lost from tick 0
 
 
 def test_a_stuck_tick_announces_beacon_and_obstacle_set_again() -> None:
@@ -139,6 +143,7 @@ def test_a_lost_peer_is_not_waited_for_and_stays_a_static_obstacle() -> None:
     want = reference(1, (100.05, 0.0), [Peer(B, 108.0, 0.0, RADIUS[B])], brain=ref)
     assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(1, *want)]
     assert want != reference(1, (100.05, 0.0), [])  # B's last position does push the agent away
+    assert node.guessed_k == -1  # B is gone by its membership: not a guess
 
 
 def test_a_repeated_tick_resends_the_same_command_without_planning_again() -> None:
@@ -161,6 +166,7 @@ def test_a_silent_peer_alive_by_its_token_is_not_waited_for() -> None:
     node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 300.0, 0.0)], 0.0)
     node.step([clock(1, (A, B)), state(1, 100.05, 0.0)], T.peer_silent_s + 0.1)
     assert node.k == 1  # B's last beacon is older than peer_silent_s
+    assert node.guessed_k == 1  # alive by its token, yet acted on without it: said
 
 
 def test_pruning_keeps_only_recent_ticks_and_the_merged_revision() -> None:

@@ -40,7 +40,10 @@ def test_the_loop_sleeps_until_the_count_it_waits_for_is_in() -> None:
     for i in range(2):
         box.callback(sample(i))
     t0 = time.monotonic()
-    assert box.take(3, 0.2) == [(f"swarm/r/agent/{i}/beacon", bytes([i]), "PUT", "unattributed") for i in range(2)]
+    got = box.take(3, 0.2)
+    want = [(f"swarm/r/agent/{i}/beacon", bytes([i]), "PUT", "unattributed") for i in range(2)]
+    assert [it[:4] for it in got] == want
+    assert t0 - 1.0 < got[0][4] <= got[1][4] <= t0  # when each arrived, not when the loop took it
     assert time.monotonic() - t0 >= 0.19  # two of three: it waited for its timeout
     threading.Timer(0.05, put_three, args=(box,)).start()
     t0 = time.monotonic()
@@ -63,5 +66,5 @@ def test_a_deleted_sample_and_an_unreadable_one() -> None:
     box.callback(sample(7, "SampleKind.DELETE"))
     box.callback(Sample("k", None))  # type: ignore[arg-type]  # no payload: dropped (logged), the rest is kept
     box.callback(sample(8))
-    assert [(key[-8:], kind) for key, _, kind, _ in box.take(1, 0)] == [("7/beacon", "DELETE"), ("8/beacon", "PUT")]
+    assert [(key[-8:], kind) for key, _, kind, _, _ in box.take(1, 0)] == [("7/beacon", "DELETE"), ("8/beacon", "PUT")]
     assert box.take(1, 0) == []

@@ -13,6 +13,7 @@ from reconswarm.net import wire
 from reconswarm.net.timing import Timing
 from reconswarm.paper.events import Event, EventKind
 from reconswarm.record.store import RunRecord, RunWriter
+from reconswarm.record.summary import summarize
 from reconswarm.scenario import load
 from tests.support import PAPER
 
@@ -148,6 +149,22 @@ def test_ticks_never_received_are_a_gap(tmp_path: Path) -> None:
         (gap,) = rec.gaps()
         assert gap["t_from"] == pytest.approx(DT) and gap["t_to"] == pytest.approx(5 * DT)
         assert "2..4" in gap["note"]
+
+
+@pytest.mark.parametrize("guesses", [(), ((IDS[2], 7), (IDS[1], 4), (IDS[2], 7))])
+def test_the_summary_says_whether_lockstep_stayed_deterministic(tmp_path: Path, guesses: tuple[tuple[int, int], ...]) -> None:
+    node = node_for(tmp_path)
+    for k in range(10):
+        tick(node, k, 0.01 * k)
+        for a in IDS:  # each agent announces the first tick it acted on without all its data (-1: none)
+            g = min((gk for ga, gk in guesses if ga == a and gk <= k), default=-1)
+            x, y = S.starts[IDS.index(a)]
+            node.beacon(wire.Beacon(a, k, k * DT, float(x), float(y), S.agents[IDS.index(a)].radius_m, 0, 0, g))
+    node.finish(0.2, 0)
+    with RunRecord(tmp_path / "run.db") as rec:
+        s = summarize(rec)
+    assert s["mode"] == "lockstep"
+    assert (s["deterministic"], s["determinism_lost_at_s"]) == ((True, None) if not guesses else (False, 4 * DT))
 
 
 def test_topology_events_are_recorded_and_published_alike(tmp_path: Path) -> None:
