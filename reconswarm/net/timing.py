@@ -71,8 +71,9 @@ class Timing:
     # --------------------------------------------------------------------------------------- session
     # A frozen process is declared gone after this (zenoh's default 10 s is too slow for robots).
     lease_ms: int = 2000
-    # Opening a session retries until the router answers or this passes.
-    session_open_timeout_s: float = 20.0
+    # Opening a session retries until the router answers or this passes (100+ processes starting at once on
+    # a loaded machine took more than 20 s; the world's start barrier, 120 s by default, is the real bound).
+    session_open_timeout_s: float = 60.0
 
 
 TIMING = Timing()  # the defaults every process runs with
