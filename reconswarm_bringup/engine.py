@@ -26,7 +26,8 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import Edges, NearPairs
+from reconswarm.geometry import Edges
+from reconswarm.pairs import NearPairs
 from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
 from reconswarm.paper.knowledge import SwarmKnowledge, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
@@ -76,7 +77,7 @@ class Engine:
         self.true_d = np.zeros((self.n, self.field.n_obstacles))
         self.reach_m = max(self.cfg.link_range_m + HYSTERESIS_M, 2 * self.rmax + self.cfg.d_max_m)
         self.pairs = NearPairs(self.reach_m, 0.25 * self.reach_m)
-        self.pairs(self.p)  # (the first call of a large swarm loads the k-d tree: not in the mission loop)
+        self.pairs(self.p)  # (the first call of a large swarm builds the candidate list: not in the mission loop)
         self.near = np.zeros((0, 2), dtype=np.int64)
         self.near_d = np.zeros(0)  # (E,) norm2 distance of each pair in self.near
         self.slot_error: Array | None = None

@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import norm2, pairs_within
+from reconswarm.geometry import norm2
+from reconswarm.pairs import pairs_within
 from reconswarm.paper.link import HYSTERESIS_M, linked
 
 PERSISTENCE_S = 1.0

@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import norm2, pairs_within
+from reconswarm.geometry import norm2
+from reconswarm.pairs import pairs_within
 
 Array = NDArray[np.float64]
 

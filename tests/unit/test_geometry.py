@@ -12,18 +12,16 @@ from shapely.geometry import MultiPoint, Point, Polygon
 
 from reconswarm.geometry import (
     Edges,
-    NearPairs,
     convex_hull,
     distance_to_polygon,
     is_strictly_convex,
     merge_hull,
-    pairs_and_distances,
-    pairs_within,
     points_inside_hull,
     polygon_area,
     sample_boundary,
     signed_distance,
 )
+from reconswarm.pairs import NearPairs, pairs_and_distances, pairs_within
 
 SETTINGS = settings(max_examples=150, deadline=None)
 angle = st.floats(0.0, 2 * math.pi, allow_nan=False, exclude_max=True)
@@ -330,7 +328,7 @@ def brute_pairs(p: np.ndarray, radius: float) -> set[tuple[int, int]]:
 
 @settings(max_examples=60, deadline=None)
 @given(st.integers(2, 260), st.integers(0, 2**32 - 1), st.floats(0.5, 30.0), st.booleans())
-def test_pairs_within_dense_and_kdtree_agree_with_brute_force(n, seed, radius, lattice):
+def test_pairs_within_dense_and_grid_agree_with_brute_force(n, seed, radius, lattice):
     rng = np.random.default_rng(seed)
     if lattice:  # many pairs exactly at the radius (3-4-5 triangles, axis neighbours)
         p = rng.integers(-20, 20, (n, 2)).astype(np.float64) * 1.0
@@ -342,11 +340,11 @@ def test_pairs_within_dense_and_kdtree_agree_with_brute_force(n, seed, radius, l
     assert [tuple(x) for x in got.tolist()] == sorted(brute_pairs(p, radius))  # sorted, i < j, exact set
 
 
-def test_pairs_within_same_set_across_the_dense_kdtree_threshold():
+def test_pairs_within_same_set_across_the_dense_grid_threshold():
     rng = np.random.default_rng(5)
     p = rng.integers(-15, 15, (200, 2)).astype(np.float64)
     r = 5.0
-    big = pairs_within(p, r)  # k-d tree path (N > 96)
+    big = pairs_within(p, r)  # grid path (N > 96)
     # The dense path on every subset of <= 96 points gives the restriction of the same set.
     for lo in (0, 60, 104):
         sub = p[lo:lo + 96]
@@ -355,6 +353,18 @@ def test_pairs_within_same_set_across_the_dense_kdtree_threshold():
         assert small == want
     assert pairs_within(p[:1], 10.0).shape == (0, 2)
     assert pairs_within(rng.uniform(0, 1e6, (150, 2)), 1e-3).shape == (0, 2)
+
+
+def test_pairs_within_grid_with_a_huge_extent_and_unknown_points():
+    """Coordinates spread over 1e12 m with a 1 m radius (coarser cells than the radius, so the cell keys
+    fit) and rows of NaN (an unknown state: in no pair) give exactly the brute-force pairs."""
+    rng = np.random.default_rng(11)
+    p = np.concatenate([rng.uniform(-5e11, 5e11, (150, 2)), rng.uniform(0, 3, (60, 2))])
+    p[[3, 170, 200]] = np.nan
+    got = [tuple(x) for x in pairs_within(p, 1.0).tolist()]
+    fin = np.isfinite(p).all(axis=1)
+    want = sorted((i, j) for i, j in brute_pairs(np.where(fin[:, None], p, 0.0), 1.0) if fin[i] and fin[j])
+    assert got == want and len(want) > 50
 
 
 @pytest.mark.parametrize("n", [40, 300])

@@ -15,7 +15,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Point, Polygon
 
-from reconswarm.geometry import pairs_within
+from reconswarm.pairs import pairs_within
 from reconswarm.paper.planner import (
     Neighbours,
     ObstacleView,
