@@ -25,6 +25,12 @@ SAMPLE_SPACING_M = 1.0  # obstacle contours are sampled at most this far apart (
 ON_EDGE_M = 1e-9  # closer to an edge than this, a point's direction from it is the edge's normal
 
 
+def rows_where(a: NDArray[Any], mask: NDArray[np.bool_]) -> NDArray[Any]:
+    """a[mask] for a 2-D array a (R, C) and a row mask (R,): the same rows, gathered by index (several times
+    faster than numpy's boolean indexing of a 2-D array). -> (R', C)"""
+    return a.take(np.flatnonzero(mask), axis=0)
+
+
 def norm2(v: Array) -> Array:
     """Euclidean norm over the last axis, written out so that it is reproducible bit for bit.
 
@@ -60,7 +66,7 @@ def convex_hull(points: Array) -> Array:
     pts = pts[order]
     keep = np.ones(len(pts), dtype=bool)
     keep[1:] = np.any(pts[1:] != pts[:-1], axis=1)
-    pts = pts[keep]
+    pts = rows_where(pts, keep)
     if len(pts) <= 2:
         return pts.copy()
     xs: list[float] = pts[:, 0].tolist()
@@ -113,7 +119,7 @@ def merge_hull(hull: Array, points: Array) -> Array:
     if pts.shape[0] == 0:
         return hull
     if hull.shape[0] >= 3:
-        pts = pts[~points_inside_hull(pts, hull)]
+        pts = rows_where(pts, ~points_inside_hull(pts, hull))
         if pts.shape[0] == 0:
             return hull
     return convex_hull(np.concatenate([hull, pts]))

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import norm2
+from reconswarm.geometry import norm2, rows_where
 
 Array = NDArray[np.float64]
 
@@ -52,7 +52,7 @@ def pairs_and_distances(points: Array, radius: float) -> tuple[NDArray[np.int64]
         cand = _triu(n)
         d = norm2(points[cand[:, 0]] - points[cand[:, 1]])
         keep = d <= radius
-        return cand[keep], d[keep]  # already sorted
+        return rows_where(cand, keep), d[keep]  # already sorted
     i, j = grid_candidates(points, radius)  # (C,) each pair once, i < j
     x, y = points[:, 0], points[:, 1]
     dx = x[i] - x[j]  # norm2(points[i] - points[j]), coordinate by coordinate
@@ -137,4 +137,5 @@ class NearPairs:
         dy = y[self._i] - y[self._j]
         d = np.sqrt(dx * dx + dy * dy)
         keep = d <= self.radius
-        return self._cand[keep], d[keep]
+        at = np.flatnonzero(keep)
+        return self._cand.take(at, axis=0), d.take(at)

@@ -26,7 +26,7 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import Edges
+from reconswarm.geometry import Edges, rows_where
 from reconswarm.pairs import NearPairs
 from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
 from reconswarm.paper.knowledge import SwarmKnowledge, obstacle_view
@@ -99,7 +99,7 @@ class Engine:
         qa, qs = self.field.scan(p, c.sensing_range_m, self.true_d) if near_any else (_NO_INDEX, _NO_INDEX)
         # (E, 2) superset of every pair any step needs, and their distances
         self.near, self.near_d = self.pairs(p)
-        self.know.update(qa, qs, self.near[linked(self.near_d, c.link_range_m)])
+        self.know.update(qa, qs, rows_where(self.near, linked(self.near_d, c.link_range_m)))
 
         nb = neighbour_table(p, self.r, self.near, c.d_max_m, self.near_d)
         ob = self._known_obstacles() if near_any else self._no_obstacle

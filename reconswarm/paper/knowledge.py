@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import Edges, convex_hull, merge_hull, signed_distance
+from reconswarm.geometry import Edges, convex_hull, merge_hull, rows_where, signed_distance
 from reconswarm.paper.planner import ObstacleView
 
 Array = NDArray[np.float64]
@@ -175,7 +175,7 @@ class SwarmKnowledge:
         share_new = new is not None and bool(new.any())
         if share_new:
             known = self.union_prev.nonzero()[0]  # columns anyone knew: the only ones sharing can bring
-            fresh_links = links[new]  # (E', 2)
+            fresh_links = rows_where(links, new)  # (E', 2)
             dst_new = np.concatenate([fresh_links[:, 0], fresh_links[:, 1]])  # (2E',)
             src_new = np.concatenate([fresh_links[:, 1], fresh_links[:, 0]])
             vals_new = self._pack(known, src_new)  # (2E', W')
@@ -270,7 +270,7 @@ class SwarmKnowledge:
         """The contour samples of obstacle l flagged in block (its bytes). -> (P, 2)"""
         flags = np.unpackbits(block)[: int(self.count[l])].astype(bool)
         s0 = int(self.start[l])
-        return self.samples[s0:s0 + int(self.count[l])][flags]
+        return rows_where(self.samples[s0:s0 + int(self.count[l])], flags)
 
     def hull(self, i: int, l: int) -> Array:
         block = self.bits[i, self.b0[l]:self.b1[l]]

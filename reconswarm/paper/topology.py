@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import norm2
+from reconswarm.geometry import norm2, rows_where
 from reconswarm.pairs import pairs_within
 from reconswarm.paper.link import HYSTERESIS_M, linked
 
@@ -45,14 +45,14 @@ def graph_edges(p: Array, active: NDArray[np.bool_], prev: NDArray[np.int64], li
         cand_d = norm2(p[cand[:, 0]] - p[cand[:, 1]])
     if not active.all():
         live = active[cand[:, 0]] & active[cand[:, 1]]
-        cand, cand_d = cand[live], cand_d[live]
+        cand, cand_d = rows_where(cand, live), cand_d[live]
     keep = linked(cand_d, link_m)
     band = (~keep & (cand_d <= link_m + hysteresis_m)).nonzero()[0]  # linked only if linked before
     if band.size and prev.shape[0]:
         keys = cand[band, 0] * n + cand[band, 1]
         old = prev_keys if prev_keys is not None else np.unique(prev[:, 0] * n + prev[:, 1])
         keep[band] = linked(cand_d[band], link_m, _member(keys, old), hysteresis_m)
-    return cand[keep]
+    return rows_where(cand, keep)
 
 
 def labels(n: int, edges: NDArray[np.int64], active: NDArray[np.bool_]) -> NDArray[np.int64]:
@@ -182,7 +182,7 @@ def _same_components(lab: NDArray[np.int64], edges: NDArray[np.int64], keys: NDA
         ends = np.zeros(n, dtype=bool)
         ends[a] = True
         ends[b] = True
-        touching = edges[ends[edges[:, 0]] | ends[edges[:, 1]]]  # the only edges that can matter
+        touching = rows_where(edges, ends[edges[:, 0]] | ends[edges[:, 1]])  # the only edges that can matter
         x, y = touching[:, 0], touching[:, 1]  # (E',)
 
         def adjacent(v: NDArray[np.int64]) -> NDArray[np.bool_]:
