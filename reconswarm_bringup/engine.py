@@ -32,7 +32,7 @@ from reconswarm.paper.deadlock import StallState, generator, stall_step, window_
 from reconswarm.paper.knowledge import SwarmKnowledge, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
 from reconswarm.paper.link import HYSTERESIS_M, linked
-from reconswarm.paper.planner import ObstacleView, command, errors, neighbour_table, repulsion
+from reconswarm.paper.planner import NeighbourTables, ObstacleView, command, errors, repulsion
 from reconswarm.record.recorder import Recorder
 from reconswarm.record.store import RunRecord, RunWriter
 from reconswarm.record.summary import summarize
@@ -79,6 +79,7 @@ class Engine:
         self.pairs = NearPairs(self.reach_m, 0.25 * self.reach_m)
         self.pairs(self.p)  # (the first call of a large swarm builds the candidate list: not in the mission loop)
         self.near = np.zeros((0, 2), dtype=np.int64)
+        self.tables = NeighbourTables()  # the neighbour tables' layout, kept while the neighbours stay
         self.near_d = np.zeros(0)  # (E,) norm2 distance of each pair in self.near
         self.slot_error: Array | None = None
         # True distances matter up to the sensing range and the repulsion reach; beyond, a bound will do.
@@ -101,7 +102,7 @@ class Engine:
         self.near, self.near_d = self.pairs(p)
         self.know.update(qa, qs, rows_where(self.near, linked(self.near_d, c.link_range_m)))
 
-        nb = neighbour_table(p, self.r, self.near, c.d_max_m, self.near_d)
+        nb = self.tables(p, self.r, self.near, c.d_max_m, self.near_d)
         ob = self._known_obstacles() if near_any else self._no_obstacle
 
         if self.leader is not None:

@@ -185,31 +185,61 @@ def neighbour_table(p: Array, r: Array, pairs: NDArray[np.int64], d_max: float, 
     them -> Neighbours with rows for all N agents, neighbours j sorted by index (the swarm is indexed in
     increasing id). Pairs beyond d_max,ij are dropped here.
     """
-    n = p.shape[0]
-    if pairs.shape[0] == 0:
-        return Neighbours.empty(n)
-    i, j = pairs[:, 0], pairs[:, 1]
-    if d is None:
-        d = norm2(p[i] - p[j])
-    keep = d <= r[i] + r[j] + d_max
-    if not keep.any():
-        return Neighbours.empty(n)
-    i, j = i[keep], j[keep]
-    src = np.concatenate([i, j])  # (2E',) each pair in both directions
-    dst = np.concatenate([j, i])
-    order = np.lexsort((dst, src))
-    src, dst = src[order], dst[order]
-    counts = np.bincount(src, minlength=n)  # (N,)
-    k = int(counts.max())
-    starts = np.cumsum(counts) - counts
-    flat = src * k + (np.arange(src.shape[0]) - starts[src])  # row-major slot of each entry in (N, K)
-    nb_p = np.zeros((n * k, 2))
-    nb_r = np.zeros(n * k)
-    valid = np.zeros(n * k, dtype=bool)
-    nb_p[flat] = p[dst]
-    nb_r[flat] = r[dst]
-    valid[flat] = True
-    return Neighbours(nb_p.reshape(n, k, 2), nb_r.reshape(n, k), valid.reshape(n, k))
+    return NeighbourTables()(p, r, pairs, d_max, d)
+
+
+class NeighbourTables:
+    """neighbour_table, call after call over one swarm (radii r fixed): the table's layout (which agent in
+    which slot) depends only on the pairs within d_max,ij, which rarely change from one tick to the next,
+    so it is kept while they stay the same and each call only places the positions."""
+
+    def __init__(self) -> None:
+        self._key = b""
+        self._n = -1
+        self._flat = np.zeros(0, dtype=np.int64)  # (2E',) slot of each entry in the flattened (N, K)
+        self._dst = np.zeros(0, dtype=np.int64)  # (2E',) the neighbour in that slot
+        self._k = 0
+        self._nb_r = np.zeros((0, 0))  # (N, K), read-only
+        self._valid = np.zeros((0, 0), dtype=bool)  # (N, K), read-only
+
+    def __call__(self, p: Array, r: Array, pairs: NDArray[np.int64], d_max: float, d: Array | None = None
+                 ) -> Neighbours:
+        n = p.shape[0]
+        if pairs.shape[0] == 0:
+            return Neighbours.empty(n)
+        i, j = pairs[:, 0], pairs[:, 1]
+        if d is None:
+            d = norm2(p[i] - p[j])
+        at = np.flatnonzero(d <= r[i] + r[j] + d_max)
+        if at.size == 0:
+            return Neighbours.empty(n)
+        i, j = i.take(at), j.take(at)
+        key = i.tobytes() + j.tobytes()
+        if n != self._n or key != self._key:
+            self._layout(n, r, i, j)
+            self._key, self._n = key, n
+        k = self._k
+        nb_p = np.zeros((n * k, 2))
+        nb_p[self._flat] = p[self._dst]
+        return Neighbours(nb_p.reshape(n, k, 2), self._nb_r, self._valid)
+
+    def _layout(self, n: int, r: Array, i: NDArray[np.int64], j: NDArray[np.int64]) -> None:
+        src = np.concatenate([i, j])  # (2E',) each pair in both directions
+        dst = np.concatenate([j, i])
+        order = np.lexsort((dst, src))
+        src, dst = src[order], dst[order]
+        counts = np.bincount(src, minlength=n)  # (N,)
+        k = int(counts.max())
+        starts = np.cumsum(counts) - counts
+        flat = src * k + (np.arange(src.shape[0]) - starts[src])  # row-major slot of each entry in (N, K)
+        nb_r = np.zeros(n * k)
+        valid = np.zeros(n * k, dtype=bool)
+        nb_r[flat] = r[dst]
+        valid[flat] = True
+        self._flat, self._dst, self._k = flat, dst, k
+        self._nb_r, self._valid = nb_r.reshape(n, k), valid.reshape(n, k)
+        self._nb_r.flags.writeable = False  # shared by every table of this layout
+        self._valid.flags.writeable = False
 
 
 def errors(p: Array, target: Array, offset: Array) -> Array:
