@@ -75,17 +75,20 @@ def stall_step(st: StallState, k: int, p: Array, e: Array, magnitude: float, k_a
     slot = k % w
     # Episodes in progress: end on progress, turn round once on timeout, else count down.
     active = st.side != 0.0
-    done = active & (e < st.e0 * 0.95 - 1.0)
-    st.hold = np.where(active, st.hold - 1, 0)
-    timeout = active & ~done & (st.hold <= 0)
-    turn = timeout & ~st.turned
-    st.side = np.where(turn, -st.side, st.side)
-    st.turned = st.turned | turn
-    st.hold = np.where(turn, 2 * ESCAPE_WINDOWS * w, st.hold)
-    st.free_dir = np.where(turn[:, None], -st.free_dir, st.free_dir)
-    ended = done | (timeout & ~turn)
-    st.side = np.where(ended, 0.0, st.side)
-    active = st.side != 0.0
+    if active.any():
+        done = active & (e < st.e0 * 0.95 - 1.0)
+        st.hold = np.where(active, st.hold - 1, 0)
+        timeout = active & ~done & (st.hold <= 0)
+        turn = timeout & ~st.turned
+        st.side = np.where(turn, -st.side, st.side)
+        st.turned = st.turned | turn
+        st.hold = np.where(turn, 2 * ESCAPE_WINDOWS * w, st.hold)
+        st.free_dir = np.where(turn[:, None], -st.free_dir, st.free_dir)
+        ended = done | (timeout & ~turn)
+        st.side = np.where(ended, 0.0, st.side)
+        active = st.side != 0.0
+    else:  # no episode: nothing ends or turns, and every countdown is 0
+        st.hold = np.zeros_like(st.hold)
     old_p = st.hist_p[:, slot].copy()
     old_e = st.hist_e[:, slot].copy()
     st.hist_p[:, slot] = p
