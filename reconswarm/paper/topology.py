@@ -161,6 +161,20 @@ def _member(keys: NDArray[np.int64], sorted_keys: NDArray[np.int64]) -> NDArray[
     return sorted_keys[at] == keys
 
 
+def _changes(old: NDArray[np.int64], new: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Keys in new and not in old (added), in old and not in new (removed), both sorted; old and new sorted
+    and unique. One merge of the two sorted runs (a stable sort of their concatenation) finds both."""
+    cat = np.concatenate([old, new])
+    order = np.argsort(cat, kind="stable")
+    merged = cat[order]
+    same = merged[1:] == merged[:-1]  # a key in both: two neighbours in the merge
+    single = np.ones(merged.size, dtype=bool)
+    single[1:] &= ~same
+    single[:-1] &= ~same
+    from_new = order >= old.size
+    return merged[single & from_new], merged[single & ~from_new]
+
+
 MAX_CERTIFIED = 16  # removed edges checked one by one before a full recomputation is cheaper
 
 
@@ -171,10 +185,9 @@ def _same_components(lab: NDArray[np.int64], edges: NDArray[np.int64], keys: NDA
     Sufficient: every added edge joins two agents of one old group (no merge), and the two ends of every
     removed edge still share a neighbour (no split). False means: recompute.
     """
-    added = keys[~_member(keys, old_keys)]
+    added, removed = _changes(old_keys, keys)
     if added.size and not bool((lab[added // n] == lab[added % n]).all()):
         return False
-    removed = old_keys[~_member(old_keys, keys)]
     if removed.size > MAX_CERTIFIED:
         return False
     if removed.size:

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from reconswarm.paper.topology import TopologyTracker, diff, graph_edges, groups_of, labels
+from reconswarm.paper.topology import TopologyTracker, _changes, diff, graph_edges, groups_of, labels
 from reconswarm.record.safety import SafetyMonitor
 
 DT = 0.05
@@ -250,3 +250,15 @@ def test_safety_monitor_min_gap_when_everything_is_far():
     true_min = min(math.dist(p[i], p[j]) - r[i] - r[j] for i in range(4) for j in range(i + 1, 4))
     assert true_min == pytest.approx(21.0)
     assert gap_a == pytest.approx(true_min)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_edge_changes_between_two_sorted_key_sets(seed):
+    """_changes gives exactly the set differences (sorted) of two sorted, unique key arrays."""
+    rng = np.random.default_rng(seed)
+    old = np.unique(rng.integers(0, 400, int(rng.integers(0, 200))))
+    new = np.unique(np.concatenate([rng.choice(old, old.size // 2, replace=False) if old.size else old,
+                                    rng.integers(0, 400, int(rng.integers(0, 50)))])).astype(np.int64)
+    added, removed = _changes(old.astype(np.int64), new)
+    assert added.tolist() == np.setdiff1d(new, old).tolist()
+    assert removed.tolist() == np.setdiff1d(old, new).tolist()
