@@ -58,9 +58,9 @@ def pairs_and_distances(points: Array, radius: float) -> tuple[NDArray[np.int64]
     dx = x[i] - x[j]  # norm2(points[i] - points[j]), coordinate by coordinate
     dy = y[i] - y[j]
     d = np.sqrt(dx * dx + dy * dy)
-    keep = (d <= radius).nonzero()[0]
-    order = np.argsort(i[keep] * n + j[keep])  # by (i, j), without a row-wise sort (keys are distinct)
-    at = keep[order]
+    within = np.flatnonzero(d <= radius)
+    order = np.argsort(i[within] * n + j[within])  # by (i, j), without a row-wise sort (keys are distinct)
+    at = within[order]
     out = np.empty((at.size, 2), dtype=np.int64)  # (E, 2)
     out[:, 0] = i[at]
     out[:, 1] = j[at]
@@ -72,9 +72,9 @@ def grid_candidates(points: Array, radius: float) -> tuple[NDArray[np.int64], ND
     cells are wider than radius: a superset of the pairs within radius. Points that are not finite are in
     no pair. (N, 2) -> i (C,), j (C,)"""
     n = points.shape[0]
-    fin = np.isfinite(points).all(axis=1)
+    fin = np.isfinite(points[:, 0]) & np.isfinite(points[:, 1])
     if not fin.all():
-        idx = fin.nonzero()[0]
+        idx = np.flatnonzero(fin)
         if idx.size < 2:
             return _NONE, _NONE
         a, b = grid_candidates(points[idx], radius)
@@ -133,9 +133,8 @@ class NearPairs:
             self._i, self._j = self._cand[:, 0].copy(), self._cand[:, 1].copy()
             self._ref = points.copy()
         x, y = points[:, 0], points[:, 1]
-        dx = x[self._i] - x[self._j]  # norm2(points[i] - points[j]), coordinate by coordinate
-        dy = y[self._i] - y[self._j]
+        dx = x.take(self._i) - x.take(self._j)  # norm2(points[i] - points[j]), coordinate by coordinate
+        dy = y.take(self._i) - y.take(self._j)
         d = np.sqrt(dx * dx + dy * dy)
-        keep = d <= self.radius
-        at = np.flatnonzero(keep)
+        at = np.flatnonzero(d <= self.radius)
         return self._cand.take(at, axis=0), d.take(at)

@@ -173,7 +173,7 @@ class SwarmKnowledge:
             src = np.concatenate([links[:, 1], links[:, 0]])
             prev_dirty = self._pack(dirty)  # (N, W)
         share_new = new is not None and bool(new.any())
-        if share_new:
+        if share_new and new is not None:
             known = self.union_prev.nonzero()[0]  # columns anyone knew: the only ones sharing can bring
             fresh_links = rows_where(links, new)  # (E', 2)
             dst_new = np.concatenate([fresh_links[:, 0], fresh_links[:, 1]])  # (2E',)

@@ -32,6 +32,7 @@ class ContourField:
     reach: Array  # (M,) its radius
     _tiled: dict[int, Edges] = field(default_factory=dict, compare=False, repr=False)
     _idx: dict[bytes, tuple[NDArray[np.int64], Array, Array]] = field(default_factory=dict, compare=False, repr=False)
+    _one: dict[int, Edges] = field(default_factory=dict, compare=False, repr=False)  # _edges_of one column
 
     @staticmethod
     def from_scenario(s: Scenario, spacing_m: float = SAMPLE_SPACING_M) -> ContourField:
@@ -78,7 +79,9 @@ class ContourField:
         if not close.any():  # all far: exact for the pair(s) that can hold the minimum gap, bounds elsewhere
             i, j = divmod(int(gap.argmin()), m)
             out[i, j] = float(self._exact(p, np.array([i]), np.array([j]))[0])
-            rows, cols = (gap < out[i, j] - radii[i]).nonzero()
+            below = gap < out[i, j] - radii[i]
+            below[i, j] = False  # exact already
+            rows, cols = below.nonzero()
             if rows.size:
                 out[rows, cols] = self._exact(p, rows, cols)
             return out
@@ -107,9 +110,15 @@ class ContourField:
 
     def _edges_of(self, cols: NDArray[np.int64]) -> Edges:
         """The true polygons' edges for the given obstacle columns, one row each: (Q,) -> Edges (Q, V)."""
+        one = cols.size == 1
+        if one and (got := self._one.get(int(cols[0]))) is not None:
+            return got
         e = self.edges
-        return Edges(e.ax[cols], e.ay[cols], e.abx[cols], e.aby[cols], e.inv_den[cols], e.pad[cols],
-                     e.invalid[cols], e.closed[cols])
+        out = Edges(e.ax[cols], e.ay[cols], e.abx[cols], e.aby[cols], e.inv_den[cols], e.pad[cols],
+                    e.invalid[cols], e.closed[cols])
+        if one:
+            self._one[int(cols[0])] = out
+        return out
 
     def scan(self, p: Array, sensing_range_m: float, true_d: Array) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """Contour points within R_v of each head point.
