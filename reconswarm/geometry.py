@@ -27,8 +27,8 @@ ON_EDGE_M = 1e-9  # closer to an edge than this, a point's direction from it is 
 
 def rows_where(a: NDArray[Any], mask: NDArray[np.bool_]) -> NDArray[Any]:
     """a[mask] for a 2-D array a (R, C) and a row mask (R,): the same rows, gathered by index (several times
-    faster than numpy's boolean indexing of a 2-D array). -> (R', C)"""
-    return a.take(np.flatnonzero(mask), axis=0)
+    faster than numpy's boolean indexing of a 2-D array, and no slower for a few rows). -> (R', C)"""
+    return a.take(mask.nonzero()[0], axis=0)
 
 
 def norm2(v: Array) -> Array:

@@ -58,7 +58,7 @@ def pairs_and_distances(points: Array, radius: float) -> tuple[NDArray[np.int64]
     dx = x[i] - x[j]  # norm2(points[i] - points[j]), coordinate by coordinate
     dy = y[i] - y[j]
     d = np.sqrt(dx * dx + dy * dy)
-    within = np.flatnonzero(d <= radius)
+    within = (d <= radius).nonzero()[0]
     order = np.argsort(i[within] * n + j[within])  # by (i, j), without a row-wise sort (keys are distinct)
     at = within[order]
     out = np.empty((at.size, 2), dtype=np.int64)  # (E, 2)
@@ -136,5 +136,5 @@ class NearPairs:
         dx = x.take(self._i) - x.take(self._j)  # norm2(points[i] - points[j]), coordinate by coordinate
         dy = y.take(self._i) - y.take(self._j)
         d = np.sqrt(dx * dx + dy * dy)
-        at = np.flatnonzero(d <= self.radius)
+        at = (d <= self.radius).nonzero()[0]
         return self._cand.take(at, axis=0), d.take(at)

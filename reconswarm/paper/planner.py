@@ -59,16 +59,19 @@ def max_repulsion_speed(psi: float, d_safe: float, d_max: float) -> float:
 def _accumulate(tx: Array, ty: Array, valid: Mask) -> Array:
     """Sum the terms (tx, ty) (N, K) over K in column order, skipping invalid entries. -> (N, 2)
 
-    The terms come as coordinate planes (N, K): built that way, the element-wise arithmetic is the same as on
-    (N, K, 2) arrays and several times cheaper than broadcasting over a last axis of 2.
+    The sum is sequential from zero, 0 + t_1 + t_2 + ... + t_K, whatever K (so one agent's row is the same
+    bit for bit in a table of any width): a running sum (ufunc accumulate, sequential by definition) over
+    a leading column of zeros. The terms come as coordinate planes (N, K): built that way, the element-wise
+    arithmetic is the same as on (N, K, 2) arrays and several times cheaper than broadcasting over a last
+    axis of 2.
     """
-    acc = np.zeros((tx.shape[0], 2))
-    if tx.shape[1] == 0:
-        return acc
-    masked = np.stack([np.where(valid, tx, 0.0), np.where(valid, ty, 0.0)], axis=-1)  # (N, K, 2)
-    for c in range(tx.shape[1]):
-        acc = acc + masked[:, c, :]
-    return acc
+    n, k = tx.shape
+    if k == 0:
+        return np.zeros((n, 2))
+    terms = np.zeros((n, k + 1, 2))  # (N, 1 + K, 2): zeros, then the valid terms (+0.0 where invalid)
+    np.copyto(terms[:, 1:, 0], tx, where=valid)
+    np.copyto(terms[:, 1:, 1], ty, where=valid)
+    return np.add.accumulate(terms, axis=1)[:, k, :]
 
 
 def agent_repulsion(p: Array, r: Array, nb_p: Array, nb_r: Array, nb_valid: Mask,
@@ -210,7 +213,7 @@ class NeighbourTables:
         i, j = pairs[:, 0], pairs[:, 1]
         if d is None:
             d = norm2(p[i] - p[j])
-        at = np.flatnonzero(d <= r[i] + r[j] + d_max)
+        at = (d <= r[i] + r[j] + d_max).nonzero()[0]
         if at.size == 0:
             return Neighbours.empty(n)
         i, j = i.take(at), j.take(at)

@@ -19,6 +19,7 @@ from reconswarm.pairs import pairs_within
 from reconswarm.paper.planner import (
     Neighbours,
     ObstacleView,
+    _accumulate,
     agent_repulsion,
     attraction,
     command,
@@ -506,3 +507,21 @@ def test_errors_are_slot_distances():
     p = np.array([[803.0, 4.0], [800.0, 0.0]])
     off = np.array([[0.0, 0.0], [0.0, 41.57]])
     np.testing.assert_allclose(errors(p, np.array([800.0, 0.0]), off), [5.0, 41.57])
+
+
+@pytest.mark.parametrize("k", [1, 2, 7, 40])
+def test_accumulate_is_the_sequential_sum_from_zero(k):
+    """The repulsion terms are summed 0 + t_1 + ... + t_K in column order, in floats, skipping invalid
+    entries (what makes an agent's row the same in a table of any width); -0.0 terms included."""
+    rng = np.random.default_rng(k)
+    tx = rng.normal(0, 1e3, (5, k)) * rng.choice([1e-12, 1.0, 1e12], (5, k))
+    ty = rng.normal(0, 1, (5, k))
+    tx[:, 0] = -0.0
+    valid = rng.uniform(size=(5, k)) < 0.7
+    got = _accumulate(tx, ty, valid)
+    for i in range(5):
+        sx = sy = 0.0
+        for c in range(k):
+            if valid[i, c]:
+                sx, sy = sx + float(tx[i, c]), sy + float(ty[i, c])
+        assert got[i].tobytes() == np.array([sx, sy]).tobytes()
