@@ -89,6 +89,9 @@ class Engine:
         self._no_obstacle = ObstacleView.empty(self.n)  # read-only, shared by every far tick
         self._edges_key: tuple[int, ...] = ()
         self._edges: tuple[list[Array], Edges] | None = None
+        # The obstacle table's layout for (which agents reach which obstacles, knowledge version)
+        self._view_key: tuple[bytes, int] = (b"", -1)
+        self._view: tuple[int, NDArray[np.int64], NDArray[np.int64], Edges] | None = None
 
     def plan(self, k: int) -> Array:
         """Steps 1-3 for tick k: returns u (N, 2); leaves true distances in self.true_d."""
@@ -130,6 +133,9 @@ class Engine:
         if self.field.n_obstacles == 0:
             return ObstacleView.empty(n)
         reach = self.true_d <= self.ob_reach[:, None]  # (N, M)
+        layout = (reach.tobytes(), self.know.version)
+        if layout == self._view_key and self._view is not None:  # the same agents reach the same known hulls
+            return obstacle_view(self.p, n, *self._view)
         cols = cast("NDArray[np.bool_]", reach.any(axis=0)).nonzero()[0]
         if cols.size == 0:
             return self._no_obstacle
@@ -152,6 +158,7 @@ class Engine:
             self._edges_key, self._edges = key, (hulls, Edges.of(hulls))  # held, so their ids stay theirs
         rows = rows_l[0] if len(rows_l) == 1 else np.concatenate(rows_l)
         cols_q = cols_l[0] if len(cols_l) == 1 else np.concatenate(cols_l)
+        self._view_key, self._view = layout, (col, rows, cols_q, self._edges[1])
         return obstacle_view(self.p, n, col, rows, cols_q, self._edges[1])
 
     def advance(self, u: Array) -> None:

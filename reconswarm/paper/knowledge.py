@@ -105,6 +105,7 @@ class SwarmKnowledge:
         self.col_owner = np.repeat(np.arange(count.size), nbytes).astype(np.int64)  # (B,) obstacle of a byte
         self.known = np.zeros((n_agents, count.size), dtype=bool)  # (N, M) knows(l) for every l
         self._hull_at = np.full((n_agents, count.size), None, dtype=object)  # (N, M) hull(i, l), None: stale
+        self.version = 0  # bumped whenever any agent's knowledge (so any hull) may have changed
 
     def add(self, agents: NDArray[np.int64], samples: NDArray[np.int64]) -> None:
         """Mark sensed samples: agent index (Q,), global sample index (Q,)."""
@@ -136,6 +137,7 @@ class SwarmKnowledge:
         """After add or share: every incremental shortcut starts over."""
         self._link_keys = None
         self._hull_at[:] = None
+        self.version += 1
         for l in range(self.count.size):
             self.known[:, l] = self.knows(l)
 
@@ -240,6 +242,7 @@ class SwarmKnowledge:
         obs = self.col_owner[cols]
         self.known[rows, obs] = True
         self._hull_at[rows, obs] = None
+        self.version += 1
 
     def knows(self, l: int) -> NDArray[np.bool_]:
         """(N,) whether each agent knows any of obstacle l."""
