@@ -60,18 +60,27 @@ def _accumulate(tx: Array, ty: Array, valid: Mask) -> Array:
     """Sum the terms (tx, ty) (N, K) over K in column order, skipping invalid entries. -> (N, 2)
 
     The sum is sequential from zero, 0 + t_1 + t_2 + ... + t_K, whatever K (so one agent's row is the same
-    bit for bit in a table of any width): a running sum (ufunc accumulate, sequential by definition) over
-    a leading column of zeros. The terms come as coordinate planes (N, K): built that way, the element-wise
-    arithmetic is the same as on (N, K, 2) arrays and several times cheaper than broadcasting over a last
-    axis of 2.
+    bit for bit in a table of any width): for a few rows, one running sum (ufunc accumulate, sequential by
+    definition) over a leading column of zeros; for many, K additions (numpy's accumulate over a short
+    axis is slow), the same operations. The terms come as coordinate planes (N, K): built that way, the
+    element-wise arithmetic is the same as on (N, K, 2) arrays and several times cheaper than broadcasting
+    over a last axis of 2.
     """
     n, k = tx.shape
     if k == 0:
         return np.zeros((n, 2))
-    terms = np.zeros((n, k + 1, 2))  # (N, 1 + K, 2): zeros, then the valid terms (+0.0 where invalid)
-    np.copyto(terms[:, 1:, 0], tx, where=valid)
-    np.copyto(terms[:, 1:, 1], ty, where=valid)
-    return np.add.accumulate(terms, axis=1)[:, k, :]
+    terms = np.zeros((k + 1, n, 2))  # (1 + K, N, 2): zeros, then the valid terms (+0.0 where invalid)
+    np.copyto(terms[1:, :, 0], tx.T, where=valid.T)
+    np.copyto(terms[1:, :, 1], ty.T, where=valid.T)
+    if n <= _FEW_ROWS:
+        return np.add.accumulate(terms, axis=0)[k]
+    acc = terms[0]
+    for c in range(1, k + 1):
+        acc = acc + terms[c]
+    return acc
+
+
+_FEW_ROWS = 64
 
 
 def agent_repulsion(p: Array, r: Array, nb_p: Array, nb_r: Array, nb_valid: Mask,
