@@ -33,6 +33,7 @@ class ContourField:
     _tiled: dict[int, Edges] = field(default_factory=dict, compare=False, repr=False)
     _idx: dict[bytes, tuple[NDArray[np.int64], Array, Array]] = field(default_factory=dict, compare=False, repr=False)
     _one: dict[int, Edges] = field(default_factory=dict, compare=False, repr=False)  # _edges_of one column
+    _planes: list[Array] = field(default_factory=list, compare=False, repr=False)  # centre x, centre y
 
     @staticmethod
     def from_scenario(s: Scenario, spacing_m: float = SAMPLE_SPACING_M) -> ContourField:
@@ -46,6 +47,13 @@ class ContourField:
         reach = np.array([float(norm2(poly - c).max()) for poly, c in zip(polys, centre, strict=True)])
         return ContourField(tuple(o.id for o in s.obstacles), polys, samples, start, count, owner,
                             Edges.of(list(polys)), centre, reach)
+
+    @property
+    def _centre_xy(self) -> tuple[Array, Array]:
+        """The bounding circles' centres as two contiguous coordinate arrays (M,) each."""
+        if not self._planes:
+            self._planes.extend((np.ascontiguousarray(self.centre[:, 0]), np.ascontiguousarray(self.centre[:, 1])))
+        return self._planes[0], self._planes[1]
 
     @property
     def n_obstacles(self) -> int:
@@ -66,8 +74,9 @@ class ContourField:
             return self._exact_all(p)
         # norm2(p[:, None, :] - centre[None, :, :]) on coordinate planes (a 3-D broadcast is several times
         # slower for the same arithmetic)
-        dx = p[:, 0:1] - self.centre[:, 0]  # (N, M)
-        dy = p[:, 1:2] - self.centre[:, 1]
+        cx, cy = self._centre_xy
+        dx = p[:, 0:1] - cx  # (N, M)
+        dy = p[:, 1:2] - cy
         bound = np.sqrt(dx * dx + dy * dy) - self.reach  # (N, M)
         close = bound <= exact_within_m
         if radii is None:
@@ -81,7 +90,7 @@ class ContourField:
             out[i, j] = float(self._exact(p, np.array([i]), np.array([j]))[0])
             below = gap < out[i, j] - radii[i]
             below[i, j] = False  # exact already
-            rows, cols = below.nonzero()
+            rows, cols = np.divmod(below.ravel().nonzero()[0], m)
             if rows.size:
                 out[rows, cols] = self._exact(p, rows, cols)
             return out
