@@ -11,8 +11,10 @@ Tick k, in this order (the agent process follows the same order for its own row)
 
 Speed (the results are those of the plain computation, bit for bit): work is skipped only where it
 provably contributes nothing (no sensing or obstacle table far from every obstacle, sharing only over the
-knowledge that changed, exact obstacle distances only where they can matter), and the pure functions get
-the inputs they would compute themselves (pair distances, tracking errors) instead of recomputing them.
+knowledge that changed, exact obstacle distances only where they can matter), the pure functions get
+the inputs they would compute themselves (pair distances, tracking errors) instead of recomputing them,
+and what changes rarely is kept between ticks (the pairs within reach as a Verlet list, the neighbour
+tables' and the obstacle table's layouts while the same agents are involved).
 """
 
 from __future__ import annotations
