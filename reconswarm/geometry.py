@@ -228,17 +228,22 @@ def signed_distance(px: Array, py: Array, e: Edges, *, normals: Literal[True]) -
 
 
 @overload
-def signed_distance(px: Array, py: Array, e: Edges, *, normals: Literal[False]) -> Array: ...
+def signed_distance(px: Array, py: Array, e: Edges, *, normals: Literal[False],
+                    outside_beyond: Array | None = None) -> Array: ...
 
 
-def signed_distance(px: Array, py: Array, e: Edges, *, normals: bool = True) -> tuple[Array, Array, Array] | Array:
+def signed_distance(px: Array, py: Array, e: Edges, *, normals: bool = True, outside_beyond: Array | None = None
+                    ) -> tuple[Array, Array, Array] | Array:
     """Signed distance from points to polygons, and the outward unit normal at the nearest point.
 
     px, py (B...) broadcast against the polygons' batch shape (K,): (P,) with K = P pairs one to one,
     or (N, 1) against (K,) = (M,) for every point against every polygon. Returns d, nx, ny of the
     broadcast shape; d < 0 inside a polygon of >= 3 vertices (CCW); (nx, ny) points from the nearest
     boundary point toward the outside, the direction in which the point must be pushed.
-    normals=False: d alone, by the same operations (the minimum d² is the one at its argmin).
+    normals=False: d alone, by the same operations (the minimum d² is the one at its argmin); with
+    outside_beyond (broadcast to d), a distance from each polygon's boundary beyond which a point cannot be
+    inside it (the radius of a circle that holds the polygon: a disc inside the polygon is inside that
+    circle), the inside test is skipped when every point is beyond it.
     """
     apx = px[..., None] - e.ax
     apy = py[..., None] - e.ay
@@ -252,6 +257,8 @@ def signed_distance(px: Array, py: Array, e: Edges, *, normals: bool = True) -> 
         dx = apx - t * abx
         dy = apy - t * aby
         dist = np.sqrt((dx * dx + dy * dy + e.pad).min(axis=-1))
+        if outside_beyond is not None and bool((dist > outside_beyond).all()):
+            return dist  # every point outside: where(inside, -dist, dist) is dist
         inside = ((abx * apy - aby * apx >= 0.0) | e.invalid).all(axis=-1) & e.closed
         return np.where(inside, -dist, dist)
     v = shape[-1]

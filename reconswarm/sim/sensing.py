@@ -33,7 +33,7 @@ class ContourField:
     _tiled: dict[int, Edges] = field(default_factory=dict, compare=False, repr=False)
     _idx: dict[bytes, tuple[NDArray[np.int64], Array, Array]] = field(default_factory=dict, compare=False, repr=False)
     _one: dict[int, Edges] = field(default_factory=dict, compare=False, repr=False)  # _edges_of one column
-    _planes: list[Array] = field(default_factory=list, compare=False, repr=False)  # centre x, centre y
+    _planes: list[Array] = field(default_factory=list, compare=False, repr=False)  # see _derived
 
     @staticmethod
     def from_scenario(s: Scenario, spacing_m: float = SAMPLE_SPACING_M) -> ContourField:
@@ -48,12 +48,14 @@ class ContourField:
         return ContourField(tuple(o.id for o in s.obstacles), polys, samples, start, count, owner,
                             Edges.of(list(polys)), centre, reach)
 
-    @property
-    def _centre_xy(self) -> tuple[Array, Array]:
-        """The bounding circles' centres as two contiguous coordinate arrays (M,) each."""
+    def _derived(self) -> list[Array]:
+        """Derived once: the bounding circles' centres as contiguous x and y arrays (M,) each, and (M,) the
+        distance from an obstacle's boundary beyond which a point is outside it (its bounding circle's
+        radius, with a margin for rounding)."""
         if not self._planes:
-            self._planes.extend((np.ascontiguousarray(self.centre[:, 0]), np.ascontiguousarray(self.centre[:, 1])))
-        return self._planes[0], self._planes[1]
+            self._planes.extend((np.ascontiguousarray(self.centre[:, 0]), np.ascontiguousarray(self.centre[:, 1]),
+                                 self.reach * (1 + 1e-9) + 1e-9))
+        return self._planes
 
     @property
     def n_obstacles(self) -> int:
@@ -74,7 +76,7 @@ class ContourField:
             return self._exact_all(p)
         # norm2(p[:, None, :] - centre[None, :, :]) on coordinate planes (a 3-D broadcast is several times
         # slower for the same arithmetic)
-        cx, cy = self._centre_xy
+        cx, cy, _ = self._derived()
         dx = p[:, 0:1] - cx  # (N, M)
         dy = p[:, 1:2] - cy
         bound = np.sqrt(dx * dx + dy * dy) - self.reach  # (N, M)
@@ -108,14 +110,15 @@ class ContourField:
         tiled = self._tiled.get(n)
         if tiled is None:
             tiled = self._tiled[n] = tile_edges(self.edges, n)
-        return signed_distance(p[:, 0:1], p[:, 1:2], tiled, normals=False)
+        return signed_distance(p[:, 0:1], p[:, 1:2], tiled, normals=False, outside_beyond=self._derived()[2])
 
     def _exact(self, p: Array, rows: NDArray[np.int64], cols: NDArray[np.int64]) -> Array:
         """Signed distance of head point rows[q] to obstacle cols[q]: (Q,), (Q,) -> (Q,).
 
         The same edges (padded alike) and element-wise arithmetic as the tiled call in true_distances.
         """
-        return signed_distance(p[rows, 0], p[rows, 1], self._edges_of(cols), normals=False)
+        return signed_distance(p[rows, 0], p[rows, 1], self._edges_of(cols), normals=False,
+                               outside_beyond=self._derived()[2][cols])
 
     def _edges_of(self, cols: NDArray[np.int64]) -> Edges:
         """The true polygons' edges for the given obstacle columns, one row each: (Q,) -> Edges (Q, V)."""

@@ -219,6 +219,24 @@ def test_signed_distance_matches_shapely(poly, rel):
 
 
 @SETTINGS
+@given(convex_polygon(), st.lists(st.tuples(st.floats(-4.0, 4.0), st.floats(-4.0, 4.0)), min_size=1, max_size=30))
+def test_signed_distance_outside_beyond_changes_nothing(poly, rel):
+    """The inside test skipped for points all farther from the boundary than the polygon's bounding circle
+    (sensing's true distances): the same distances bit for bit, inside points included (never skipped)."""
+    c = poly.mean(axis=0)
+    reach = float(np.max(np.hypot(*(poly - c).T)))
+    pts = c + reach * np.array(rel)
+    e = Edges.of([poly])
+    plain = signed_distance(pts[:, 0:1], pts[:, 1:2], e, normals=False)
+    beyond = np.array([reach * (1 + 1e-9) + 1e-9])
+    assert signed_distance(pts[:, 0:1], pts[:, 1:2], e, normals=False, outside_beyond=beyond).tobytes() \
+        == plain.tobytes()
+    for k in range(pts.shape[0]):  # each point alone: the shortcut is taken whenever it is outside the circle
+        one = signed_distance(pts[k:k + 1, 0:1], pts[k:k + 1, 1:2], e, normals=False, outside_beyond=beyond)
+        assert one.tobytes() == plain[k:k + 1].tobytes()
+
+
+@SETTINGS
 @given(convex_polygon(), st.integers(0, 7), st.floats(0.0, 1.0))
 def test_signed_distance_zero_on_boundary_with_outward_normal(poly, edge, t):
     v = poly.shape[0]
