@@ -55,16 +55,16 @@ def pairs_and_distances(points: Array, radius: float) -> tuple[NDArray[np.int64]
         return rows_where(cand, keep), d[keep]  # already sorted
     i, j = grid_candidates(points, radius)  # (C,) each pair once, i < j
     x, y = points[:, 0], points[:, 1]
-    dx = x[i] - x[j]  # norm2(points[i] - points[j]), coordinate by coordinate
-    dy = y[i] - y[j]
+    dx = x.take(i) - x.take(j)  # norm2(points[i] - points[j]), coordinate by coordinate
+    dy = y.take(i) - y.take(j)
     d = np.sqrt(dx * dx + dy * dy)
     within = (d <= radius).nonzero()[0]
-    order = np.argsort(i[within] * n + j[within])  # by (i, j), without a row-wise sort (keys are distinct)
-    at = within[order]
-    out = np.empty((at.size, 2), dtype=np.int64)  # (E, 2)
-    out[:, 0] = i[at]
-    out[:, 1] = j[at]
-    return out, d[at]
+    i, j, d = i.take(within), j.take(within), d.take(within)
+    order = np.argsort(i * n + j)  # by (i, j), without a row-wise sort (keys are distinct)
+    out = np.empty((order.size, 2), dtype=np.int64)  # (E, 2)
+    out[:, 0] = i.take(order)
+    out[:, 1] = j.take(order)
+    return out, d.take(order)
 
 
 def grid_candidates(points: Array, radius: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
@@ -106,7 +106,7 @@ def grid_candidates(points: Array, radius: float) -> tuple[NDArray[np.int64], ND
     src = np.repeat(np.tile(pos, len(los)), counts)  # (C,) sorted position of the first point
     first = np.cumsum(counts) - counts  # where each range starts in the output
     dst = np.repeat(lo - first, counts) + np.arange(total)  # (C,) sorted position of the second
-    i, j = order[src], order[dst]
+    i, j = order.take(src), order.take(dst)
     return np.minimum(i, j), np.maximum(i, j)
 
 
