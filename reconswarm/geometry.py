@@ -25,6 +25,12 @@ SAMPLE_SPACING_M = 1.0  # obstacle contours are sampled at most this far apart (
 ON_EDGE_M = 1e-9  # closer to an edge than this, a point's direction from it is the edge's normal
 
 
+def rows_where(a: NDArray[Any], mask: NDArray[np.bool_]) -> NDArray[Any]:
+    """a[mask] for a 2-D array a (R, C) and a row mask (R,): the same rows, gathered by index (several times
+    faster than numpy's boolean indexing of a 2-D array, and no slower for a few rows). -> (R', C)"""
+    return a.take(mask.nonzero()[0], axis=0)
+
+
 def norm2(v: Array) -> Array:
     """Euclidean norm over the last axis, written out so that it is reproducible bit for bit.
 
@@ -60,7 +66,7 @@ def convex_hull(points: Array) -> Array:
     pts = pts[order]
     keep = np.ones(len(pts), dtype=bool)
     keep[1:] = np.any(pts[1:] != pts[:-1], axis=1)
-    pts = pts[keep]
+    pts = rows_where(pts, keep)
     if len(pts) <= 2:
         return pts.copy()
     xs: list[float] = pts[:, 0].tolist()
@@ -113,7 +119,7 @@ def merge_hull(hull: Array, points: Array) -> Array:
     if pts.shape[0] == 0:
         return hull
     if hull.shape[0] >= 3:
-        pts = pts[~points_inside_hull(pts, hull)]
+        pts = rows_where(pts, ~points_inside_hull(pts, hull))
         if pts.shape[0] == 0:
             return hull
     return convex_hull(np.concatenate([hull, pts]))
@@ -222,17 +228,22 @@ def signed_distance(px: Array, py: Array, e: Edges, *, normals: Literal[True]) -
 
 
 @overload
-def signed_distance(px: Array, py: Array, e: Edges, *, normals: Literal[False]) -> Array: ...
+def signed_distance(px: Array, py: Array, e: Edges, *, normals: Literal[False],
+                    outside_beyond: Array | None = None) -> Array: ...
 
 
-def signed_distance(px: Array, py: Array, e: Edges, *, normals: bool = True) -> tuple[Array, Array, Array] | Array:
+def signed_distance(px: Array, py: Array, e: Edges, *, normals: bool = True, outside_beyond: Array | None = None
+                    ) -> tuple[Array, Array, Array] | Array:
     """Signed distance from points to polygons, and the outward unit normal at the nearest point.
 
     px, py (B...) broadcast against the polygons' batch shape (K,): (P,) with K = P pairs one to one,
     or (N, 1) against (K,) = (M,) for every point against every polygon. Returns d, nx, ny of the
     broadcast shape; d < 0 inside a polygon of >= 3 vertices (CCW); (nx, ny) points from the nearest
     boundary point toward the outside, the direction in which the point must be pushed.
-    normals=False: d alone, by the same operations (the minimum d² is the one at its argmin).
+    normals=False: d alone, by the same operations (the minimum d² is the one at its argmin); with
+    outside_beyond (broadcast to d), a distance from each polygon's boundary beyond which a point cannot be
+    inside it (the radius of a circle that holds the polygon: a disc inside the polygon is inside that
+    circle), the inside test is skipped when every point is beyond it.
     """
     apx = px[..., None] - e.ax
     apy = py[..., None] - e.ay
@@ -246,6 +257,8 @@ def signed_distance(px: Array, py: Array, e: Edges, *, normals: bool = True) -> 
         dx = apx - t * abx
         dy = apy - t * aby
         dist = np.sqrt((dx * dx + dy * dy + e.pad).min(axis=-1))
+        if outside_beyond is not None and bool((dist > outside_beyond).all()):
+            return dist  # every point outside: where(inside, -dist, dist) is dist
         inside = ((abx * apy - aby * apx >= 0.0) | e.invalid).all(axis=-1) & e.closed
         return np.where(inside, -dist, dist)
     v = shape[-1]
@@ -295,85 +308,3 @@ def distance_to_polygon(points: Array, polygon: Array) -> tuple[Array, Array]:
     """Signed distance of many points to one polygon: (P, 2), (V, 2) -> d (P,), n (P, 2)."""
     d, nx, ny = signed_distance(points[:, 0:1], points[:, 1:2], Edges.of([polygon]))
     return d[:, 0], np.stack([nx[:, 0], ny[:, 0]], axis=1)
-
-
-_TRIU: dict[int, NDArray[np.int64]] = {}
-
-
-def _triu(n: int) -> NDArray[np.int64]:
-    pairs = _TRIU.get(n)
-    if pairs is None:
-        ii, jj = np.triu_indices(n, 1)
-        pairs = np.stack([ii, jj], axis=1).astype(np.int64)
-        if len(_TRIU) > 64:
-            _TRIU.clear()
-        _TRIU[n] = pairs
-    return pairs
-
-
-def pairs_within(points: Array, radius: float) -> NDArray[np.int64]:
-    """Index pairs (i < j) with ‖p_i - p_j‖ <= radius, sorted. (N, 2) -> (E, 2).
-
-    Dense for small N, a k-d tree for large N; both filter with norm2 so the set is the same.
-    """
-    return pairs_and_distances(points, radius)[0]
-
-
-def pairs_and_distances(points: Array, radius: float) -> tuple[NDArray[np.int64], Array]:
-    """pairs_within, and the norm2 distance of each pair: (N, 2) -> pairs (E, 2), d (E,)."""
-    n = points.shape[0]
-    if n < 2:
-        return np.zeros((0, 2), dtype=np.int64), np.zeros(0)
-    if n <= 96:
-        cand = _triu(n)
-        d = norm2(points[cand[:, 0]] - points[cand[:, 1]])
-        keep = d <= radius
-        return cand[keep], d[keep]  # already sorted
-    from scipy.spatial import cKDTree
-
-    cand = cKDTree(points, balanced_tree=False, compact_nodes=False).query_pairs(
-        radius * (1 + 1e-9) + 1e-9, output_type="ndarray")
-    if cand.shape[0] == 0:
-        return np.zeros((0, 2), dtype=np.int64), np.zeros(0)
-    # Sort by the key i * n + j (i < j): the same order as sorting by (i, j), without a row-wise sort.
-    a = cand[:, 0].astype(np.int64)
-    b = cand[:, 1].astype(np.int64)
-    keys = np.minimum(a, b) * n + np.maximum(a, b)  # (E,)
-    keys.sort()
-    i, j = np.divmod(keys, n)
-    d = norm2(points[i] - points[j])
-    keep = d <= radius
-    out = np.empty((int(keep.sum()), 2), dtype=np.int64)  # (E, 2)
-    out[:, 0] = i[keep]
-    out[:, 1] = j[keep]
-    return out, d[keep]
-
-
-class NearPairs:
-    """pairs_and_distances(points, radius) for a point set that moves a little every call (a Verlet list).
-
-    Large sets: the pairs within radius + skin are found once (k-d tree, sorted) and reused while no point
-    has moved more than skin / 2 since; each call then only measures those candidates. A pair within
-    radius now was within radius + skin then, so the result is the same pairs in the same order with the
-    same norm2 distances as pairs_and_distances. Small sets (dense search) go straight through.
-    """
-
-    def __init__(self, radius: float, skin: float) -> None:
-        self.radius, self.skin = radius, skin
-        self._ref = np.zeros((0, 2))
-        self._cand = np.zeros((0, 2), dtype=np.int64)
-        self._i = self._j = np.zeros(0, dtype=np.int64)
-
-    def __call__(self, points: Array) -> tuple[NDArray[np.int64], Array]:
-        if points.shape[0] <= 96:
-            return pairs_and_distances(points, self.radius)
-        if self._ref.shape != points.shape or 2 * float(norm2(points - self._ref).max()) > self.skin - 1e-6:
-            self._cand = pairs_and_distances(points, self.radius + self.skin)[0]
-            self._i, self._j = self._cand[:, 0].copy(), self._cand[:, 1].copy()
-            self._ref = points.copy()
-        x, y = points[:, 0], points[:, 1]
-        dx = x[self._i] - x[self._j]  # norm2(points[i] - points[j]), coordinate by coordinate
-        dy = y[self._i] - y[self._j]
-        d = np.sqrt(dx * dx + dy * dy)
-        keep = d <= self.radius
-        return self._cand[keep], d[keep]

@@ -20,9 +20,9 @@ from reconswarm.geometry import (
     distance_to_polygon,
     is_strictly_convex,
     norm2,
-    pairs_within,
     polygon_area,
 )
+from reconswarm.pairs import pairs_within
 from reconswarm.toml_reader import TableReader
 
 

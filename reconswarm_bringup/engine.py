@@ -11,8 +11,10 @@ Tick k, in this order (the agent process follows the same order for its own row)
 
 Speed (the results are those of the plain computation, bit for bit): work is skipped only where it
 provably contributes nothing (no sensing or obstacle table far from every obstacle, sharing only over the
-knowledge that changed, exact obstacle distances only where they can matter), and the pure functions get
-the inputs they would compute themselves (pair distances, tracking errors) instead of recomputing them.
+knowledge that changed, exact obstacle distances only where they can matter), the pure functions get
+the inputs they would compute themselves (pair distances, tracking errors) instead of recomputing them,
+and what changes rarely is kept between ticks (the pairs within reach as a Verlet list, the neighbour
+tables' and the obstacle table's layouts while the same agents are involved).
 """
 
 from __future__ import annotations
@@ -26,12 +28,13 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import Edges, NearPairs
+from reconswarm.geometry import Edges, rows_where
+from reconswarm.pairs import NearPairs
 from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
 from reconswarm.paper.knowledge import SwarmKnowledge, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
 from reconswarm.paper.link import HYSTERESIS_M, linked
-from reconswarm.paper.planner import ObstacleView, command, errors, neighbour_table, repulsion
+from reconswarm.paper.planner import NeighbourTables, ObstacleView, command, errors, repulsion
 from reconswarm.record.recorder import Recorder
 from reconswarm.record.store import RunRecord, RunWriter
 from reconswarm.record.summary import summarize
@@ -76,8 +79,9 @@ class Engine:
         self.true_d = np.zeros((self.n, self.field.n_obstacles))
         self.reach_m = max(self.cfg.link_range_m + HYSTERESIS_M, 2 * self.rmax + self.cfg.d_max_m)
         self.pairs = NearPairs(self.reach_m, 0.25 * self.reach_m)
-        self.pairs(self.p)  # (the first call of a large swarm loads the k-d tree: not in the mission loop)
+        self.pairs(self.p)  # (the first call of a large swarm builds the candidate list: not in the mission loop)
         self.near = np.zeros((0, 2), dtype=np.int64)
+        self.tables = NeighbourTables()  # the neighbour tables' layout, kept while the neighbours stay
         self.near_d = np.zeros(0)  # (E,) norm2 distance of each pair in self.near
         self.slot_error: Array | None = None
         # True distances matter up to the sensing range and the repulsion reach; beyond, a bound will do.
@@ -87,6 +91,9 @@ class Engine:
         self._no_obstacle = ObstacleView.empty(self.n)  # read-only, shared by every far tick
         self._edges_key: tuple[int, ...] = ()
         self._edges: tuple[list[Array], Edges] | None = None
+        # The obstacle table's layout for (which agents reach which obstacles, knowledge version)
+        self._view_key: tuple[bytes, int] = (b"", -1)
+        self._view: tuple[int, NDArray[np.int64], NDArray[np.int64], Edges] | None = None
 
     def plan(self, k: int) -> Array:
         """Steps 1-3 for tick k: returns u (N, 2); leaves true distances in self.true_d."""
@@ -98,9 +105,9 @@ class Engine:
         qa, qs = self.field.scan(p, c.sensing_range_m, self.true_d) if near_any else (_NO_INDEX, _NO_INDEX)
         # (E, 2) superset of every pair any step needs, and their distances
         self.near, self.near_d = self.pairs(p)
-        self.know.update(qa, qs, self.near[linked(self.near_d, c.link_range_m)])
+        self.know.update(qa, qs, rows_where(self.near, linked(self.near_d, c.link_range_m)))
 
-        nb = neighbour_table(p, self.r, self.near, c.d_max_m, self.near_d)
+        nb = self.tables(p, self.r, self.near, c.d_max_m, self.near_d)
         ob = self._known_obstacles() if near_any else self._no_obstacle
 
         if self.leader is not None:
@@ -128,6 +135,9 @@ class Engine:
         if self.field.n_obstacles == 0:
             return ObstacleView.empty(n)
         reach = self.true_d <= self.ob_reach[:, None]  # (N, M)
+        layout = (reach.tobytes(), self.know.version)
+        if layout == self._view_key and self._view is not None:  # the same agents reach the same known hulls
+            return obstacle_view(self.p, n, *self._view)
         cols = cast("NDArray[np.bool_]", reach.any(axis=0)).nonzero()[0]
         if cols.size == 0:
             return self._no_obstacle
@@ -150,6 +160,7 @@ class Engine:
             self._edges_key, self._edges = key, (hulls, Edges.of(hulls))  # held, so their ids stay theirs
         rows = rows_l[0] if len(rows_l) == 1 else np.concatenate(rows_l)
         cols_q = cols_l[0] if len(cols_l) == 1 else np.concatenate(cols_l)
+        self._view_key, self._view = layout, (col, rows, cols_q, self._edges[1])
         return obstacle_view(self.p, n, col, rows, cols_q, self._edges[1])
 
     def advance(self, u: Array) -> None:

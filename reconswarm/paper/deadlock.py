@@ -36,8 +36,8 @@ def generator(seed: int, agent_id: int, stream: int = 0) -> np.random.Generator:
 class StallState:
     """Per-agent history over one window and the escape episode (rows = agents in the batch)."""
 
-    hist_p: Array  # (N, W, 2) positions, ring buffer indexed by tick mod W
-    hist_e: Array  # (N, W) error norms
+    hist_p: Array  # (W, N, 2) positions, ring buffer indexed by tick mod W (one tick's row contiguous)
+    hist_e: Array  # (W, N) error norms
     filled: NDArray[np.int64]  # (N,) ticks of history since the last reset
     pert: Array  # (N, 2) current perturbation
     hold: NDArray[np.int64]  # (N,) ticks left in the current escape episode
@@ -50,7 +50,7 @@ class StallState:
 
     @staticmethod
     def create(n: int, window: int, rngs: list[np.random.Generator]) -> StallState:
-        return StallState(np.zeros((n, window, 2)), np.zeros((n, window)), np.zeros(n, dtype=np.int64),
+        return StallState(np.zeros((window, n, 2)), np.zeros((window, n)), np.zeros(n, dtype=np.int64),
                           np.zeros((n, 2)), np.zeros(n, dtype=np.int64), rngs, np.zeros(n, dtype=np.int64),
                           np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n), np.zeros((n, 2)))
 
@@ -69,27 +69,30 @@ def stall_step(st: StallState, k: int, p: Array, e: Array, magnitude: float, k_a
     p (N, 2) positions, e (N,) error norms, push (N, 2) the repulsion acting on each agent now (the
     boundary to follow). `magnitude` 0 disables (always zeros).
     """
-    n, w = st.hist_e.shape
+    w, n = st.hist_e.shape
     if magnitude <= 0.0:
         return np.zeros((n, 2))
     slot = k % w
     # Episodes in progress: end on progress, turn round once on timeout, else count down.
     active = st.side != 0.0
-    done = active & (e < st.e0 * 0.95 - 1.0)
-    st.hold = np.where(active, st.hold - 1, 0)
-    timeout = active & ~done & (st.hold <= 0)
-    turn = timeout & ~st.turned
-    st.side = np.where(turn, -st.side, st.side)
-    st.turned = st.turned | turn
-    st.hold = np.where(turn, 2 * ESCAPE_WINDOWS * w, st.hold)
-    st.free_dir = np.where(turn[:, None], -st.free_dir, st.free_dir)
-    ended = done | (timeout & ~turn)
-    st.side = np.where(ended, 0.0, st.side)
-    active = st.side != 0.0
-    old_p = st.hist_p[:, slot].copy()
-    old_e = st.hist_e[:, slot].copy()
-    st.hist_p[:, slot] = p
-    st.hist_e[:, slot] = e
+    if active.any():
+        done = active & (e < st.e0 * 0.95 - 1.0)
+        st.hold = np.where(active, st.hold - 1, 0)
+        timeout = active & ~done & (st.hold <= 0)
+        turn = timeout & ~st.turned
+        st.side = np.where(turn, -st.side, st.side)
+        st.turned = st.turned | turn
+        st.hold = np.where(turn, 2 * ESCAPE_WINDOWS * w, st.hold)
+        st.free_dir = np.where(turn[:, None], -st.free_dir, st.free_dir)
+        ended = done | (timeout & ~turn)
+        st.side = np.where(ended, 0.0, st.side)
+        active = st.side != 0.0
+    else:  # no episode: nothing ends or turns, and every countdown is 0
+        st.hold = np.zeros_like(st.hold)
+    old_p = st.hist_p[slot].copy()
+    old_e = st.hist_e[slot].copy()
+    st.hist_p[slot] = p
+    st.hist_e[slot] = e
     st.filled = np.where(active, 0, st.filled + 1)
     full = st.filled > w
     expected = np.minimum(k_att * old_e, r_c * k_att) * (w * dt)

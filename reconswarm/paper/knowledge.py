@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import Edges, convex_hull, merge_hull, signed_distance
+from reconswarm.geometry import Edges, convex_hull, merge_hull, rows_where, signed_distance
 from reconswarm.paper.planner import ObstacleView
 
 Array = NDArray[np.float64]
@@ -105,6 +105,7 @@ class SwarmKnowledge:
         self.col_owner = np.repeat(np.arange(count.size), nbytes).astype(np.int64)  # (B,) obstacle of a byte
         self.known = np.zeros((n_agents, count.size), dtype=bool)  # (N, M) knows(l) for every l
         self._hull_at = np.full((n_agents, count.size), None, dtype=object)  # (N, M) hull(i, l), None: stale
+        self.version = 0  # bumped whenever any agent's knowledge (so any hull) may have changed
 
     def add(self, agents: NDArray[np.int64], samples: NDArray[np.int64]) -> None:
         """Mark sensed samples: agent index (Q,), global sample index (Q,)."""
@@ -136,6 +137,7 @@ class SwarmKnowledge:
         """After add or share: every incremental shortcut starts over."""
         self._link_keys = None
         self._hull_at[:] = None
+        self.version += 1
         for l in range(self.count.size):
             self.known[:, l] = self.knows(l)
 
@@ -173,9 +175,9 @@ class SwarmKnowledge:
             src = np.concatenate([links[:, 1], links[:, 0]])
             prev_dirty = self._pack(dirty)  # (N, W)
         share_new = new is not None and bool(new.any())
-        if share_new:
+        if share_new and new is not None:
             known = self.union_prev.nonzero()[0]  # columns anyone knew: the only ones sharing can bring
-            fresh_links = links[new]  # (E', 2)
+            fresh_links = rows_where(links, new)  # (E', 2)
             dst_new = np.concatenate([fresh_links[:, 0], fresh_links[:, 1]])  # (2E',)
             src_new = np.concatenate([fresh_links[:, 1], fresh_links[:, 0]])
             vals_new = self._pack(known, src_new)  # (2E', W')
@@ -240,6 +242,7 @@ class SwarmKnowledge:
         obs = self.col_owner[cols]
         self.known[rows, obs] = True
         self._hull_at[rows, obs] = None
+        self.version += 1
 
     def knows(self, l: int) -> NDArray[np.bool_]:
         """(N,) whether each agent knows any of obstacle l."""
@@ -270,7 +273,7 @@ class SwarmKnowledge:
         """The contour samples of obstacle l flagged in block (its bytes). -> (P, 2)"""
         flags = np.unpackbits(block)[: int(self.count[l])].astype(bool)
         s0 = int(self.start[l])
-        return self.samples[s0:s0 + int(self.count[l])][flags]
+        return rows_where(self.samples[s0:s0 + int(self.count[l])], flags)
 
     def hull(self, i: int, l: int) -> Array:
         block = self.bits[i, self.b0[l]:self.b1[l]]

@@ -56,15 +56,31 @@ def max_repulsion_speed(psi: float, d_safe: float, d_max: float) -> float:
     return -psi * d_max / (d_max - d_safe)
 
 
-def _accumulate(terms: Array, valid: Mask) -> Array:
-    """Sum (N, K, 2) terms over K in column order, skipping invalid entries. -> (N, 2)"""
-    acc = np.zeros((terms.shape[0], 2))
-    if terms.shape[1] == 0:
-        return acc
-    masked = np.where(valid[:, :, None], terms, 0.0)  # (N, K, 2)
-    for c in range(terms.shape[1]):
-        acc = acc + masked[:, c, :]
+def _accumulate(tx: Array, ty: Array, valid: Mask) -> Array:
+    """Sum the terms (tx, ty) (N, K) over K in column order, skipping invalid entries. -> (N, 2)
+
+    The sum is sequential from zero, 0 + t_1 + t_2 + ... + t_K, whatever K (so one agent's row is the same
+    bit for bit in a table of any width): for a few rows, one running sum (ufunc accumulate, sequential by
+    definition) over a leading column of zeros; for many, K additions (numpy's accumulate over a short
+    axis is slow), the same operations. The terms come as coordinate planes (N, K): built that way, the
+    element-wise arithmetic is the same as on (N, K, 2) arrays and several times cheaper than broadcasting
+    over a last axis of 2.
+    """
+    n, k = tx.shape
+    if k == 0:
+        return np.zeros((n, 2))
+    terms = np.zeros((k + 1, n, 2))  # (1 + K, N, 2): zeros, then the valid terms (+0.0 where invalid)
+    np.copyto(terms[1:, :, 0], tx.T, where=valid.T)
+    np.copyto(terms[1:, :, 1], ty.T, where=valid.T)
+    if n <= _FEW_ROWS:
+        return np.add.accumulate(terms, axis=0)[k]
+    acc = terms[0]
+    for c in range(1, k + 1):
+        acc = acc + terms[c]
     return acc
+
+
+_FEW_ROWS = 64
 
 
 def agent_repulsion(p: Array, r: Array, nb_p: Array, nb_r: Array, nb_valid: Mask,
@@ -76,8 +92,10 @@ def agent_repulsion(p: Array, r: Array, nb_p: Array, nb_r: Array, nb_valid: Mask
     """
     if nb_p.shape[1] == 0:  # no neighbour: the sum over no column
         return np.zeros((p.shape[0], 2))
-    rel = p[:, None, :] - nb_p  # (N, K, 2)
-    d = norm2(rel)  # (N, K)
+    # p_i - p_j and its norm2, on coordinate planes (N, K)
+    rx = p[:, 0:1] - nb_p[:, :, 0]
+    ry = p[:, 1:2] - nb_p[:, :, 1]
+    d = np.sqrt(rx * rx + ry * ry)
     rr = r[:, None] + nb_r
     dmin = rr + d_safe
     dmax = rr + d_max
@@ -85,12 +103,9 @@ def agent_repulsion(p: Array, r: Array, nb_p: Array, nb_r: Array, nb_valid: Mask
     pos = d > 0.0
     safe = np.where(pos, d, 1.0)
     # Coincident centres have no direction: push along +x (a measure-zero case, but never NaN).
-    unit = np.where(pos[..., None], rel / safe[..., None], _PLUS_X)  # (N, K, 2)
-    terms = mag[..., None] * unit
-    return _accumulate(terms, nb_valid & (d <= dmax))
-
-
-_PLUS_X = np.array([1.0, 0.0])
+    tx = mag * np.where(pos, rx / safe, 1.0)
+    ty = mag * np.where(pos, ry / safe, 0.0)
+    return _accumulate(tx, ty, nb_valid & (d <= dmax))
 
 
 def obstacle_repulsion(r: Array, ob_d: Array, ob_n: Array, ob_valid: Mask,
@@ -105,8 +120,7 @@ def obstacle_repulsion(r: Array, ob_d: Array, ob_n: Array, ob_valid: Mask,
     dmin = r[:, None] + d_safe
     dmax = r[:, None] + d_max
     mag = repulsion_speed(ob_d, dmin, dmax, psi, r[:, None])
-    terms = mag[..., None] * ob_n
-    return _accumulate(terms, ob_valid & (ob_d <= dmax))
+    return _accumulate(mag * ob_n[:, :, 0], mag * ob_n[:, :, 1], ob_valid & (ob_d <= dmax))
 
 
 def containment(p: Array, r: Array, center: Array, r_c: float, d_safe: float, d_max: float,
@@ -183,31 +197,61 @@ def neighbour_table(p: Array, r: Array, pairs: NDArray[np.int64], d_max: float, 
     them -> Neighbours with rows for all N agents, neighbours j sorted by index (the swarm is indexed in
     increasing id). Pairs beyond d_max,ij are dropped here.
     """
-    n = p.shape[0]
-    if pairs.shape[0] == 0:
-        return Neighbours.empty(n)
-    i, j = pairs[:, 0], pairs[:, 1]
-    if d is None:
-        d = norm2(p[i] - p[j])
-    keep = d <= r[i] + r[j] + d_max
-    if not keep.any():
-        return Neighbours.empty(n)
-    i, j = i[keep], j[keep]
-    src = np.concatenate([i, j])  # (2E',) each pair in both directions
-    dst = np.concatenate([j, i])
-    order = np.lexsort((dst, src))
-    src, dst = src[order], dst[order]
-    counts = np.bincount(src, minlength=n)  # (N,)
-    k = int(counts.max())
-    starts = np.cumsum(counts) - counts
-    flat = src * k + (np.arange(src.shape[0]) - starts[src])  # row-major slot of each entry in (N, K)
-    nb_p = np.zeros((n * k, 2))
-    nb_r = np.zeros(n * k)
-    valid = np.zeros(n * k, dtype=bool)
-    nb_p[flat] = p[dst]
-    nb_r[flat] = r[dst]
-    valid[flat] = True
-    return Neighbours(nb_p.reshape(n, k, 2), nb_r.reshape(n, k), valid.reshape(n, k))
+    return NeighbourTables()(p, r, pairs, d_max, d)
+
+
+class NeighbourTables:
+    """neighbour_table, call after call over one swarm (radii r fixed): the table's layout (which agent in
+    which slot) depends only on the pairs within d_max,ij, which rarely change from one tick to the next,
+    so it is kept while they stay the same and each call only places the positions."""
+
+    def __init__(self) -> None:
+        self._key = b""
+        self._n = -1
+        self._flat = np.zeros(0, dtype=np.int64)  # (2E',) slot of each entry in the flattened (N, K)
+        self._dst = np.zeros(0, dtype=np.int64)  # (2E',) the neighbour in that slot
+        self._k = 0
+        self._nb_r = np.zeros((0, 0))  # (N, K), read-only
+        self._valid = np.zeros((0, 0), dtype=bool)  # (N, K), read-only
+
+    def __call__(self, p: Array, r: Array, pairs: NDArray[np.int64], d_max: float, d: Array | None = None
+                 ) -> Neighbours:
+        n = p.shape[0]
+        if pairs.shape[0] == 0:
+            return Neighbours.empty(n)
+        i, j = pairs[:, 0], pairs[:, 1]
+        if d is None:
+            d = norm2(p[i] - p[j])
+        at = (d <= r[i] + r[j] + d_max).nonzero()[0]
+        if at.size == 0:
+            return Neighbours.empty(n)
+        i, j = i.take(at), j.take(at)
+        key = i.tobytes() + j.tobytes()
+        if n != self._n or key != self._key:
+            self._layout(n, r, i, j)
+            self._key, self._n = key, n
+        k = self._k
+        nb_p = np.zeros((n * k, 2))
+        nb_p[self._flat] = p[self._dst]
+        return Neighbours(nb_p.reshape(n, k, 2), self._nb_r, self._valid)
+
+    def _layout(self, n: int, r: Array, i: NDArray[np.int64], j: NDArray[np.int64]) -> None:
+        src = np.concatenate([i, j])  # (2E',) each pair in both directions
+        dst = np.concatenate([j, i])
+        order = np.lexsort((dst, src))
+        src, dst = src[order], dst[order]
+        counts = np.bincount(src, minlength=n)  # (N,)
+        k = int(counts.max())
+        starts = np.cumsum(counts) - counts
+        flat = src * k + (np.arange(src.shape[0]) - starts[src])  # row-major slot of each entry in (N, K)
+        nb_r = np.zeros(n * k)
+        valid = np.zeros(n * k, dtype=bool)
+        nb_r[flat] = r[dst]
+        valid[flat] = True
+        self._flat, self._dst, self._k = flat, dst, k
+        self._nb_r, self._valid = nb_r.reshape(n, k), valid.reshape(n, k)
+        self._nb_r.flags.writeable = False  # shared by every table of this layout
+        self._valid.flags.writeable = False
 
 
 def errors(p: Array, target: Array, offset: Array) -> Array:

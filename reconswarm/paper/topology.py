@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import norm2, pairs_within
+from reconswarm.geometry import norm2, rows_where
+from reconswarm.pairs import pairs_within
 from reconswarm.paper.link import HYSTERESIS_M, linked
 
 PERSISTENCE_S = 1.0
@@ -44,14 +45,14 @@ def graph_edges(p: Array, active: NDArray[np.bool_], prev: NDArray[np.int64], li
         cand_d = norm2(p[cand[:, 0]] - p[cand[:, 1]])
     if not active.all():
         live = active[cand[:, 0]] & active[cand[:, 1]]
-        cand, cand_d = cand[live], cand_d[live]
+        cand, cand_d = rows_where(cand, live), cand_d[live]
     keep = linked(cand_d, link_m)
     band = (~keep & (cand_d <= link_m + hysteresis_m)).nonzero()[0]  # linked only if linked before
     if band.size and prev.shape[0]:
         keys = cand[band, 0] * n + cand[band, 1]
         old = prev_keys if prev_keys is not None else np.unique(prev[:, 0] * n + prev[:, 1])
         keep[band] = linked(cand_d[band], link_m, _member(keys, old), hysteresis_m)
-    return cand[keep]
+    return rows_where(cand, keep)
 
 
 def labels(n: int, edges: NDArray[np.int64], active: NDArray[np.bool_]) -> NDArray[np.int64]:
@@ -160,6 +161,20 @@ def _member(keys: NDArray[np.int64], sorted_keys: NDArray[np.int64]) -> NDArray[
     return sorted_keys[at] == keys
 
 
+def _changes(old: NDArray[np.int64], new: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Keys in new and not in old (added), in old and not in new (removed), both sorted; old and new sorted
+    and unique. One merge of the two sorted runs (a stable sort of their concatenation) finds both."""
+    cat = np.concatenate([old, new])
+    order = np.argsort(cat, kind="stable")
+    merged = cat[order]
+    same = merged[1:] == merged[:-1]  # a key in both: two neighbours in the merge
+    single = np.ones(merged.size, dtype=bool)
+    single[1:] &= ~same
+    single[:-1] &= ~same
+    from_new = order >= old.size
+    return merged[single & from_new], merged[single & ~from_new]
+
+
 MAX_CERTIFIED = 16  # removed edges checked one by one before a full recomputation is cheaper
 
 
@@ -170,10 +185,9 @@ def _same_components(lab: NDArray[np.int64], edges: NDArray[np.int64], keys: NDA
     Sufficient: every added edge joins two agents of one old group (no merge), and the two ends of every
     removed edge still share a neighbour (no split). False means: recompute.
     """
-    added = keys[~_member(keys, old_keys)]
+    added, removed = _changes(old_keys, keys)
     if added.size and not bool((lab[added // n] == lab[added % n]).all()):
         return False
-    removed = old_keys[~_member(old_keys, keys)]
     if removed.size > MAX_CERTIFIED:
         return False
     if removed.size:
@@ -181,7 +195,7 @@ def _same_components(lab: NDArray[np.int64], edges: NDArray[np.int64], keys: NDA
         ends = np.zeros(n, dtype=bool)
         ends[a] = True
         ends[b] = True
-        touching = edges[ends[edges[:, 0]] | ends[edges[:, 1]]]  # the only edges that can matter
+        touching = rows_where(edges, ends[edges[:, 0]] | ends[edges[:, 1]])  # the only edges that can matter
         x, y = touching[:, 0], touching[:, 1]  # (E',)
 
         def adjacent(v: NDArray[np.int64]) -> NDArray[np.bool_]:

@@ -8,12 +8,14 @@ collision, below d_safe a safety violation.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import norm2, pairs_within
+from reconswarm.geometry import norm2
+from reconswarm.pairs import pairs_and_distances, pairs_within
 
 Array = NDArray[np.float64]
 
@@ -45,22 +47,28 @@ def agent_gaps(p: Array, r: Array, reach_m: float, cand: NDArray[np.int64] | Non
 def nearest_gap(p: Array, r: Array) -> float:
     """The smallest surface gap over all pairs, exactly (used when no pair is close); inf for one robot.
 
-    For robot i, no robot farther than its nearest centre d_1 + (r_max - r_min) can have a smaller gap to
-    it than the nearest one, so only those are examined.
+    Pairs within a search radius R are measured (pairs_and_distances, exact); a pair beyond R has a gap
+    above R - 2 r_max, so once the smallest gap found is at most that, it is the smallest of all. R starts
+    at the mean spacing of the points and doubles until then. Points that are not finite are in no pair.
     """
-    if p.shape[0] < 2:
+    fin = np.isfinite(p[:, 0]) & np.isfinite(p[:, 1])
+    if int(fin.sum()) < 2:
         return float("inf")
-    from scipy.spatial import cKDTree
-
-    tree = cKDTree(p)
-    d, _ = tree.query(p, k=2)
-    spread = float(r.max() - r.min())
+    q, rq = p[fin], r[fin]
+    span = float(max(np.ptp(q[:, 0]), np.ptp(q[:, 1])))
+    two_r = 2 * float(rq.max())
+    radius = max(span / math.sqrt(q.shape[0]), two_r, 1e-9)
     best = float("inf")
-    for i, js in enumerate(tree.query_ball_point(p, d[:, 1] + spread + 1e-9)):
-        js = np.array([j for j in js if j != i], dtype=np.int64)
-        if js.size:
-            best = min(best, float(np.min(norm2(p[js] - p[i]) - r[i] - r[js])))
-    return best
+    while True:
+        pairs, d = pairs_and_distances(q, radius)
+        if pairs.shape[0]:
+            ri, rj = rq[pairs[:, 0]], rq[pairs[:, 1]]
+            best = float(np.minimum(d - ri - rj, d - rj - ri).min())  # as seen from either end
+            if best <= radius - two_r:
+                return best
+        if radius > 2 * span + two_r:  # every pair is within radius: best is the minimum
+            return best
+        radius *= 2
 
 
 @dataclass

@@ -53,6 +53,13 @@ def _blob(a: NDArray[Any], dtype: str) -> bytes:
 _F8 = np.dtype("<f8")
 
 
+def page_size(n_agents: int) -> int:
+    """SQLite page size for a run of n agents. A tick row holds three blobs of 8 n bytes: beyond a hundred
+    or so agents it spills over the default 4 KiB pages into chains of overflow pages, while 64 KiB pages
+    hold the row of up to ~2,600 agents in one (at N = 1000, about half the CPU per row, measured)."""
+    return 65536 if n_agents > 128 else 4096
+
+
 class RunWriter:
     """Appends to run.db. Not thread-safe: one writer per process, called from its main loop."""
 
@@ -65,7 +72,10 @@ class RunWriter:
         if not append and self.path.exists():
             for suffix in ("", "-wal", "-shm"):
                 Path(str(self.path) + suffix).unlink(missing_ok=True)
+        fresh = not self.path.exists()
         self.db = sqlite3.connect(str(self.path), isolation_level=None, check_same_thread=False)
+        if fresh:  # (a page size is set before the first table, and before WAL mode)
+            self.db.execute(f"PRAGMA page_size={page_size(len(scenario.agents))}")
         self.db.execute("PRAGMA journal_mode=WAL")
         self.db.execute("PRAGMA synchronous=NORMAL")
         self.db.executescript(DDL)

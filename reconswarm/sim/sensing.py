@@ -32,6 +32,8 @@ class ContourField:
     reach: Array  # (M,) its radius
     _tiled: dict[int, Edges] = field(default_factory=dict, compare=False, repr=False)
     _idx: dict[bytes, tuple[NDArray[np.int64], Array, Array]] = field(default_factory=dict, compare=False, repr=False)
+    _one: dict[int, Edges] = field(default_factory=dict, compare=False, repr=False)  # _edges_of one column
+    _planes: list[Array] = field(default_factory=list, compare=False, repr=False)  # see _derived
 
     @staticmethod
     def from_scenario(s: Scenario, spacing_m: float = SAMPLE_SPACING_M) -> ContourField:
@@ -45,6 +47,15 @@ class ContourField:
         reach = np.array([float(norm2(poly - c).max()) for poly, c in zip(polys, centre, strict=True)])
         return ContourField(tuple(o.id for o in s.obstacles), polys, samples, start, count, owner,
                             Edges.of(list(polys)), centre, reach)
+
+    def _derived(self) -> list[Array]:
+        """Derived once: the bounding circles' centres as contiguous x and y arrays (M,) each, and (M,) the
+        distance from an obstacle's boundary beyond which a point is outside it (its bounding circle's
+        radius, with a margin for rounding)."""
+        if not self._planes:
+            self._planes.extend((np.ascontiguousarray(self.centre[:, 0]), np.ascontiguousarray(self.centre[:, 1]),
+                                 self.reach * (1 + 1e-9) + 1e-9))
+        return self._planes
 
     @property
     def n_obstacles(self) -> int:
@@ -63,18 +74,25 @@ class ContourField:
             return np.zeros((n, 0))
         if np.isinf(exact_within_m) or n * m <= 256:  # small: exact everywhere is cheaper than picking
             return self._exact_all(p)
-        bound = norm2(p[:, None, :] - self.centre[None, :, :]) - self.reach  # (N, M)
+        # norm2(p[:, None, :] - centre[None, :, :]) on coordinate planes (a 3-D broadcast is several times
+        # slower for the same arithmetic)
+        cx, cy, _ = self._derived()
+        dx = p[:, 0:1] - cx  # (N, M)
+        dy = p[:, 1:2] - cy
+        bound = np.sqrt(dx * dx + dy * dy) - self.reach  # (N, M)
         close = bound <= exact_within_m
         if radii is None:
             if not close.any():
                 return bound
             return self._exact_all(p)
-        out = bound.copy()
         gap = bound - radii[:, None]
+        out = bound  # (fresh: filled in place from here on)
         if not close.any():  # all far: exact for the pair(s) that can hold the minimum gap, bounds elsewhere
             i, j = divmod(int(gap.argmin()), m)
             out[i, j] = float(self._exact(p, np.array([i]), np.array([j]))[0])
-            rows, cols = (gap < out[i, j] - radii[i]).nonzero()
+            below = gap < out[i, j] - radii[i]
+            below[i, j] = False  # exact already
+            rows, cols = np.divmod(below.ravel().nonzero()[0], m)
             if rows.size:
                 out[rows, cols] = self._exact(p, rows, cols)
             return out
@@ -92,20 +110,27 @@ class ContourField:
         tiled = self._tiled.get(n)
         if tiled is None:
             tiled = self._tiled[n] = tile_edges(self.edges, n)
-        return signed_distance(p[:, 0:1], p[:, 1:2], tiled, normals=False)
+        return signed_distance(p[:, 0:1], p[:, 1:2], tiled, normals=False, outside_beyond=self._derived()[2])
 
     def _exact(self, p: Array, rows: NDArray[np.int64], cols: NDArray[np.int64]) -> Array:
         """Signed distance of head point rows[q] to obstacle cols[q]: (Q,), (Q,) -> (Q,).
 
         The same edges (padded alike) and element-wise arithmetic as the tiled call in true_distances.
         """
-        return signed_distance(p[rows, 0], p[rows, 1], self._edges_of(cols), normals=False)
+        return signed_distance(p[rows, 0], p[rows, 1], self._edges_of(cols), normals=False,
+                               outside_beyond=self._derived()[2][cols])
 
     def _edges_of(self, cols: NDArray[np.int64]) -> Edges:
         """The true polygons' edges for the given obstacle columns, one row each: (Q,) -> Edges (Q, V)."""
+        one = cols.size == 1
+        if one and (got := self._one.get(int(cols[0]))) is not None:
+            return got
         e = self.edges
-        return Edges(e.ax[cols], e.ay[cols], e.abx[cols], e.aby[cols], e.inv_den[cols], e.pad[cols],
-                     e.invalid[cols], e.closed[cols])
+        out = Edges(e.ax[cols], e.ay[cols], e.abx[cols], e.aby[cols], e.inv_den[cols], e.pad[cols],
+                    e.invalid[cols], e.closed[cols])
+        if one:
+            self._one[int(cols[0])] = out
+        return out
 
     def scan(self, p: Array, sensing_range_m: float, true_d: Array) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """Contour points within R_v of each head point.

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from reconswarm.geometry import convex_hull, norm2, pairs_within
+from reconswarm.geometry import convex_hull, norm2
 from reconswarm.net import wire
 from reconswarm.net.admission import (
     UNATTRIBUTED,
@@ -20,6 +20,7 @@ from reconswarm.net.admission import (
     Membership,
     command_bound_mps,
 )
+from reconswarm.pairs import pairs_within
 from reconswarm.paper.planner import command, max_repulsion_speed, neighbour_table
 from reconswarm.scenario import load
 from reconswarm.sim.sensing import ContourField

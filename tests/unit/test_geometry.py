@@ -12,13 +12,10 @@ from shapely.geometry import MultiPoint, Point, Polygon
 
 from reconswarm.geometry import (
     Edges,
-    NearPairs,
     convex_hull,
     distance_to_polygon,
     is_strictly_convex,
     merge_hull,
-    pairs_and_distances,
-    pairs_within,
     points_inside_hull,
     polygon_area,
     sample_boundary,
@@ -221,6 +218,24 @@ def test_signed_distance_matches_shapely(poly, rel):
 
 
 @SETTINGS
+@given(convex_polygon(), st.lists(st.tuples(st.floats(-4.0, 4.0), st.floats(-4.0, 4.0)), min_size=1, max_size=30))
+def test_signed_distance_outside_beyond_changes_nothing(poly, rel):
+    """The inside test skipped for points all farther from the boundary than the polygon's bounding circle
+    (sensing's true distances): the same distances bit for bit, inside points included (never skipped)."""
+    c = poly.mean(axis=0)
+    reach = float(np.max(np.hypot(*(poly - c).T)))
+    pts = c + reach * np.array(rel)
+    e = Edges.of([poly])
+    plain = signed_distance(pts[:, 0:1], pts[:, 1:2], e, normals=False)
+    beyond = np.array([reach * (1 + 1e-9) + 1e-9])
+    assert signed_distance(pts[:, 0:1], pts[:, 1:2], e, normals=False, outside_beyond=beyond).tobytes() \
+        == plain.tobytes()
+    for k in range(pts.shape[0]):  # each point alone: the shortcut is taken whenever it is outside the circle
+        one = signed_distance(pts[k:k + 1, 0:1], pts[k:k + 1, 1:2], e, normals=False, outside_beyond=beyond)
+        assert one.tobytes() == plain[k:k + 1].tobytes()
+
+
+@SETTINGS
 @given(convex_polygon(), st.integers(0, 7), st.floats(0.0, 1.0))
 def test_signed_distance_zero_on_boundary_with_outward_normal(poly, edge, t):
     v = poly.shape[0]
@@ -312,61 +327,3 @@ def test_sample_boundary_spacing_vertices_and_on_boundary(poly, spacing):
     # As few as the spacing allows: ceil(edge / spacing) per edge.
     edges = np.hypot(*(np.roll(poly, -1, axis=0) - poly).T)
     assert s.shape[0] == sum(max(1, math.ceil(float(x) / spacing)) for x in edges)
-
-
-# ------------------------------------------------------------------------------------------ pairs
-
-
-def brute_pairs(p: np.ndarray, radius: float) -> set[tuple[int, int]]:
-    n = p.shape[0]
-    out = set()
-    for i in range(n):
-        dx = p[i + 1:, 0] - p[i, 0]
-        dy = p[i + 1:, 1] - p[i, 1]
-        for j in np.flatnonzero(np.sqrt(dx * dx + dy * dy) <= radius):
-            out.add((i, i + 1 + int(j)))
-    return out
-
-
-@settings(max_examples=60, deadline=None)
-@given(st.integers(2, 260), st.integers(0, 2**32 - 1), st.floats(0.5, 30.0), st.booleans())
-def test_pairs_within_dense_and_kdtree_agree_with_brute_force(n, seed, radius, lattice):
-    rng = np.random.default_rng(seed)
-    if lattice:  # many pairs exactly at the radius (3-4-5 triangles, axis neighbours)
-        p = rng.integers(-20, 20, (n, 2)).astype(np.float64) * 1.0
-        radius = float(rng.choice([1.0, 5.0, 10.0]))
-    else:
-        p = rng.uniform(-100, 100, (n, 2))
-    got = pairs_within(p, radius)
-    assert got.dtype == np.int64 and got.shape[1] == 2
-    assert [tuple(x) for x in got.tolist()] == sorted(brute_pairs(p, radius))  # sorted, i < j, exact set
-
-
-def test_pairs_within_same_set_across_the_dense_kdtree_threshold():
-    rng = np.random.default_rng(5)
-    p = rng.integers(-15, 15, (200, 2)).astype(np.float64)
-    r = 5.0
-    big = pairs_within(p, r)  # k-d tree path (N > 96)
-    # The dense path on every subset of <= 96 points gives the restriction of the same set.
-    for lo in (0, 60, 104):
-        sub = p[lo:lo + 96]
-        small = {(i + lo, j + lo) for i, j in pairs_within(sub, r).tolist()}
-        want = {(i, j) for i, j in big.tolist() if lo <= i < lo + 96 and lo <= j < lo + 96}
-        assert small == want
-    assert pairs_within(p[:1], 10.0).shape == (0, 2)
-    assert pairs_within(rng.uniform(0, 1e6, (150, 2)), 1e-3).shape == (0, 2)
-
-
-@pytest.mark.parametrize("n", [40, 300])
-def test_near_pairs_equal_a_fresh_search_every_step(n):
-    """The Verlet list gives, step after step, exactly the pairs, order and distances of a fresh search,
-    also across its rebuilds (points moving up to 3 m a step against a 2.5 m skin)."""
-    rng = np.random.default_rng(n)
-    p = rng.uniform(0, 150, (n, 2))
-    near = NearPairs(12.0, 5.0)
-    for _ in range(60):
-        got, got_d = near(p)
-        want, want_d = pairs_and_distances(p, 12.0)
-        assert got.tolist() == want.tolist()
-        assert got_d.tobytes() == want_d.tobytes()
-        p = p + rng.uniform(-1.5, 1.5, (n, 2)) * (rng.uniform(size=(n, 1)) < 0.2)

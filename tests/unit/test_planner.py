@@ -15,10 +15,11 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Point, Polygon
 
-from reconswarm.geometry import pairs_within
+from reconswarm.pairs import pairs_within
 from reconswarm.paper.planner import (
     Neighbours,
     ObstacleView,
+    _accumulate,
     agent_repulsion,
     attraction,
     command,
@@ -506,3 +507,23 @@ def test_errors_are_slot_distances():
     p = np.array([[803.0, 4.0], [800.0, 0.0]])
     off = np.array([[0.0, 0.0], [0.0, 41.57]])
     np.testing.assert_allclose(errors(p, np.array([800.0, 0.0]), off), [5.0, 41.57])
+
+
+@pytest.mark.parametrize("rows", [1, 5, 200])
+@pytest.mark.parametrize("k", [1, 2, 7, 40])
+def test_accumulate_is_the_sequential_sum_from_zero(rows, k):
+    """The repulsion terms are summed 0 + t_1 + ... + t_K in column order, in floats, skipping invalid
+    entries (what makes an agent's row the same in a table of any width and any number of rows); -0.0
+    terms included."""
+    rng = np.random.default_rng(k * 1000 + rows)
+    tx = rng.normal(0, 1e3, (rows, k)) * rng.choice([1e-12, 1.0, 1e12], (rows, k))
+    ty = rng.normal(0, 1, (rows, k))
+    tx[:, 0] = -0.0
+    valid = rng.uniform(size=(rows, k)) < 0.7
+    got = _accumulate(tx, ty, valid)
+    for i in range(rows):
+        sx = sy = 0.0
+        for c in range(k):
+            if valid[i, c]:
+                sx, sy = sx + float(tx[i, c]), sy + float(ty[i, c])
+        assert got[i].tobytes() == np.array([sx, sy]).tobytes()

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from reconswarm.paper.topology import TopologyTracker, diff, graph_edges, groups_of, labels
-from reconswarm.record.safety import SafetyMonitor
+from reconswarm.paper.topology import TopologyTracker, _changes, diff, graph_edges, groups_of, labels
+from reconswarm.record.safety import SafetyMonitor, nearest_gap
 
 DT = 0.05
 LINK = 40.0
@@ -90,7 +90,7 @@ def test_labels_are_connected_components(n, seed):
 
 def test_labels_large_graph_path_agrees_with_small():
     rng = np.random.default_rng(2)
-    n = 400  # above the union-find threshold: scipy's connected components
+    n = 400  # a large graph: many rounds of hooking and pointer jumping
     p = rng.uniform(0, 1500, (n, 2))
     act = np.ones(n, dtype=bool)
     edges = graph_edges(p, act, np.zeros((0, 2), np.int64), LINK)
@@ -250,3 +250,30 @@ def test_safety_monitor_min_gap_when_everything_is_far():
     true_min = min(math.dist(p[i], p[j]) - r[i] - r[j] for i in range(4) for j in range(i + 1, 4))
     assert true_min == pytest.approx(21.0)
     assert gap_a == pytest.approx(true_min)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_edge_changes_between_two_sorted_key_sets(seed):
+    """_changes gives exactly the set differences (sorted) of two sorted, unique key arrays."""
+    rng = np.random.default_rng(seed)
+    old = np.unique(rng.integers(0, 400, int(rng.integers(0, 200))))
+    new = np.unique(np.concatenate([rng.choice(old, old.size // 2, replace=False) if old.size else old,
+                                    rng.integers(0, 400, int(rng.integers(0, 50)))])).astype(np.int64)
+    added, removed = _changes(old.astype(np.int64), new)
+    assert added.tolist() == np.setdiff1d(new, old).tolist()
+    assert removed.tolist() == np.setdiff1d(old, new).tolist()
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_nearest_gap_is_the_smallest_surface_gap_of_all_pairs(seed):
+    """nearest_gap (used when no pair is close) equals the brute-force minimum of ‖p_i - p_j‖ - r_i - r_j over
+    every ordered pair, for swarms spread over 1 m to 1000 km, and ignores unknown (NaN) positions."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 120))
+    p = rng.uniform(-1e3, 1e3, (n, 2)) * [1e-3, 1.0, 1e3][seed % 3]
+    r = rng.uniform(0.5, 5.0, n)
+    if seed % 2:
+        p[0] = np.nan
+    want = min(math.hypot(*(p[i] - p[j])) - r[i] - r[j] for i in range(n) for j in range(n)
+               if i != j and np.isfinite(p[i]).all() and np.isfinite(p[j]).all())
+    assert nearest_gap(p, r) == pytest.approx(want, rel=1e-12, abs=1e-9)
