@@ -151,8 +151,11 @@ def test_ticks_never_received_are_a_gap(tmp_path: Path) -> None:
         assert "2..4" in gap["note"]
 
 
+Guesses = tuple[tuple[int, int], ...]  # (agent, the first tick it acted on without all its data)
+
+
 @pytest.mark.parametrize("guesses", [(), ((IDS[2], 7), (IDS[1], 4), (IDS[2], 7))])
-def test_the_summary_says_whether_lockstep_stayed_deterministic(tmp_path: Path, guesses: tuple[tuple[int, int], ...]) -> None:
+def test_the_summary_says_whether_lockstep_stayed_deterministic(tmp_path: Path, guesses: Guesses) -> None:
     node = node_for(tmp_path)
     for k in range(10):
         tick(node, k, 0.01 * k)
