@@ -138,10 +138,11 @@ Item = tuple[str, bytes, str, str, float]  # key, payload, kind (PUT | DELETE), 
 class Inbox:
     """Samples from zenoh, held raw until the main loop takes them all at once: one wake-up per batch.
 
-    `handler()` gives zenoh a callback that runs on zenoh's own receiving thread (zenoh-python runs a plain
-    callable in a Python thread of its own per subscriber instead: one more thread wake-up per sample); it
-    only appends the sample and, for an urgent subscriber (the tick's trigger) or once `want` samples wait,
-    wakes the loop. The loop converts and decodes the batch itself. Nothing blocks or calls zenoh in it."""
+    `handler()` gives zenoh a callback (run by zenoh-python in a Python thread of the subscriber's, so zenoh's
+    own threads never wait for the GIL: measured 2-4 % cheaper per agent than running it on zenoh's receiving
+    thread, `indirect=False`, at N = 36); it only appends the sample with its arrival time and, for an urgent
+    subscriber (the tick's trigger) or once `want` samples wait, wakes the loop. The loop converts and
+    decodes the batch itself. Nothing blocks or calls zenoh in the callback."""
 
     samples_in = 0  # over every inbox of the process (for its exit line: benchmarks read them)
     wakeups = 0
@@ -156,7 +157,7 @@ class Inbox:
         """A zenoh handler that feeds this inbox (urgent: each sample wakes the loop at once)."""
         import zenoh
 
-        return zenoh.handlers.Callback(self.urgent if urgent else self.callback, indirect=False)
+        return zenoh.handlers.Callback(self.urgent if urgent else self.callback)
 
     def callback(self, sample: Any) -> None:
         self._samples.append((sample, time.monotonic()))
