@@ -25,7 +25,7 @@ from reconswarm.errors import BadInput
 from reconswarm.net import wire
 from reconswarm.net.gate import Gate
 from reconswarm.net.report import report_to_wire
-from reconswarm.net.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
+from reconswarm.net.session import Inbox, Member, Rejections, StartMark, Stopper, ZenohOptions, serving
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.scenario import load
 
@@ -142,7 +142,9 @@ class AgentLink(Member):
     def run(self, stop: Stopper) -> int:
         """Feed the node until it exits or asks for a new session (RECONNECT), or a signal stops us."""
         node, poll_s = self.node, self.node.timing.agent_poll_s
+        mark = StartMark()
         while not stop.stopped:
+            mark(node.started)
             wake = node.wake_at_s()
             items = self.inbox.take(node.awaiting(time.monotonic()),
                                     poll_s if wake is None else min(poll_s, max(0.0, wake - time.monotonic())))

@@ -1,7 +1,8 @@
 """The distributed deployment, measured with real processes through deploy/run_local.sh's launcher:
 
 1. lockstep on a sparse grid (bench/grid.py: about 8 neighbours per agent whatever N is) for N = 16, 36,
-   64, 100: CPU-ms per tick per role (from each process's exit line), messages received per agent per
+   64, 100: CPU-ms per tick per role (from each process's exit line, as the difference between a run and
+   one a third as long, so start-up does not count), messages received and loop wake-ups per agent per
    tick, simulated seconds per wall second;
 2. the paper mission in lockstep (--paper): sim/wall until it converges;
 3. realtime at --speed 1 (the control loop at 1/dt = 20 Hz): the largest N whose missed-deadline ratio
@@ -72,24 +73,40 @@ def launcher_cmd(checkout: Path | None) -> tuple[list[str], Path]:
     return [py, "-m", "reconswarm_bringup.cli_launch" if new else "reconswarm.launcher"], checkout
 
 
-def grid_row(tmp: Path, n: int, sim_s: float, checkout: Path | None) -> dict[str, float]:
-    scen = tmp / f"grid{n}.toml"
+def grid_run(tmp: Path, n: int, sim_s: float, checkout: Path | None) -> tuple[int, float, dict[str, list[dict]]]:
+    """One lockstep grid run: (ticks, sim/wall, each process's exit line by role)."""
+    scen = tmp / f"grid{n}-{sim_s:g}.toml"
     scen.write_text(to_toml(grid_scenario(n, sim_s)))
-    out = tmp / f"grid{n}-{'old' if checkout else 'new'}"
+    out = tmp / f"grid{n}-{sim_s:g}-{'old' if checkout else 'new'}-{len(str(checkout))}"
     s = launch(out, scen, free_port(), launcher=launcher_cmd(checkout))
-    ticks = round(s["duration_s"] / 0.05) + 1
-    use = role_usage(out)
-    cpu = {r: [u["cpu_user_s"] + u["cpu_sys_s"] for u in v] for r, v in use.items()}
-    msgs = [u["msgs_in"] for u in use.get("agent", []) if "msgs_in" in u]
-    wakes = [u["wakeups"] for u in use.get("agent", []) if "wakeups" in u]
-    return {"n": n, "ticks": ticks, "sim_wall": s["duration_s"] / s["wall_time_s"],
-            "agent_ms": 1000 * median(cpu.get("agent", [0.0])) / ticks,
-            "agents_ms": 1000 * sum(cpu.get("agent", [0.0])) / ticks,
-            "world_ms": 1000 * sum(cpu.get("simworld", [0.0])) / ticks,
-            "monitor_ms": 1000 * sum(cpu.get("monitor", [0.0])) / ticks,
-            "router_ms": 1000 * sum(cpu.get("router", [0.0])) / ticks,
-            "msgs_in": median(msgs) / ticks if msgs else float("nan"),
-            "wakeups": median(wakes) / ticks if wakes else float("nan")}
+    return round(s["duration_s"] / 0.05) + 1, s["duration_s"] / s["wall_time_s"], role_usage(out)
+
+
+def grid_row(tmp: Path, n: int, sim_s: float, checkout: Path | None) -> dict[str, float]:
+    """Per-tick figures as the difference of a run of sim_s and one of sim_s / 3: start-up (imports, sessions,
+    the start barrier) cancels out, whatever the version logs."""
+    t_short, _, short = grid_run(tmp, n, sim_s / 3, checkout)
+    ticks_long, sim_wall, long = grid_run(tmp, n, sim_s, checkout)
+    ticks = ticks_long - t_short
+
+    def per_tick(role: str, key: str, agg: str = "sum") -> float:
+        def vals(use: dict[str, list[dict]]) -> list[float]:
+            return [(u["cpu_user_s"] + u["cpu_sys_s"]) if key == "cpu" else u[key]
+                    for u in use.get(role, []) if key == "cpu" or key in u]
+        a, b = vals(long), vals(short)
+        if not a or not b:
+            return float("nan")
+        f = sum if agg == "sum" else median
+        return (f(a) - f(b)) / ticks
+
+    return {"n": n, "ticks": ticks, "sim_wall": sim_wall,
+            "agent_ms": 1000 * per_tick("agent", "cpu", "median"),
+            "agents_ms": 1000 * per_tick("agent", "cpu"),
+            "world_ms": 1000 * per_tick("simworld", "cpu"),
+            "monitor_ms": 1000 * per_tick("monitor", "cpu"),
+            "router_ms": 1000 * per_tick("router", "cpu"),
+            "msgs_in": per_tick("agent", "msgs_in", "median"),
+            "wakeups": per_tick("agent", "wakeups", "median")}
 
 
 def main() -> int:

@@ -26,7 +26,7 @@ from reconswarm.net import wire
 from reconswarm.net.admission import Intrusion, IntrusionKind, Membership
 from reconswarm.net.gate import Gate
 from reconswarm.net.report import report_from_wire
-from reconswarm.net.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
+from reconswarm.net.session import Inbox, Member, Rejections, StartMark, Stopper, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
 from reconswarm.record.store import RunWriter
 from reconswarm.scenario import load
@@ -164,7 +164,9 @@ class MonitorAdapter(Member):
             live.start()
         last_counts = time.monotonic()
         try:
+            mark = StartMark()
             while not stop.stopped:
+                mark(node.wall0 is not None)
                 for item in self.inbox.take(None, TIMING.monitor_wake_s):
                     self.handle(*item)
                 self.sync(time.monotonic())

@@ -19,7 +19,7 @@ from reconswarm.net import ros2, wire
 from reconswarm.net.admission import Membership
 from reconswarm.net.gate import Gate
 from reconswarm.net.report import report_to_wire
-from reconswarm.net.session import Inbox, Member, Rejections, Stopper, ZenohOptions, serving
+from reconswarm.net.session import Inbox, Member, Rejections, StartMark, Stopper, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
 from reconswarm.net.wire import ClockMode
 from reconswarm.scenario import load
@@ -143,7 +143,9 @@ class WorldAdapter(Member):
     def run(self, stop: Stopper) -> str:
         """Feed the node until it ends the mission; returns the end reason."""
         wake_s, want = time.monotonic(), self.node.awaiting()
+        mark = StartMark()
         while True:
+            mark(self.node.started)
             # One wake-up per batch: the commands the tick waits for, or its due time, or 50 ms at most.
             for item in self.inbox.take(want, min(0.05, max(0.0, wake_s - time.monotonic()))):
                 self.handle(*item)

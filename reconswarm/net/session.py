@@ -276,6 +276,19 @@ def usage() -> dict[str, float]:
             "max_rss_mb": round(ru.ru_maxrss / 1024.0, 1), "msgs_in": Inbox.samples_in, "wakeups": Inbox.wakeups}
 
 
+class StartMark:
+    """Logs `usage at start: {...}` once, when the mission starts: benchmarks take CPU per tick as the exit
+    line's figures minus these (start-up and imports are not per-tick work)."""
+
+    def __init__(self) -> None:
+        self.done = False
+
+    def __call__(self, started: bool) -> None:
+        if started and not self.done:
+            self.done = True
+            log.info("usage at start: %s", usage())
+
+
 def setup_logging(debug: bool = False) -> None:
     logging.basicConfig(level=logging.DEBUG if debug else logging.INFO,
                         format="%(asctime)s %(levelname)s %(message)s", datefmt="%H:%M:%S")
