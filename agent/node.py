@@ -108,7 +108,7 @@ class AgentNode:
         self.last_act = now_s  # wall time of our latest command (or of the latest new session)
         self.state_at: dict[int, float] = {}  # wall time each tick's state arrived (while waiting for the rest)
         self._linked: tuple[int, dict[int, int]] = (-1, {})  # (tick, linked peer -> its set's revision)
-        self.beacon_again = 0.0
+        self.beacon_again, self._again_n = 0.0, 0  # when to announce again; how often we did on this tick
         self.told_waiting = 0.0
         self._out: list[Output] = []
         self._announce_set = False  # after a new session: publish our obstacle set again (its cache is new)
@@ -231,11 +231,14 @@ class AgentNode:
         if self.beacon_sent < k or now > self.beacon_again:  # (again if peers may have lost it)
             self._out.append(self._beacon(st))
             if self.beacon_sent < k:
-                self.wait_since = now
-            elif self.brain.rev:  # stuck on this tick: peers may have lost our obstacle set too
-                self._out.append(self._obstacle_set(k))
+                self.wait_since, self._again_n = now, 0
+            else:
+                self._again_n += 1
+                if self._again_n == 1 and self.brain.rev:  # stuck: peers may have lost our obstacle set too
+                    self._out.append(self._obstacle_set(k))
             self.beacon_sent = k
-            self.beacon_again = now + t.beacon_again_s
+            # Backing off (0.5, 1, 2 s, ...), the set only once: re-sent every 0.5 s it flooded a stuck N = 64.
+            self.beacon_again = now + t.beacon_again_s * 2 ** self._again_n
         # Each way on without some of the tick's data is a guess: the command may differ from the in-process
         # engine's from here on, so the node says so (`guessed_k` in its beacons, then the record's summary).
         self._guess = ""

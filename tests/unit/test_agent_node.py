@@ -131,6 +131,10 @@ def test_a_stuck_tick_announces_beacon_and_obstacle_set_again() -> None:
     # B stays silent, but was heard 1 s ago (< peer_silent_s): after beacon_again_s both go out again.
     out = node.step([], 1.0 + T.beacon_again_s + 0.01)
     assert [type(o) for o in out] == [wire.Beacon, wire.ObstacleSet] and beacons(out)[0].rev == 1
+    # Then backing off, the beacon alone: 2 x beacon_again_s later, not before.
+    assert node.step([], 1.0 + 2.5 * T.beacon_again_s) == []
+    out = node.step([], 1.0 + 3.0 * T.beacon_again_s + 0.02)
+    assert [type(o) for o in out] == [wire.Beacon]
 
 
 def test_a_lost_peer_is_not_waited_for_and_stays_a_static_obstacle() -> None:
