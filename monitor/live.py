@@ -24,13 +24,10 @@ from foxglove.messages import (
     LinePrimitive,
     LinePrimitiveLineType,
     Point3,
-    Pose,
-    Quaternion,
     SceneEntity,
     SceneEntityDeletion,
     SceneEntityDeletionType,
     SceneUpdate,
-    Vector3,
 )
 from numpy.typing import NDArray
 from zenoh import ext
@@ -50,7 +47,6 @@ DEFAULT_PORT = 8765
 TOPIC_KNOWLEDGE = "/knowledge"
 MAX_RATE_HZ = 20.0  # scenes per wall second at most
 KNOWLEDGE_Z_M = 0.2  # hull outlines just above the true obstacles
-_ORIGIN = Pose(position=Vector3(x=0.0, y=0.0, z=0.0), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
 
 
 def knowledge_update(sets: dict[int, dict[str, NDArray[np.float64]]], group: dict[int, int], ns: int) -> SceneUpdate:
@@ -60,7 +56,7 @@ def knowledge_update(sets: dict[int, dict[str, NDArray[np.float64]]], group: dic
     ents = []
     for aid in sorted(sets):
         colour = scene.group_colour(group.get(aid, -1), 0.9)
-        lines = [LinePrimitive(type=LinePrimitiveLineType.LineLoop, pose=_ORIGIN, thickness=0.35,
+        lines = [LinePrimitive(type=LinePrimitiveLineType.LineLoop, pose=scene.pose(0.0, 0.0), thickness=0.35,
                                points=[Point3(x=float(x), y=float(y), z=KNOWLEDGE_Z_M) for x, y in hull.tolist()],
                                color=colour)
                  for _, hull in sorted(sets[aid].items()) if hull.shape[0] >= 2]

@@ -138,7 +138,8 @@ class SwarmGraph:
         return self.edges, group_index(labels(p.shape[0], self.edges, active))
 
 
-def _pose(x: float, y: float, z: float = 0.0, yaw: float | None = None) -> Pose:
+def pose(x: float, y: float, z: float = 0.0, yaw: float | None = None) -> Pose:
+    """A pose in the scene's frame (yaw None: the identity rotation)."""
     q = _IDENTITY if yaw is None else Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
     return Pose(position=Vector3(x=x, y=y, z=z), orientation=q)
 
@@ -147,13 +148,13 @@ def agent_entity(aid: int, x: float, y: float, theta: float, radius_m: float, gr
                  stamp: Timestamp) -> SceneEntity:
     """A disc of the agent's radius at its head point, a heading arrow and its id."""
     c = group_colour(group if alive else -1, 0.85)
-    disc = CylinderPrimitive(pose=_pose(x, y, DISC_HEIGHT_M / 2),
+    disc = CylinderPrimitive(pose=pose(x, y, DISC_HEIGHT_M / 2),
                              size=Vector3(x=2 * radius_m, y=2 * radius_m, z=DISC_HEIGHT_M),
                              bottom_scale=1.0, top_scale=1.0, color=c)
-    arrow = ArrowPrimitive(pose=_pose(x, y, DISC_HEIGHT_M + 0.05, theta), shaft_length=1.4 * radius_m,
+    arrow = ArrowPrimitive(pose=pose(x, y, DISC_HEIGHT_M + 0.05, theta), shaft_length=1.4 * radius_m,
                            shaft_diameter=0.25 * radius_m, head_length=0.8 * radius_m,
                            head_diameter=0.7 * radius_m, color=Color(r=0.1, g=0.1, b=0.1, a=1.0))
-    label = TextPrimitive(pose=_pose(x, y, DISC_HEIGHT_M + 1.0), billboard=True, font_size=14.0,
+    label = TextPrimitive(pose=pose(x, y, DISC_HEIGHT_M + 1.0), billboard=True, font_size=14.0,
                           scale_invariant=True, color=Color(r=0.05, g=0.05, b=0.05, a=1.0), text=str(aid))
     return SceneEntity(timestamp=stamp, frame_id=FRAME, id=f"agent/{aid}", cylinders=[disc], arrows=[arrow],
                        texts=[label])
@@ -173,7 +174,7 @@ def swarm_update(f: SwarmFrame, ns: int) -> SceneUpdate:
                 pts.append(Point3(x=float(f.p[k, 0]), y=float(f.p[k, 1]), z=0.1))
                 cols.append(c)
         ents.append(SceneEntity(timestamp=stamp, frame_id=FRAME, id="links", lines=[LinePrimitive(
-            type=LinePrimitiveLineType.LineList, pose=_pose(0.0, 0.0), thickness=0.4, points=pts, colors=cols)]))
+            type=LinePrimitiveLineType.LineList, pose=pose(0.0, 0.0), thickness=0.4, points=pts, colors=cols)]))
     return SceneUpdate(deletions=[SceneEntityDeletion(timestamp=stamp, type=SceneEntityDeletionType.All)],
                        entities=ents)
 
@@ -188,19 +189,19 @@ def world_update(s: Scenario, ns: int) -> SceneUpdate:
         ring = [Point3(x=float(x), y=float(y), z=0.0) for x, y in poly]
         tris = [ring[i] for v in range(1, len(ring) - 1) for i in (0, v, v + 1)]  # a fan: the polygon is convex
         ents.append(SceneEntity(timestamp=stamp, frame_id=FRAME, id=f"obstacle/{ob.id}",
-                                triangles=[TriangleListPrimitive(pose=_pose(0.0, 0.0), points=tris, color=fill)],
-                                lines=[LinePrimitive(type=LinePrimitiveLineType.LineLoop, pose=_pose(0.0, 0.0),
+                                triangles=[TriangleListPrimitive(pose=pose(0.0, 0.0), points=tris, color=fill)],
+                                lines=[LinePrimitive(type=LinePrimitiveLineType.LineLoop, pose=pose(0.0, 0.0),
                                                      thickness=0.5, points=ring, color=edge)]))
     slots = np.asarray(s.target_m) + s.offsets
     ents.append(SceneEntity(timestamp=stamp, frame_id=FRAME, id="slots", spheres=[
-        SpherePrimitive(pose=_pose(float(x), float(y)), size=Vector3(x=1.5, y=1.5, z=1.5),
+        SpherePrimitive(pose=pose(float(x), float(y)), size=Vector3(x=1.5, y=1.5, z=1.5),
                         color=Color(r=0.0, g=0.0, b=0.0, a=0.8)) for x, y in slots]))
     cx, cy = s.target_m
     r = s.planner.target_radius_m
     circle = [Point3(x=cx + r * math.cos(a), y=cy + r * math.sin(a), z=0.0)
               for a in np.linspace(0.0, 2 * math.pi, 96, endpoint=False)]
     ents.append(SceneEntity(timestamp=stamp, frame_id=FRAME, id="target", lines=[LinePrimitive(
-        type=LinePrimitiveLineType.LineLoop, pose=_pose(0.0, 0.0), thickness=0.3, points=circle,
+        type=LinePrimitiveLineType.LineLoop, pose=pose(0.0, 0.0), thickness=0.3, points=circle,
         color=Color(r=0.4, g=0.4, b=0.4, a=0.8))]))
     return SceneUpdate(entities=ents)
 
