@@ -19,58 +19,17 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterable
-from dataclasses import dataclass
 
 import numpy as np
 
 from agent.brain import AgentBrain, Peer
+from agent.messages import Exit, Input, Invalid, Joined, Left, Output, Reconnect, WorldToken
 from reconswarm.net import wire
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.scenario import Scenario
 
 log = logging.getLogger("reconswarm.agent")
 
-
-# ------------------------------------------------------------------------------------------ inputs
-@dataclass(frozen=True)
-class Joined:
-    """An agent's liveliness token appeared."""
-
-    agent: int
-
-
-@dataclass(frozen=True)
-class Left:
-    """An agent's liveliness token went away."""
-
-    agent: int
-
-
-@dataclass(frozen=True)
-class Invalid:
-    """A message the adapter dropped (undecodable, or on our own key from another session): counted."""
-
-    key: str
-    reason: str
-
-
-Input = wire.State | wire.Scan | wire.Clock | wire.Beacon | wire.ObstacleSet | Joined | Left | Invalid
-
-
-# ----------------------------------------------------------------------------------------- outputs
-@dataclass(frozen=True)
-class Reconnect:
-    """No command for `resubscribe_s` though the mission goes on: open a new session (keep this node)."""
-
-
-@dataclass(frozen=True)
-class Exit:
-    """Leave the loop with this exit code (0: the world ended the mission; 3: the world went silent)."""
-
-    code: int
-
-
-Output = wire.Beacon | wire.ObstacleSet | wire.Cmd | Reconnect | Exit
 
 ObstacleSets = dict[str, np.ndarray]
 
@@ -102,6 +61,8 @@ class AgentNode:
         self.act_at: float | None = None
         self.last_clock = now_s
         self.ended = False
+        self.world_gone = False  # the world's token went away and no clock came since (a stalled world)
+        self.world_back = now_s  # when the world last came back from a stall (nobody spoke during it)
         self.started = False  # the mission began (first clock): the watches run from then on
         self.last_cmd: wire.Cmd | None = None
         self.heard: dict[int, float] = {}  # wall time of each peer's latest beacon (or of its token)
@@ -147,7 +108,7 @@ class AgentNode:
         clock = self.clocks.get(k)
         peers = self.alive if clock is None or self.mode == "realtime" else self.alive.intersection(clock.alive)
         silent = self.timing.peer_silent_s
-        need = sum(1 for a in peers if a != self.id and a not in fresh and now_s - self.heard.get(a, now_s) < silent)
+        need = sum(1 for a in peers if a != self.id and a not in fresh and now_s - self._heard(a, now_s) < silent)
         if self.mode != "realtime":
             need += (clock is None) + (st.scan_n > 0 and k not in self.scans)
             if self._linked[0] == k:
@@ -166,11 +127,16 @@ class AgentNode:
             self.heard.setdefault(m.agent, now)
         elif isinstance(m, Left):
             self.alive.discard(m.agent)
+        elif isinstance(m, WorldToken) and not m.up:
+            self.world_gone = True
+        elif isinstance(m, WorldToken):
+            self._world_back(now)
         elif isinstance(m, Invalid):
             self.rejected += 1
         elif isinstance(m, wire.Clock):
             self.clocks[m.k] = m
             self.last_clock = now
+            self._world_back(now)
             self.mode = m.mode
             self.period_s = self.s.meta.dt_s / m.speed if m.speed > 0 else 0.0
             if m.end:
@@ -195,6 +161,16 @@ class AgentNode:
         else:  # wire.ObstacleSet
             self.sets.setdefault(m.id, {})[m.rev] = {oid: np.array(v, dtype=np.float64)
                                                      for oid, v in m.obstacles.items()}
+
+    def _world_back(self, now: float) -> None:
+        """The world is back from a stall: our wait for a command (before a new session) starts now."""
+        if self.world_gone:
+            self.world_gone, self.last_act, self.world_back = False, max(self.last_act, now), now
+
+    def _heard(self, peer: int, now: float) -> float:
+        """When we last heard the peer, for its silence: not before the world's return (no peer has a state
+        to announce while the world stalls)."""
+        return max(self.heard.get(peer, now), self.world_back)
 
     # --------------------------------------------------------------------------------------- planning
 
@@ -257,7 +233,7 @@ class AgentNode:
         # Peers alive by their tokens whose beacon for k is not in: wait, unless one has said nothing for
         # peer_silent_s (a token without data: a frozen process before its lease ends, or a forged token).
         missing = [a for a in clock.alive if a != self.id and a in self.alive and a not in fresh]
-        if any(now - self.heard.get(a, now) < t.peer_silent_s for a in missing):
+        if any(now - self._heard(a, now) < t.peer_silent_s for a in missing):
             return False
         if missing:
             self._guess = f"agents {missing} alive but silent for {t.peer_silent_s:g} s"
@@ -389,7 +365,7 @@ class AgentNode:
             log.error("agent %d: no clock from the world for %.0f s", self.id, t.world_silence_s)
             self._out.append(Exit(3))
             return
-        if self.started and now - self.last_act > t.resubscribe_s:
+        if self.started and now - self.last_act > (t.resubscribe_world_gone_s if self.world_gone else t.resubscribe_s):
             self._out.append(Reconnect())
             return
         if self.started and now - self.last_act > t.waiting_log_s and now > self.told_waiting + t.waiting_log_s:

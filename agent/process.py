@@ -19,7 +19,8 @@ from pathlib import Path
 import zenoh
 from zenoh import ext
 
-from agent.node import AgentNode, Exit, Input, Invalid, Joined, Left, Output, Reconnect
+from agent.messages import Exit, Input, Invalid, Joined, Left, Output, Reconnect, WorldToken
+from agent.node import AgentNode
 from agent.ros2_io import AgentRos2
 from reconswarm.errors import BadInput
 from reconswarm.net import wire
@@ -94,7 +95,7 @@ class AgentLink(Member):
         if key.endswith("/obstacles") and not self.gate.admit_set_bytes(len(payload), source, key, time.monotonic()):
             return None
         m = self._decode(key, payload, kind)
-        if isinstance(m, Invalid | Joined | Left) or m is None:
+        if isinstance(m, Invalid | Joined | Left | WorldToken) or m is None:
             return m
         return m if self.gate.admit(m, source, key, time.monotonic()) else None
 
@@ -104,7 +105,7 @@ class AgentLink(Member):
             if what == "alive":
                 if leaf == "agent" and aid is not None:
                     return Left(aid) if kind == "DELETE" else Joined(aid)
-                return None
+                return WorldToken(kind != "DELETE") if leaf == "simworld" else None
             if what == "clock":
                 return wire.clock_from_wire(payload)
             if what != "agent" or aid is None:

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from agent.node import Invalid
+from agent.messages import Invalid
 from reconswarm.net import ros2, wire
 from reconswarm.net.ros2_node import Ros2Node
 from reconswarm.sim.unicycle import inputs

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import zenoh
+from zenoh import ext
 
 from monitor.live import LiveFeed, LiveView
 from monitor.node import MonitorNode
@@ -62,7 +63,10 @@ class MonitorAdapter(Member):
         self.pub_event = z.declare_publisher(k.event, congestion_control=zenoh.CongestionControl.BLOCK)
         # Everything arrives in the inbox, taken in one batch per tick: the world's truth wakes the loop, the
         # rest (beacons, clock, reports, membership) waits for it (the monitor is off the critical path).
-        self.subs = [z.declare_subscriber(k.truth, self.inbox.handler(urgent=True)),
+        # The truth comes numbered from the world's advanced publisher: one that was lost (published while
+        # the world's session came back from a stall) is fetched from its cache, and delivered in order.
+        recovery = ext.RecoveryConfig(periodic_queries=None, heartbeat=True)
+        self.subs = [ext.declare_advanced_subscriber(z, k.truth, self.inbox.handler(urgent=True), recovery=recovery),
                      *(z.declare_subscriber(key, self.inbox.handler())
                        for key in (k.all_agents("beacon"), k.clock, k.report_all))]
         # Admission (what the run cannot contain is refused and counted, with the other processes' reports);

@@ -21,9 +21,11 @@ The rules (`R` = `swarm/<run>`) allow, per subject and nothing else:
   `R/agent/*/beacon`, `R/agent/*/obstacles`; history queries on `R/agent/*/obstacles/@adv/**`; liveliness
   subscriptions on `R/alive/**` and `R/agent/*/obstacles/@adv/pub/**`;
 - simworld: put `R/clock`, `R/truth`, `R/agent/*/state`, `R/agent/*/scan`, `R/report/simworld`; token
-  `R/alive/simworld`; subscribe `R/agent/*/cmd`, liveliness `R/alive/**`;
+  `R/alive/simworld`; subscribe `R/agent/*/cmd`, liveliness `R/alive/**`; the truth's advanced publisher
+  (queryable `R/truth/@adv/pub/**` replying on `R/truth`, heartbeats put under `R/truth/@adv/pub/**`);
 - monitor: put `R/event`; token `R/alive/monitor`; subscribe `R/truth`, `R/agent/*/beacon`, `R/clock`,
-  `R/report/*`, liveliness `R/alive/**`;
+  `R/report/*`, liveliness `R/alive/**`; recovery of a lost truth (subscribe the heartbeats
+  `R/truth/@adv/pub/**`, query `R/truth/@adv/**`, receive replies on `R/truth`);
 - observer: subscribe `R/clock`, `R/event`;
 - intruder, or any other certificate of the CA: nothing.
 
@@ -221,11 +223,19 @@ def access_control(run: str, agent_ids: tuple[int, ...]) -> dict[str, Any]:
                                   f"{r}/report/simworld"], [f"{r}/report/*"]),
         *subscribe("simworld-sub", [f"{r}/agent/*/cmd"]),
         *membership("simworld", f"{r}/alive/simworld"),
+        # the truth's advanced publisher: its cache (a queryable, replies with the truth only) and heartbeats
+        rule("simworld-truth-cache", ["declare_queryable"], ("ingress",), [f"{r}/truth/@adv/pub/**"]),
+        rule("simworld-truth-reply", ["reply"], ("ingress",), [f"{r}/truth"]),
+        *publish("simworld-truth-heartbeat", [f"{r}/truth/@adv/pub/**"]),
     ])
     grant("monitor", [
         *publish("monitor-pub", [f"{r}/event"]),
         *subscribe("monitor-sub", [f"{r}/truth", f"{r}/agent/*/beacon", f"{r}/clock", f"{r}/report/*"]),
         *membership("monitor", f"{r}/alive/monitor"),
+        # recovery of a lost truth: the world's heartbeats, queries to its cache and their replies
+        *subscribe("monitor-truth-heartbeat", [f"{r}/truth/@adv/pub/**"]),
+        rule("monitor-truth-query", ["query"], ("ingress", "egress"), [f"{r}/truth/@adv/**"]),
+        rule("monitor-truth-reply", ["reply"], ("egress",), [f"{r}/truth"]),
     ])
     grant("observer", subscribe("observer-sub", [f"{r}/clock", f"{r}/event"]))
     # "intruder" has a certificate of the CA but no subject: the default (deny) applies to it.

@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import zenoh
+from zenoh import ext
 
 from reconswarm.errors import BadInput
 from reconswarm.net import ros2, wire
@@ -61,7 +62,11 @@ class WorldAdapter(Member):
         if ros2_domain_id is not None and isinstance(node, Ros2World):
             self.ros2 = WorldRos2(z, ros2_domain_id, node, self.inbox.callback)
         self.pub_clock = z.declare_publisher(k.clock, congestion_control=block)
-        self.pub_truth = z.declare_publisher(k.truth, congestion_control=block)
+        # The record's input: kept and numbered, so the monitor recovers a truth that was lost (advanced pub/sub).
+        self.pub_truth = ext.declare_advanced_publisher(
+            z, k.truth, congestion_control=block, cache=ext.CacheConfig(max_samples=node.timing.truth_cache_ticks),
+            sample_miss_detection=ext.MissDetectionConfig(heartbeat=None,
+                                                          sporadic_heartbeat=node.timing.truth_heartbeat_s))
         self.pub_state = {} if self.ros2 else {a: z.declare_publisher(k.state(a), congestion_control=block)
                                                 for a in node.ids}
         self.pub_scan = {a: z.declare_publisher(k.scan(a), congestion_control=block) for a in node.ids}

@@ -25,6 +25,10 @@ class Timing:
     # No command for this long (though the world re-sends a waiting tick every `republish_s`): the agent
     # opens a new zenoh session (its node, and so its knowledge and peers, are kept).
     resubscribe_s: float = 5.0
+    # ... but this long while the world's own token is gone and no clock came since: the world stalled (frozen,
+    # starved), and new sessions of every agent at once would only make its return harder (new session ids,
+    # subscriptions to propagate). Still a way out if it is our session, not the world, that is broken.
+    resubscribe_world_gone_s: float = 15.0
     # Exit 3 if the world sends no clock for this long after the mission began.
     world_silence_s: float = 30.0
     # Realtime: act this fraction of a period after a new state, with whatever has arrived by then.
@@ -53,6 +57,11 @@ class Timing:
     self_stall_s: float = 1.0
     # After the last clock, keep the session this long so the last messages reach the monitor.
     world_end_linger_s: float = 0.3
+    # The truth's publisher keeps this many ticks for the monitor to recover (a truth published while the
+    # world's session was coming back from a stall of its own went nowhere: seen as a one-tick gap under load),
+    # and announces its newest sequence number this often when it changed (so a lost last tick is found too).
+    truth_cache_ticks: int = 32
+    truth_heartbeat_s: float = 0.25
 
     # --------------------------------------------------------------------------------------- monitor
     # After the world's last clock, how long to wait for the last states.

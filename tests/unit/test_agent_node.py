@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from agent.brain import AgentBrain, Peer
-from agent.node import AgentNode, Exit, Invalid, Joined, Left, Output, Reconnect
+from agent.messages import Exit, Invalid, Joined, Left, Output, Reconnect, WorldToken
+from agent.node import AgentNode
 from reconswarm.net import wire
 from reconswarm.net.timing import Timing
 from reconswarm.scenario import PlannerKind, Scenario, load
@@ -173,6 +174,18 @@ def test_a_silent_peer_alive_by_its_token_is_not_waited_for() -> None:
     assert node.guessed_k == 1  # alive by its token, yet acted on without it: said
 
 
+def test_after_a_world_stall_a_peer_is_silent_only_counting_from_the_worlds_return() -> None:
+    """Nobody has a state to announce while the world is frozen: B's beacon 10 s ago is not silence."""
+    node = started(peers=(B,))
+    node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 300.0, 0.0)], 0.0)
+    node.step([WorldToken(False)], 2.0)
+    node.step([WorldToken(True), clock(1, (A, B)), state(1, 100.05, 0.0)], 10.0)
+    assert node.k == 0 and node.awaiting(10.0) == 1  # B's beacon for tick 1 is waited for
+    node.step([], 10.0 + T.peer_silent_s - 0.01)
+    assert node.k == 0
+    node.step([beacon(B, 1, 300.0, 0.0)], 11.0)
+    assert node.k == 1 and node.guessed_k == -1  # deterministic
+
 def test_pruning_keeps_only_recent_ticks_and_the_merged_revision() -> None:
     node = started(peers=(B,))
     sets = {r: wire.ObstacleSet(B, r, r, {"diamond": ((130.0 + r, 0.0), (131.0, 1.0), (131.0, -1.0))})
@@ -210,6 +223,30 @@ def test_after_a_new_session_a_dead_peer_is_still_an_obstacle_at_its_last_positi
     want = reference(2, (100.1, 0.0), peers, brain=ref)
     assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(2, *want)]
     assert want != reference(2, (100.1, 0.0), peers[:1])  # without C the command would differ
+
+
+def test_a_stalled_world_is_waited_for_not_answered_with_a_new_session() -> None:
+    """The world froze past its lease (its token is gone, no clock since): no new session at resubscribe_s
+    (every agent reconnecting at once made the world's return refuse their commands as impersonation, and
+    lost beacons of tick k); only after resubscribe_world_gone_s, in case our own session is the broken one.
+    A clock, or the token back, ends the stall: resubscribe_s counts again."""
+    node = started(peers=())
+    node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
+    assert node.k == 0
+    node.step([WorldToken(False)], 1.0)
+    assert node.step([], T.resubscribe_s + 0.5) == []
+    assert node.step([], T.resubscribe_world_gone_s - 0.01) == []
+    assert node.step([], T.resubscribe_world_gone_s + 0.01) == [Reconnect()]
+    node.reconnected(T.resubscribe_world_gone_s + 0.02)
+    # The world is back (its token): the wait for a command counts from its return, by resubscribe_s.
+    assert node.step([WorldToken(True)], 16.0) == []  # 1 s after the new session, but the world just came back
+    assert node.step([], 16.0 + T.resubscribe_s - 0.01) == []
+    assert node.step([], 16.0 + T.resubscribe_s + 0.01) == [Reconnect()]
+    node.reconnected(21.1)
+    node.step([WorldToken(False), clock(1, (A,))], 22.0)  # a clock after the token went: not stalled
+    assert node.world_gone is False
+    assert node.step([], 22.0 + T.resubscribe_s - 0.01) == []
+    assert node.step([], 22.0 + T.resubscribe_s + 0.01) == [Reconnect()]
 
 
 def test_a_new_session_keeps_knowledge_revision_and_escape_state() -> None:

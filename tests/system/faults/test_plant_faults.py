@@ -43,7 +43,8 @@ def test_world_frozen_is_one_stall_and_lockstep_stays_exact(tmp_path: Path, out:
     (stall,) = [e for e in ev if e["kind"] == "world_stalled"]
     assert 19.9 <= stall["t"] <= 20.5 and 9.0 <= stall["duration_s"] <= 14.0
     # Every tick is in the record, and the trajectories are exactly those of the in-process engine.
-    assert s["ticks"] == 1201 and s["record_gaps"] == []
+    assert s["ticks"] == 1201 and s["record_gaps"] == [], (s["ticks"], s["record_gaps"])
+    assert s["deterministic"] is True  # nobody acted on a guess: the stall was waited out, not guessed through
     sim = reconswarm("sim", str(scen), "-o", str(tmp_path / "sim"), "--json")
     assert sim.returncode == 1, sim.stderr
     assert max_difference(trajectories(out / "run.db"), trajectories(tmp_path / "sim" / "run.db")) == 0.0
