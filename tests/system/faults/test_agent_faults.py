@@ -43,10 +43,11 @@ def test_agent_restarted_rejoins_with_shared_obstacles(out: Path) -> None:
 
 
 def test_dead_robot_is_still_avoided_after_a_world_stall(out: Path) -> None:
-    """Issue 11, collisions with no attacker 1: agent 3 killed, then the world stalled for 10 s, so the agents
-    go without commanding for longer than the session safety net (5 s) and open new sessions. Robot 3 still
-    stands where it stopped: everyone must still avoid it (before: agent 10 hit it at t = 81.55 s)."""
-    p = run_launcher(out, "--fault", "kill:agent:3@60", "--fault", "freeze:simworld@78+10", "--json")
+    """Issue 11, collisions with no attacker 1: agent 3 killed, then the world stalled for 18 s, so the agents
+    go without commanding for longer than the session safety net while the world's token is gone (15 s) and
+    open new sessions. Robot 3 still stands where it stopped: everyone must still avoid it (before: agent 10
+    hit it at t = 81.55 s)."""
+    p = run_launcher(out, "--fault", "kill:agent:3@60", "--fault", "freeze:simworld@78+18", "--json")
     assert p.returncode == 0, p.stderr[-3000:]
     s = json.loads(p.stdout)
     assert s["collisions"] == 0 and 3 in s["agents_lost"] and s["converged"], s
