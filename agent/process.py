@@ -193,6 +193,6 @@ def run(cfg: AgentConfig) -> int:
             # We stopped acting although the mission goes on (seen after a router restart: a route to one of
             # our keys was not restored): a new session re-declares everything; the node keeps all it knows
             # (peers' last positions, lost peers, knowledge, revisions, escape state).
-            log.warning("agent %d: no command for %.0f s: opening a new session", cfg.agent_id,
-                        cfg.timing.resubscribe_s)
+            log.warning("agent %d: no command for %.0f s%s: opening a new session", cfg.agent_id,
+                        time.monotonic() - node.last_act, " (the world's token gone)" if node.world_gone else "")
             node.reconnected(time.monotonic())
