@@ -244,6 +244,8 @@ class AgentNode:
         # peer that reconnected keeps counting; one restarted counts again from 1, and what it knew is
         # static knowledge we hold anyway).
         merged = self.merged_union if self.brain.leader is not None else self.merged
+        if self.k < 0 and k > 0:  # joining a mission under way: every peer's cached set (any revision) first
+            return all(b.rev == 0 or self.sets.get(a) for a, b in fresh.items())
         return all(rev == 0 or rev in self.sets.get(a, ()) or rev <= merged.get(a, 0) for a, rev in need.items())
 
     def _unmerged(self, wanted: dict[int, int], merged: dict[int, int]) -> list[ObstacleSets]:

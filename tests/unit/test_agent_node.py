@@ -271,6 +271,19 @@ def test_a_restarted_agent_joining_late_merges_every_cached_obstacle_set() -> No
     assert isinstance(out[-2], wire.ObstacleSet) and out[-2].rev == 1
 
 
+def test_a_late_joiner_waits_for_every_peers_cached_set_before_its_first_tick() -> None:
+    """The history replies from the peers' caches can come after the world's state (seen under load: a restarted
+    agent 4 acted with no set at all). The joiner waits for a set from each peer whose beacon announces one,
+    far ones included, any revision (the cache holds the newest); a set never coming is the usual guess."""
+    node = started(peers=(B, C))
+    hull: dict[str, tuple[tuple[float, float], ...]] = {"hexagon": ((600.0, 0.0), (601.0, 1.0), (601.0, -1.0))}
+    node.step([clock(300, (A, B, C)), state(300, 100.0, 0.0), beacon(B, 300, 900.0, 0.0, rev=4),
+               beacon(C, 300, 120.0, 0.0)], 0.0)
+    assert node.k == -1  # B announces a set (rev 4) that has not come yet; C has none (rev 0)
+    node.step([wire.ObstacleSet(B, 299, 5, hull)], 0.1)  # the cache's newest, one revision on
+    assert node.k == 300 and "hexagon" in node.brain.obstacle_sets() and node.guessed_k == -1
+
+
 def test_the_virtual_leader_waits_for_every_set_and_merges_the_union() -> None:
     s = dataclasses.replace(S, planner=dataclasses.replace(S.planner, kind=PlannerKind.VIRTUAL_LEADER))
     node = started(node_s=s, peers=(B,))
