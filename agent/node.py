@@ -62,7 +62,6 @@ class AgentNode:
         self.last_clock = now_s
         self.ended = False
         self.world_gone = False  # the world's token went away and no clock came since (a stalled world)
-        self.world_back = now_s  # when the world last came back from a stall (nobody spoke during it)
         self.started = False  # the mission began (first clock): the watches run from then on
         self.last_cmd: wire.Cmd | None = None
         self.heard: dict[int, float] = {}  # wall time of each peer's latest beacon (or of its token)
@@ -108,7 +107,7 @@ class AgentNode:
         clock = self.clocks.get(k)
         peers = self.alive if clock is None or self.mode == "realtime" else self.alive.intersection(clock.alive)
         silent = self.timing.peer_silent_s
-        need = sum(1 for a in peers if a != self.id and a not in fresh and now_s - self._heard(a, now_s) < silent)
+        need = sum(1 for a in peers if a != self.id and a not in fresh and now_s - self.heard.get(a, now_s) < silent)
         if self.mode != "realtime":
             need += (clock is None) + (st.scan_n > 0 and k not in self.scans)
             if self._linked[0] == k:
@@ -127,10 +126,11 @@ class AgentNode:
             self.heard.setdefault(m.agent, now)
         elif isinstance(m, Left):
             self.alive.discard(m.agent)
-        elif isinstance(m, WorldToken) and not m.up:
-            self.world_gone = True
         elif isinstance(m, WorldToken):
-            self._world_back(now)
+            if m.up:
+                self._world_back(now)
+            else:
+                self.world_gone = True
         elif isinstance(m, Invalid):
             self.rejected += 1
         elif isinstance(m, wire.Clock):
@@ -163,14 +163,11 @@ class AgentNode:
                                                      for oid, v in m.obstacles.items()}
 
     def _world_back(self, now: float) -> None:
-        """The world is back from a stall: our wait for a command (before a new session) starts now."""
+        """The world is back from a stall: our wait for a command (before a new session) starts now, and so
+        does every peer's silence (no peer has a state to announce while the world stalls)."""
         if self.world_gone:
-            self.world_gone, self.last_act, self.world_back = False, max(self.last_act, now), now
-
-    def _heard(self, peer: int, now: float) -> float:
-        """When we last heard the peer, for its silence: not before the world's return (no peer has a state
-        to announce while the world stalls)."""
-        return max(self.heard.get(peer, now), self.world_back)
+            self.world_gone, self.last_act = False, max(self.last_act, now)
+            self.heard = {a: max(at, now) for a, at in self.heard.items()}
 
     # --------------------------------------------------------------------------------------- planning
 
@@ -233,19 +230,19 @@ class AgentNode:
         # Peers alive by their tokens whose beacon for k is not in: wait, unless one has said nothing for
         # peer_silent_s (a token without data: a frozen process before its lease ends, or a forged token).
         missing = [a for a in clock.alive if a != self.id and a in self.alive and a not in fresh]
-        if any(now - self._heard(a, now) < t.peer_silent_s for a in missing):
+        if any(now - self.heard.get(a, now) < t.peer_silent_s for a in missing):
             return False
         if missing:
             self._guess = f"agents {missing} alive but silent for {t.peer_silent_s:g} s"
         if self._linked[0] != k:
             self._link(k, np.array([st.px, st.py]))
+        if self.k < 0 and k > 0:  # joining a mission under way: every peer's cached set (any revision) first
+            return all(b.rev == 0 or self.sets.get(a) for a, b in fresh.items())
         need = {a: b.rev for a, b in fresh.items()} if self.brain.leader is not None else self._linked[1]
         # A set is there, or nothing to wait for: an empty set (rev 0), or a revision we merged already (a
         # peer that reconnected keeps counting; one restarted counts again from 1, and what it knew is
         # static knowledge we hold anyway).
         merged = self.merged_union if self.brain.leader is not None else self.merged
-        if self.k < 0 and k > 0:  # joining a mission under way: every peer's cached set (any revision) first
-            return all(b.rev == 0 or self.sets.get(a) for a, b in fresh.items())
         return all(rev == 0 or rev in self.sets.get(a, ()) or rev <= merged.get(a, 0) for a, rev in need.items())
 
     def _unmerged(self, wanted: dict[int, int], merged: dict[int, int]) -> list[ObstacleSets]:
