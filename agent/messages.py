@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from agent.neighbours import Cells
 from reconswarm.net import wire
 
 
@@ -54,4 +55,4 @@ class Exit:
     code: int
 
 
-Output = wire.Beacon | wire.ObstacleSet | wire.Cmd | Reconnect | Exit
+Output = Cells | wire.Beacon | wire.ObstacleSet | wire.Cmd | Reconnect | Exit

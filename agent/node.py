@@ -6,10 +6,11 @@ beacon, an obstacle set, a command) or to do (open a new session, exit). The Age
 calls. agent/process.py moves the bytes between zenoh and this class.
 
 Lockstep (the clock says so): at tick k the agent waits for its state (and scan), announces its beacon
-(with the revision of its obstacle set at k-1), waits for the beacons of every live agent and the
-obstacle sets of those within link range (all of them for the virtual leader), then plans and
+(with the revision of its obstacle set at k-1), waits for the beacons of the live agents that may matter
+at k (agent/neighbours.py: the cells it listens to and its wait set; every live agent for the virtual
+leader) and the obstacle sets of those within link range (all for the virtual leader), then plans and
 commands. Realtime: it acts shortly after each new state on whatever it has (latest beacons, sets).
-A peer whose beacon is missing is kept where it was last seen (a static obstacle).
+A lost peer is kept where it was last seen (a static obstacle); a live one out of our cells is dropped.
 
 The node outlives the adapter's zenoh sessions: after a new session (`reconnected`) it still knows its
 peers' last positions and radii, lost peers, its knowledge, revisions and escape state.
@@ -24,6 +25,8 @@ import numpy as np
 
 from agent.brain import AgentBrain, Peer
 from agent.messages import Exit, Input, Invalid, Joined, Left, Output, Reconnect, WorldToken
+from agent.neighbours import Neighbourhood
+from agent.sets import ObstacleSets, PeerSets
 from reconswarm.net import wire
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.scenario import Scenario
@@ -31,13 +34,11 @@ from reconswarm.scenario import Scenario
 log = logging.getLogger("reconswarm.agent")
 
 
-ObstacleSets = dict[str, np.ndarray]
-
-
 class AgentNode:
     def __init__(self, s: Scenario, agent_id: int, now_s: float, timing: Timing = TIMING) -> None:
         self.s, self.id, self.timing = s, agent_id, timing
         self.brain = AgentBrain(s, agent_id)
+        self.nb = Neighbourhood(s, agent_id)  # our cells and whom a tick waits for (agent/neighbours.py)
         self.radius = float(self.brain.r[0])
         self.rejected = 0  # messages dropped so far (announced in our beacons)
         self.states: dict[int, wire.State] = {}
@@ -45,11 +46,9 @@ class AgentNode:
         self.clocks: dict[int, wire.Clock] = {}
         self.beacons: dict[int, dict[int, wire.Beacon]] = {}  # tick -> peer -> its beacon at that tick
         self.last_seen: dict[int, wire.Beacon] = {}  # peer -> its newest beacon (a lost peer stays there)
-        self.sets: dict[int, dict[int, ObstacleSets]] = {}  # peer -> rev -> obstacle sets
-        # Revisions already merged (into the brain's own set / the leader's union): merging a set again
-        # cannot change a hull, so it is skipped.
-        self.merged: dict[int, int] = {}
-        self.merged_union: dict[int, int] = {}
+        self.peer_sets = PeerSets()  # peers' sets by revision, and the revisions merged (agent/sets.py)
+        ps = self.peer_sets
+        self.sets, self.merged, self.merged_union = ps.sets, ps.merged, ps.merged_union
         self.alive: set[int] = set()
         self.k = -1  # last tick commanded
         self.beacon_sent = -1
@@ -103,12 +102,11 @@ class AgentNode:
         st = self.states.get(k)
         if st is None or k <= self.k:
             return None
-        fresh = self.beacons.get(k, {})
-        clock = self.clocks.get(k)
-        peers = self.alive if clock is None or self.mode == "realtime" else self.alive.intersection(clock.alive)
-        silent = self.timing.peer_silent_s
-        need = sum(1 for a in peers if a != self.id and a not in fresh and now_s - self.heard.get(a, now_s) < silent)
+        fresh, clock, silent = self.beacons.get(k, {}), self.clocks.get(k), self.timing.peer_silent_s
+        waited = self._expected(k, clock)
+        need = sum(1 for a in waited if a not in fresh and now_s - self.heard.get(a, now_s) < silent)
         if self.mode != "realtime":
+            need += self.nb.also_heard(self.alive, self.beacons.get(k - 1, {}), fresh, waited)
             need += (clock is None) + (st.scan_n > 0 and k not in self.scans)
             if self._linked[0] == k:
                 need += sum(1 for a, rev in self._linked[1].items() if rev and rev not in self.sets.get(a, ()))
@@ -124,6 +122,7 @@ class AgentNode:
         if isinstance(m, Joined):
             self.alive.add(m.agent)
             self.heard.setdefault(m.agent, now)
+            self.nb.peer_joined(m.agent, self.k >= 0)
         elif isinstance(m, Left):
             self.alive.discard(m.agent)
         elif isinstance(m, WorldToken):
@@ -156,11 +155,15 @@ class AgentNode:
         elif isinstance(m, wire.Beacon):
             self.beacons.setdefault(m.k, {})[m.id] = m
             self.heard[m.id] = now
+            self.nb.peer_heard(m.id)
+            if m.k <= self.k and self.guessed_k < 0 and self.nb.intruder(m.k, m):  # too late: we acted without it
+                self.guessed_k = m.k
+                log.warning("agent %d: tick %d: %s; lockstep is no longer deterministic", self.id, m.k,
+                            self.nb.unexpected(m))
             if m.id not in self.last_seen or m.k >= self.last_seen[m.id].k:
                 self.last_seen[m.id] = m
         else:  # wire.ObstacleSet
-            self.sets.setdefault(m.id, {})[m.rev] = {oid: np.array(v, dtype=np.float64)
-                                                     for oid, v in m.obstacles.items()}
+            self.peer_sets.add(m)
 
     def _world_back(self, now: float) -> None:
         """The world is back from a stall: our wait for a command (before a new session) starts now, and so
@@ -180,9 +183,26 @@ class AgentNode:
                     pts.setdefault(oid, []).append((x, y))
         return {oid: np.array(v, dtype=np.float64) for oid, v in pts.items()}
 
+    def _expected(self, k: int, clock: wire.Clock | None) -> set[int]:
+        """The live peers tick k waits for: those that may matter (agent/neighbours.py) and that the world
+        counts alive at k (lockstep); realtime: those whose latest beacon may matter."""
+        p = (self.states[k].px, self.states[k].py)
+        if self.mode == "realtime":
+            return self.nb.near_now(p, self.alive, self.last_seen)
+        self.nb.own.setdefault(k, p)
+        near = self.nb.wait_set(k, self.alive, self.beacons.get(k - 1, {}), self.last_seen)
+        return set(near if clock is None else near.intersection(clock.alive))
+
     def _peers(self, k: int) -> list[wire.Beacon]:
+        """Whom tick k plans with: every beacon of k; for the peers it waited for but lacks (a guess) and for
+        lost peers (their robots stay where they stopped), the latest beacon. An alive peer that may not
+        matter at k is left out: it contributes nothing, and its last position would be stale."""
         fresh = self.beacons.get(k, {})
-        return [fresh.get(a, b) for a, b in self.last_seen.items()]
+        st = self.states[k]
+        wanted = self._expected(k, None) if self.mode != "realtime" else set()
+        rt, p = self.mode == "realtime", (st.px, st.py)
+        return [fresh.get(a, b) for a, b in self.last_seen.items()
+                if a in fresh or a not in self.alive or a in wanted or (rt and self.nb.audible(p, b))]
 
     def _beacon(self, st: wire.State) -> wire.Beacon:
         return wire.Beacon(self.id, st.k, st.t, st.px, st.py, self.radius, self.brain.rev, self.rejected,
@@ -202,6 +222,8 @@ class AgentNode:
             return False
         # Our beacon goes out as soon as our state is in: the peers wait for it (it needs neither clock nor scan).
         if self.beacon_sent < k or now > self.beacon_again:  # (again if peers may have lost it)
+            if self.beacon_sent < k:
+                self._move(k, st)
             self._out.append(self._beacon(st))
             if self.beacon_sent < k:
                 self.wait_since, self._again_n = now, 0
@@ -227,9 +249,9 @@ class AgentNode:
             self._guess = f"gave up waiting {t.agent_wait_timeout_s:g} s for peers' data"
             return True
         fresh = self.beacons.get(k, {})
-        # Peers alive by their tokens whose beacon for k is not in: wait, unless one has said nothing for
-        # peer_silent_s (a token without data: a frozen process before its lease ends, or a forged token).
-        missing = [a for a in clock.alive if a != self.id and a in self.alive and a not in fresh]
+        # Peers alive by their tokens that may matter at k whose beacon for k is not in: wait, unless one has
+        # said nothing for peer_silent_s (a token without data: a frozen process before its lease ends, forged).
+        missing = sorted(a for a in self._expected(k, clock) if a not in fresh)
         if any(now - self.heard.get(a, now) < t.peer_silent_s for a in missing):
             return False
         if missing:
@@ -245,26 +267,21 @@ class AgentNode:
         merged = self.merged_union if self.brain.leader is not None else self.merged
         return all(rev == 0 or rev in self.sets.get(a, ()) or rev <= merged.get(a, 0) for a, rev in need.items())
 
-    def _unmerged(self, wanted: dict[int, int], merged: dict[int, int]) -> list[ObstacleSets]:
-        """The sets at the wanted revisions that are not merged yet (and mark them merged)."""
-        out = []
-        for a in sorted(wanted):
-            rev = wanted[a]
-            if rev == 0 or merged.get(a, 0) >= rev:
-                continue
-            out.append(self._latest_set(a, rev))
-            merged[a] = rev
-        return out
-
-    def _latest_set(self, peer: int, rev: int | None) -> ObstacleSets:
-        revs = self.sets.get(peer, {})
-        if rev is not None and rev in revs:
-            return revs[rev]
-        usable = [r for r in revs if rev is None or r <= rev]
-        return revs[max(usable)] if usable else {}
+    def _move(self, k: int, st: wire.State) -> None:
+        """Our state of tick k is in: our cells follow us (before our beacon, long before our command); in a
+        new home cell our obstacle set is put again (its cache there is new)."""
+        old = self.nb.home
+        cells = self.nb.on_state(k, (st.px, st.py))
+        if cells is not None:
+            self._out.append(cells)
+            if cells.home != old and self.brain.rev:
+                self._out.append(self._obstacle_set(max(self.k, 0)))
 
     def _act(self, k: int, now: float) -> None:
         st = self.states[k]
+        if self.mode == "lockstep" and not self._guess:
+            late = [b for b in self.beacons.get(k, {}).values() if self.nb.intruder(k, b)]
+            self._guess = self.nb.unexpected(late[0]) if late else ""
         if self._guess and self.guessed_k < 0:
             self.guessed_k = k
             log.warning("agent %d: tick %d: %s: acting without them; lockstep is no longer deterministic",
@@ -284,14 +301,17 @@ class AgentNode:
             linked = {a: max(revs) for a, revs in self.sets.items() if revs}
             log.info("agent %d: joining at tick %d; cached obstacle sets from agents %s: %s", self.id, k,
                      sorted(linked), sorted({o for revs in self.sets.values() for v in revs.values() for o in v}))
-        shared = self._unmerged(linked, self.merged)
-        swarm = self._unmerged(every, self.merged_union) if self.brain.leader is not None else None
+        shared = self.peer_sets.unmerged(linked, self.merged)
+        swarm = self.peer_sets.unmerged(every, self.merged_union) if self.brain.leader is not None else None
         scan = self._scan_sets(self.k + 1 if self.k >= 0 else k, k)
         u, grew = self.brain.tick(k, p, scan, peers, shared, swarm)
         if grew:
             self._out.append(self._obstacle_set(k))
         self.last_cmd = wire.Cmd(self.id, k, float(u[0]), float(u[1]))
         self._out.append(self.last_cmd)
+        cells = self.nb.after_command(k)
+        if cells is not None:
+            self._out.append(cells)
         self.last_act = now
         self.k = k
         self.wait_since = None
@@ -309,7 +329,7 @@ class AgentNode:
         if self.states[k].scan_n > 0 and k not in self.scans:
             missing.append("scan")
         fresh = self.beacons.get(k, {})
-        peers = sorted(a for a in (clock.alive if clock else ()) if a != self.id and a in self.alive and a not in fresh)
+        peers = sorted(a for a in self._expected(k, clock) if a not in fresh)
         if peers:
             missing.append(f"beacons of {peers}")
         sets = sorted(a for a, rev in self._linked[1].items() if rev and rev not in self.sets.get(a, ()))
@@ -326,10 +346,11 @@ class AgentNode:
         for store in (self.states, self.clocks, self.beacons, self.scans, self.state_at):
             for kk in [x for x in store if x < k - 2]:
                 del store[kk]
-        for a, revs in self.sets.items():  # keep the newest merged revision and everything after it
-            done = min(self.merged.get(a, 0), self.merged_union.get(a, 0) if self.brain.leader else 2**62)
-            for r in [r for r in revs if r < done]:
-                del revs[r]
+        self.nb.prune(k)
+        p = (self.states[k].px, self.states[k].py)
+        for a in [a for a, b in self.last_seen.items() if a in self.alive and not self.nb.audible(p, b)]:
+            del self.last_seen[a]  # out of our cells: we no longer hear it, its position would go stale
+        self.peer_sets.prune(self.brain.leader is not None)
 
     def _advance(self, now: float) -> None:
         """Act on every tick the data allows."""
@@ -340,11 +361,12 @@ class AgentNode:
             if k <= self.k:
                 return
             if self.beacon_sent < k:
+                self._move(k, self.states[k])
                 self._out.append(self._beacon(self.states[k]))
                 self.beacon_sent = k
             fresh = self.beacons.get(k, {})
             due = self.act_at is not None and now >= self.act_at
-            if due or all(a in fresh for a in self.alive if a != self.id):
+            if due or all(a in fresh for a in self._expected(k, None)):
                 self.act_at = None
                 self._act(k, now)
             return

@@ -1,8 +1,10 @@
 """`reconswarm agent --id I`: one agent as its own process, the AgentNode (agent/node.py) behind zenoh.
 
-This adapter only moves bytes: it subscribes to its state and scan, the clock, every agent's beacon and
-obstacle set (an advanced subscriber: a late or restarted agent receives each publisher's current set),
-and liveliness; decodes what arrives into wire dataclasses (dropping and counting what is malformed),
+This adapter only moves bytes: it subscribes to its state and scan, the clock, liveliness, and the beacons
+and obstacle sets (advanced subscribers: a late or restarted agent, or one entering a cell, receives each
+publisher's current set) of the cells the node names (agent/neighbours.py: re-declared as the agent
+moves, every cell for the virtual leader); it publishes its beacon and set under its own cell. It decodes
+what arrives into wire dataclasses (dropping and counting what is malformed),
 hands each batch to the node with the wall time, and publishes what the node returns: its beacon,
 obstacle set (advanced publisher, cached) and command; it declares the agent's liveliness token.
 When the node asks for a new session, the session is replaced and the node, with everything it knows,
@@ -20,10 +22,12 @@ import zenoh
 from zenoh import ext
 
 from agent.messages import Exit, Input, Invalid, Joined, Left, Output, Reconnect, WorldToken
+from agent.neighbours import Cells
 from agent.node import AgentNode
 from agent.ros2_io import AgentRos2
 from reconswarm.errors import BadInput
 from reconswarm.net import wire
+from reconswarm.net.cells import Cell
 from reconswarm.net.gate import Gate
 from reconswarm.net.report import report_to_wire
 from reconswarm.net.session import Inbox, Member, Rejections, StartMark, Stopper, ZenohOptions, serving
@@ -60,29 +64,51 @@ class AgentLink(Member):
         block = zenoh.CongestionControl.BLOCK
         k = self.keys
         z = session
-        self.pub_beacon = z.declare_publisher(k.beacon(self.id), congestion_control=block)
+        self.home: Cell | None = None  # the cell we publish from (none declared yet)
+        self.pub_beacon: zenoh.Publisher
+        self.pub_obs: ext.AdvancedPublisher
+        self.listening: dict[Cell | None, tuple[zenoh.Subscriber, ext.AdvancedSubscriber]] = {}
         l_m = float(node.s.head_offsets[node.s.agent_index(self.id)])
         self.ros2 = None if ros2_domain_id is None else AgentRos2(
             z, ros2_domain_id, self.id, l_m, node.s.meta.dt_s, self.inbox.urgent)
         self.pub_cmd = None if self.ros2 else z.declare_publisher(k.cmd(self.id), congestion_control=block)
         self.pub_report = z.declare_publisher(k.report(gate.process))
-        self.pub_obs = ext.declare_advanced_publisher(z, k.obstacles(self.id), cache=ext.CacheConfig(max_samples=1))
-        cb = self.inbox.handler()
-        remote = zenoh.Locality.REMOTE
+        self.cb = cb = self.inbox.handler()
+        self.cells(node.nb.current())
         self.subs = [
             # Our state starts a tick: it wakes the loop at once; the rest wakes it only once the node's
             # count of what it still needs is in (one wake-up per tick, not one per message).
             *([] if self.ros2 else [z.declare_subscriber(k.state(self.id), self.inbox.handler(urgent=True))]),
             z.declare_subscriber(k.scan(self.id), cb),
             z.declare_subscriber(k.clock, cb),
-            # Our own announcements are not delivered back (REMOTE); anyone else's on our keys are checked.
-            z.declare_subscriber(k.all_agents("beacon"), cb, allowed_origin=remote),
-            ext.declare_advanced_subscriber(z, k.all_agents("obstacles"), cb, allowed_origin=remote,
-                                            history=ext.HistoryConfig(detect_late_publishers=True)),
             z.liveliness().declare_subscriber(k.alive_all, cb, history=True),
         ]
         # Declared last: the token tells the world this agent is ready to receive.
         self.token = z.liveliness().declare_token(k.alive_agent(self.id))
+
+    def cells(self, c: Cells) -> None:
+        """Publish from c.home (the obstacle set's cache moves with it: the node puts its set again), listen
+        to c.listen: new cells are declared before the old ones go."""
+        z, k, block = self.z, self.keys, zenoh.CongestionControl.BLOCK
+        if c.home != self.home:
+            if self.home is not None:
+                self.pub_beacon.undeclare()
+                self.pub_obs.undeclare()
+            self.home = c.home
+            self.pub_beacon = z.declare_publisher(k.beacon(c.home, self.id), congestion_control=block)
+            self.pub_obs = ext.declare_advanced_publisher(z, k.obstacles(c.home, self.id),
+                                                          cache=ext.CacheConfig(max_samples=1))
+        want: set[Cell | None] = {None} if c.listen is None else set(c.listen)
+        remote = zenoh.Locality.REMOTE
+        for cell in want - self.listening.keys():
+            # Our own announcements are not delivered back (REMOTE); anyone else's on our keys are checked.
+            self.listening[cell] = (
+                z.declare_subscriber(k.cell_agents(cell, "beacon"), self.cb, allowed_origin=remote),
+                ext.declare_advanced_subscriber(z, k.cell_agents(cell, "obstacles"), self.cb, allowed_origin=remote,
+                                                history=ext.HistoryConfig(detect_late_publishers=True)))
+        for cell in self.listening.keys() - want:
+            for sub in self.listening.pop(cell):
+                sub.undeclare()
 
     def decode(self, key: str, payload: bytes, kind: str, source: str, _at_s: float) -> Input | None:
         """The sample as a node input (None: not for us, or refused by admission, which counts and logs it);
@@ -139,6 +165,8 @@ class AgentLink(Member):
             self.pub_beacon.put(wire.beacon_to_wire(out))
         elif isinstance(out, wire.ObstacleSet):
             self.pub_obs.put(wire.obstacles_to_wire(out))
+        elif isinstance(out, Cells):
+            self.cells(out)
 
     def run(self, stop: Stopper) -> int:
         """Feed the node until it exits or asks for a new session (RECONNECT), or a signal stops us."""

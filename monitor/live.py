@@ -135,7 +135,7 @@ class LiveFeed:
     def __init__(self, view: LiveView, keys: wire.Keys, session: Any, rej: Rejections) -> None:
         self.view, self.keys, self.rej = view, keys, rej
         self.inbox = Inbox()
-        self.sub = ext.declare_advanced_subscriber(session, keys.all_agents("obstacles"), self.inbox.handler(),
+        self.sub = ext.declare_advanced_subscriber(session, keys.cell_agents(None, "obstacles"), self.inbox.handler(),
                                                    history=ext.HistoryConfig(detect_late_publishers=True))
 
     def poll(self) -> None:

@@ -68,7 +68,7 @@ class MonitorAdapter(Member):
         recovery = ext.RecoveryConfig(periodic_queries=None, heartbeat=True)
         self.subs = [ext.declare_advanced_subscriber(z, k.truth, self.inbox.handler(urgent=True), recovery=recovery),
                      *(z.declare_subscriber(key, self.inbox.handler())
-                       for key in (k.all_agents("beacon"), k.clock, k.report_all))]
+                       for key in (k.cell_agents(None, "beacon"), k.clock, k.report_all))]
         # Admission (what the run cannot contain is refused and counted, with the other processes' reports);
         # an agent is alive while its token is there AND its own beacons keep coming.
         self.gate = Gate(node.s, "monitor")

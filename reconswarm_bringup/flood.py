@@ -3,6 +3,8 @@
 Every payload is invalid by construction, one of several kinds: random bytes, truncated msgpack, a wrong
 schema version, NaN / inf numbers, wrong types, another agent's id, an oversized payload. A valid message
 is never sent, so the run's outcome must not change; every receiver must drop and count each one.
+Beacons and obstacle sets go under the cell each agent is in when the flood starts (heard from the run's
+beacons for up to 2 s; else the cell of its start), so the agents listening there receive them too.
 Prints one JSON line: how many payloads went to each key.
 """
 
@@ -11,6 +13,7 @@ from __future__ import annotations
 import json
 import math
 import random
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +22,7 @@ from typing import Any
 import msgpack
 
 from reconswarm.net import wire
+from reconswarm.net.cells import Cell, CellGrid
 from reconswarm.net.session import ZenohOptions, open_session
 from reconswarm.scenario import load
 
@@ -53,18 +57,43 @@ class FloodConfig:
     seed: int = 0
 
 
+def _cells_now(session: Any, k: wire.Keys, ids: list[int], start: dict[int, Cell]) -> dict[int, Cell]:
+    """The cell of each agent's latest beacon (listening up to 2 s), else of its start."""
+    heard: dict[int, Cell] = {}
+
+    def got(sample: Any) -> None:
+        parts = str(sample.key_expr).split("/")
+        try:
+            a, (cx, cy) = int(parts[-2]), (int(c) for c in parts[-4].split("_"))
+        except ValueError:
+            return
+        heard[a] = (cx, cy)
+
+    sub = session.declare_subscriber(k.cell_agents(None, "beacon"), got)
+    deadline = time.monotonic() + 2.0
+    while time.monotonic() < deadline and not set(ids) <= heard.keys():
+        time.sleep(0.05)
+    sub.undeclare()
+    return {a: heard.get(a, start.get(a, (0, 0))) for a in ids}
+
+
 def run(cfg: FloodConfig) -> dict[str, int]:
-    ids = [a.id for a in load(cfg.scenario).agents] if cfg.scenario else list(range(1, 11))
+    s = load(cfg.scenario) if cfg.scenario else None
+    ids = [a.id for a in s.agents] if s else list(range(1, 11))
+    grid = CellGrid.for_scenario(s) if s else None
+    start = {a.id: grid.cell_of(*a.start_m) for a in s.agents} if s and grid else {}
     k = wire.Keys(cfg.run)
-    keys: list[tuple[str, int]] = [(k.clock, 0), (k.truth, 0), (k.event, 0)]
-    for a in ids:
-        keys += [(k.state(a), a), (k.scan(a), a), (k.cmd(a), a), (k.beacon(a), a), (k.obstacles(a), a)]
     rng = random.Random(cfg.seed)
     sent: dict[str, int] = {}
     import zenoh
 
     session = open_session(cfg.zenoh, "flood")
     try:
+        cells = _cells_now(session, k, ids, start)
+        keys: list[tuple[str, int]] = [(k.clock, 0), (k.truth, 0), (k.event, 0)]
+        for a in ids:
+            keys += [(k.state(a), a), (k.scan(a), a), (k.cmd(a), a), (k.beacon(cells[a], a), a),
+                     (k.obstacles(cells[a], a), a)]
         pubs = {key: session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
                 for key, _ in keys}
         makers = {key: payloads(rng, kid) for key, kid in keys}

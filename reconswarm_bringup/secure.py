@@ -15,15 +15,16 @@
 
 The rules (`R` = `swarm/<run>`) allow, per subject and nothing else:
 
-- agent i: put `R/agent/i/{cmd,beacon,obstacles}`, its intrusion report `R/report/agent-i`; token
-  `R/alive/agent/i`; the advanced publisher's cache (queryable `R/agent/i/obstacles/@adv/pub/**`, replies
-  on `R/agent/i/obstacles`); subscribe (and receive) `R/agent/i/{state,scan}`, `R/clock`,
-  `R/agent/*/beacon`, `R/agent/*/obstacles`; history queries on `R/agent/*/obstacles/@adv/**`; liveliness
-  subscriptions on `R/alive/**` and `R/agent/*/obstacles/@adv/pub/**`;
+- agent i: put `R/agent/i/cmd`, `R/cell/*/agent/i/{beacon,obstacles}` (in any cell, under its own id
+  only), its intrusion report `R/report/agent-i`; token `R/alive/agent/i`; the advanced publisher's cache
+  (queryable `R/cell/*/agent/i/obstacles/@adv/pub/**`, replies on `R/cell/*/agent/i/obstacles`); subscribe
+  (and receive) `R/agent/i/{state,scan}`, `R/clock`, `R/cell/*/agent/*/beacon`,
+  `R/cell/*/agent/*/obstacles` (one cell or all); history queries on `R/cell/*/agent/*/obstacles/@adv/**`;
+  liveliness subscriptions on `R/alive/**` and `R/cell/*/agent/*/obstacles/@adv/pub/**`;
 - simworld: put `R/clock`, `R/truth`, `R/agent/*/state`, `R/agent/*/scan`, `R/report/simworld`; token
   `R/alive/simworld`; subscribe `R/agent/*/cmd`, liveliness `R/alive/**`; the truth's advanced publisher
   (queryable `R/truth/@adv/pub/**` replying on `R/truth`, heartbeats put under `R/truth/@adv/pub/**`);
-- monitor: put `R/event`; token `R/alive/monitor`; subscribe `R/truth`, `R/agent/*/beacon`, `R/clock`,
+- monitor: put `R/event`; token `R/alive/monitor`; subscribe `R/truth`, `R/cell/*/agent/*/beacon`, `R/clock`,
   `R/report/*`, liveliness `R/alive/**`; recovery of a lost truth (subscribe the heartbeats
   `R/truth/@adv/pub/**`, query `R/truth/@adv/**`, receive replies on `R/truth`);
 - observer: subscribe `R/clock`, `R/event`;
@@ -198,25 +199,25 @@ def access_control(run: str, agent_ids: tuple[int, ...]) -> dict[str, Any]:
         policies.append({"id": f"{subject}-policy", "rules": rule_ids, "subjects": [subject]})
 
     # Shared by every agent: the swarm's beacons and obstacle sets, the clock, history of obstacle sets.
-    obstacles = f"{r}/agent/*/obstacles"
+    obstacles, beacons = f"{r}/cell/*/agent/*/obstacles", f"{r}/cell/*/agent/*/beacon"
     agents_common = [
-        *subscribe("agents-sub", [f"{r}/clock", f"{r}/agent/*/beacon", obstacles]),
+        *subscribe("agents-sub", [f"{r}/clock", beacons, obstacles]),
         # advanced subscriber: history query to the publishers' caches, their replies, late publishers
         rule("agents-history-query", ["query"], ("ingress", "egress"), [f"{obstacles}/@adv/**"]),
         rule("agents-history-reply", ["reply"], ("egress",), [obstacles]),
         rule("agents-history-live", ["declare_liveliness_subscriber"], ("ingress",), [f"{obstacles}/@adv/pub/**"]),
     ]
     for i in agent_ids:
-        a = f"{r}/agent/{i}"
+        a, own = f"{r}/agent/{i}", f"{r}/cell/*/agent/{i}"
         grant(f"agent-{i}", [
             *agents_common,
-            *publish(f"agent-{i}-pub", [f"{a}/cmd", f"{a}/beacon", f"{a}/obstacles", f"{r}/report/agent-{i}"],
-                     [f"{r}/agent/*/cmd", f"{r}/agent/*/beacon", obstacles, f"{r}/report/*"]),
+            *publish(f"agent-{i}-pub", [f"{a}/cmd", f"{own}/beacon", f"{own}/obstacles", f"{r}/report/agent-{i}"],
+                     [f"{r}/agent/*/cmd", beacons, obstacles, f"{r}/report/*"]),
             *subscribe(f"agent-{i}-own", [f"{a}/state", f"{a}/scan"]),
             *membership(f"agent-{i}", f"{r}/alive/agent/{i}"),
             # its advanced publisher's cache: a queryable under its own key, replies with its own set only
-            rule(f"agent-{i}-cache", ["declare_queryable"], ("ingress",), [f"{a}/obstacles/@adv/pub/**"]),
-            rule(f"agent-{i}-cache-reply", ["reply"], ("ingress",), [f"{a}/obstacles"]),
+            rule(f"agent-{i}-cache", ["declare_queryable"], ("ingress",), [f"{own}/obstacles/@adv/pub/**"]),
+            rule(f"agent-{i}-cache-reply", ["reply"], ("ingress",), [f"{own}/obstacles"]),
         ])
     grant("simworld", [
         *publish("simworld-pub", [f"{r}/clock", f"{r}/truth", f"{r}/agent/*/state", f"{r}/agent/*/scan",
@@ -230,7 +231,7 @@ def access_control(run: str, agent_ids: tuple[int, ...]) -> dict[str, Any]:
     ])
     grant("monitor", [
         *publish("monitor-pub", [f"{r}/event"]),
-        *subscribe("monitor-sub", [f"{r}/truth", f"{r}/agent/*/beacon", f"{r}/clock", f"{r}/report/*"]),
+        *subscribe("monitor-sub", [f"{r}/truth", f"{r}/cell/*/agent/*/beacon", f"{r}/clock", f"{r}/report/*"]),
         *membership("monitor", f"{r}/alive/monitor"),
         # recovery of a lost truth: the world's heartbeats, queries to its cache and their replies
         *subscribe("monitor-truth-heartbeat", [f"{r}/truth/@adv/pub/**"]),

@@ -4,6 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from reconswarm.net.cells import Cell, cell_chunk, chunk_cell
+
+CELL_LEAVES = ("beacon", "obstacles")  # what is published under a cell of the sender's position
+
 
 class WireError(ValueError):
     """A payload (or key) that must be dropped (and counted)."""
@@ -32,11 +36,19 @@ class Keys:
     def cmd(self, agent_id: int) -> str:
         return self.agent(agent_id, "cmd")
 
-    def beacon(self, agent_id: int) -> str:
-        return self.agent(agent_id, "beacon")
+    def in_cell(self, cell: Cell, agent_id: int, leaf: str) -> str:
+        """A key published under the spatial cell of the sender's position (reconswarm/net/cells.py)."""
+        return f"{self.prefix}/cell/{cell_chunk(cell)}/agent/{agent_id}/{leaf}"
 
-    def obstacles(self, agent_id: int) -> str:
-        return self.agent(agent_id, "obstacles")
+    def beacon(self, cell: Cell, agent_id: int) -> str:
+        return self.in_cell(cell, agent_id, "beacon")
+
+    def obstacles(self, cell: Cell, agent_id: int) -> str:
+        return self.in_cell(cell, agent_id, "obstacles")
+
+    def cell_agents(self, cell: Cell | None, leaf: str) -> str:
+        """Every agent's `leaf` (beacon, obstacles) in one cell, or in every cell (None)."""
+        return f"{self.prefix}/cell/{'*' if cell is None else cell_chunk(cell)}/agent/*/{leaf}"
 
     def all_agents(self, leaf: str) -> str:
         return f"{self.prefix}/agent/*/{leaf}"
@@ -77,8 +89,9 @@ class Keys:
         return f"{self.prefix}/report/*"
 
     def parse(self, key: str) -> tuple[str, int | None, str]:
-        """Classify a key: ("agent", id, leaf) | ("clock", None, "") | ("event", None, "") |
-        ("truth", None, "") | ("alive", id or None, "agent" | "simworld" | "monitor") |
+        """Classify a key: ("agent", id, leaf) (also for `cell/<cx>_<cy>/agent/<id>/<leaf>`) |
+        ("clock", None, "") | ("event", None, "") | ("truth", None, "") |
+        ("alive", id or None, "agent" | "simworld" | "monitor") |
         ("report", agent id or None, "agent-<id>" | "simworld").
         Raises WireError for anything else."""
         hit = self._parsed.get(key)
@@ -102,6 +115,12 @@ class Keys:
             return "truth", None, ""
         if len(parts) == 3 and parts[0] == "agent":
             return "agent", _key_id(parts[1], key), parts[2]
+        if len(parts) == 5 and parts[0] == "cell" and parts[2] == "agent" and parts[4] in CELL_LEAVES:
+            try:
+                chunk_cell(parts[1])
+            except ValueError:
+                raise WireError(f"bad cell in key {key!r}") from None
+            return "agent", _key_id(parts[3], key), parts[4]
         if len(parts) == 3 and parts[:2] == ["alive", "agent"]:
             return "alive", _key_id(parts[2], key), "agent"
         if len(parts) == 2 and parts[0] == "report" and (parts[1] == "simworld" or (

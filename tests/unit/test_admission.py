@@ -48,7 +48,7 @@ def clock(k: int, **kw: object) -> wire.Clock:
 def started() -> Admission:
     adm = Admission(S)
     assert adm.check_clock(clock(0), WORLD, KEYS.clock) is None  # pins the world
-    assert adm.check_beacon(beacon(2, 40.0, 0.0), A2, KEYS.beacon(2), now=0.0) is None  # pins agent 2
+    assert adm.check_beacon(beacon(2, 40.0, 0.0), A2, KEYS.beacon((0, 0), 2), now=0.0) is None  # pins agent 2
     assert adm.check_cmd(wire.Cmd(2, 0, 1.0, 0.0), A2, KEYS.cmd(2), now=0.0, world_k=0) is None
     return adm
 
@@ -72,17 +72,18 @@ def test_forged_cmd_for_agent_2_is_refused() -> None:
 
 def test_phantom_beacons_are_refused() -> None:
     adm = started()
-    got = adm.check_beacon(beacon(99, 100.0, 0.0, radius=1e6), X, KEYS.beacon(99), now=1.0)
+    got = adm.check_beacon(beacon(99, 100.0, 0.0, radius=1e6), X, KEYS.beacon((0, 0), 99), now=1.0)
     assert kind(got) is K.UNKNOWN_AGENT
-    assert kind(adm.check_beacon(beacon(3, 100.0, 0.0, radius=1e6), X, KEYS.beacon(3), now=1.0)) is K.RADIUS
+    assert kind(adm.check_beacon(beacon(3, 100.0, 0.0, radius=1e6), X, KEYS.beacon((0, 0), 3), now=1.0)) is K.RADIUS
     # A phantom 60 m ahead of the swarm: an unknown id, or a real one from another session.
-    assert kind(adm.check_beacon(beacon(99, 100.0, 0.0, radius=2.6), X, KEYS.beacon(99), now=1.0)) is K.UNKNOWN_AGENT
-    assert kind(adm.check_beacon(beacon(2, 100.0, 0.0, t=12.0), X, KEYS.beacon(2), now=0.5)) is K.IMPERSONATION
+    got = adm.check_beacon(beacon(99, 100.0, 0.0, radius=2.6), X, KEYS.beacon((0, 0), 99), now=1.0)
+    assert kind(got) is K.UNKNOWN_AGENT
+    assert kind(adm.check_beacon(beacon(2, 100.0, 0.0, t=12.0), X, KEYS.beacon((0, 0), 2), now=0.5)) is K.IMPERSONATION
     # Impossible positions: 1,000 km away at t = 10 s; a jump no robot can make between two beacons.
-    assert kind(adm.check_beacon(beacon(5, 1e6, 0.0), A5, KEYS.beacon(5), now=1.0)) is K.POSITION
-    assert adm.check_beacon(beacon(5, 40.0, 20.0, t=10.0), A5, KEYS.beacon(5), now=1.0) is None
+    assert kind(adm.check_beacon(beacon(5, 1e6, 0.0), A5, KEYS.beacon((0, 0), 5), now=1.0)) is K.POSITION
+    assert adm.check_beacon(beacon(5, 40.0, 20.0, t=10.0), A5, KEYS.beacon((0, 0), 5), now=1.0) is None
     jump = adm.reach_m(0.05) + 1.0
-    got = adm.check_beacon(beacon(5, 40.0 + jump, 20.0, t=10.05), A5, KEYS.beacon(5), now=1.1)
+    got = adm.check_beacon(beacon(5, 40.0 + jump, 20.0, t=10.05), A5, KEYS.beacon((0, 0), 5), now=1.1)
     assert kind(got) is K.POSITION
 
 
@@ -106,29 +107,29 @@ def test_hulls_must_lie_on_the_true_obstacle() -> None:
             if seen.shape[0]:
                 hull = convex_hull(np.concatenate([hull, seen]))
                 o = wire.ObstacleSet(2, 1, 1, {oid: tuple((float(x), float(y)) for x, y in hull)})
-                assert adm.check_obstacles(o, X, KEYS.obstacles(2)) is None  # whoever sends the truth
+                assert adm.check_obstacles(o, X, KEYS.obstacles((0, 0), 2)) is None  # whoever sends the truth
                 admitted += 1
     assert admitted > 20
     oid = field.ids[0]
     x0, y0 = field.polygons[0].mean(axis=0)
     slab = ((x0, y0 - 5.0), (x0 + 10_000.0, y0 - 5.0), (x0 + 10_000.0, y0 + 5.0), (x0, y0 + 5.0))
-    got = adm.check_obstacles(wire.ObstacleSet(2, 1, 1, {oid: slab}), X, KEYS.obstacles(2))
+    got = adm.check_obstacles(wire.ObstacleSet(2, 1, 1, {oid: slab}), X, KEYS.obstacles((0, 0), 2))
     assert kind(got) is K.HULL and got is not None and "off the obstacle's boundary" in got.detail
     # The same slab from the phantom: refused for its id already.
-    got = adm.check_obstacles(wire.ObstacleSet(99, 1, 1, {oid: slab}), X, KEYS.obstacles(99))
+    got = adm.check_obstacles(wire.ObstacleSet(99, 1, 1, {oid: slab}), X, KEYS.obstacles((0, 0), 99))
     assert kind(got) is K.UNKNOWN_AGENT
     # More vertices than the sensor can produce on that obstacle (all on its boundary).
     edge = field.polygons[0][:2]
     line = edge[0] + np.linspace(0, 1, adm.max_vertices[oid] + 1)[:, None] * (edge[1] - edge[0])
     many = tuple((float(x), float(y)) for x, y in line)
-    assert kind(adm.check_obstacles(wire.ObstacleSet(2, 1, 1, {oid: many}), X, KEYS.obstacles(2))) is K.HULL
+    assert kind(adm.check_obstacles(wire.ObstacleSet(2, 1, 1, {oid: many}), X, KEYS.obstacles((0, 0), 2))) is K.HULL
 
 
 def test_an_obstacle_set_with_4000_ids_is_refused() -> None:
     adm = started()
     tri: tuple[tuple[float, float], ...] = ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))
     flood = {f"o{i}": tri for i in range(4000)}
-    got = adm.check_obstacles(wire.ObstacleSet(2, 1, 1, flood), A2, KEYS.obstacles(2))
+    got = adm.check_obstacles(wire.ObstacleSet(2, 1, 1, flood), A2, KEYS.obstacles((0, 0), 2))
     assert kind(got) is K.UNKNOWN_OBSTACLE and got is not None and "4000 obstacle id(s)" in got.detail
 
 
@@ -235,13 +236,13 @@ def test_gate_delivers_the_runs_messages_and_counts_logs_and_reports_the_rest(ca
     g = Gate(S, "agent-3")
     assert g.admit(clock(0), WORLD, KEYS.clock, 0.0) and g.world_k == 0
     assert g.admit(wire.State(3, 0, 0.0, 0.0, 0.0, 0.0, 0.5, 0.0), WORLD, KEYS.state(3), 0.0)
-    assert g.admit(beacon(2, 40.0, 0.0, t=0.0), A2, KEYS.beacon(2), 0.0)
+    assert g.admit(beacon(2, 40.0, 0.0, t=0.0), A2, KEYS.beacon((0, 0), 2), 0.0)
     assert g.report(0.0) is None  # nothing refused yet
     with caplog.at_level("WARNING", logger="reconswarm.admission"):
         assert not g.admit(wire.State(3, 1, 0.05, 9.0, 9.0, 0.0, 9.5, 9.0), X, KEYS.state(3), 0.1)
         for n in range(5):
             assert not g.admit(clock(2 + n, end=True, reason="converged"), X, KEYS.clock, 0.2 + 0.01 * n)
-        assert not g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.beacon(99), 0.3)
+        assert not g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.beacon((0, 0), 99), 0.3)
     assert g.count == 7 and g.world_k == 0  # the spoofed clocks did not advance the world's tick
     lines = [r.getMessage() for r in caplog.records]
     assert len(lines) == 2 and all(X in ln for ln in lines)  # first of each (kind, source) at once, rest quiet
@@ -249,7 +250,7 @@ def test_gate_delivers_the_runs_messages_and_counts_logs_and_reports_the_rest(ca
     assert r is not None and r.process == "agent-3"
     assert {(k, s, n) for k, s, n, _ in r.rows} == {("not_from_world", X, 6), ("unknown_agent", X, 1)}
     assert g.report(1.6) is None  # unchanged
-    g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.beacon(99), 1.7)
+    g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.beacon((0, 0), 99), 1.7)
     assert g.report(1.8) is None and g.report(2.6) is not None  # changed, but at most once a second
 
 
@@ -260,8 +261,8 @@ def test_oversize_obstacle_sets_are_refused_before_decoding() -> None:
     full = {oid: tuple((float(x), float(y)) for x, y in field.samples[field.start[m]:field.start[m] + field.count[m]])
             for m, oid in enumerate(field.ids)}
     biggest = wire.obstacles_to_wire(wire.ObstacleSet(10, 2**40, 2**40, full))
-    assert adm.check_set_size(len(biggest), A2, KEYS.obstacles(10)) is None
+    assert adm.check_set_size(len(biggest), A2, KEYS.obstacles((0, 0), 10)) is None
     tri: tuple[tuple[float, float], ...] = ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))
     flood = wire.obstacles_to_wire(wire.ObstacleSet(4, 1, 1, {f"o{i}": tri for i in range(4000)}))
-    got = adm.check_set_size(len(flood), X, KEYS.obstacles(4))
+    got = adm.check_set_size(len(flood), X, KEYS.obstacles((0, 0), 4))
     assert kind(got) is K.OVERSIZE and len(flood) > 200_000 > 10 * adm.max_set_bytes  # 255 kB vs 14 kB

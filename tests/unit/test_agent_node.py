@@ -14,16 +14,20 @@ import pytest
 
 from agent.brain import AgentBrain, Peer
 from agent.messages import Exit, Invalid, Joined, Left, Output, Reconnect, WorldToken
+from agent.neighbours import Cells
 from agent.node import AgentNode
 from reconswarm.net import wire
 from reconswarm.net.timing import Timing
 from reconswarm.scenario import PlannerKind, Scenario, load
 from tests.support import PAPER
 
-S = load(PAPER)
+A, B, C = 1, 2, 3  # the node under test and two peers
+HEAD = {A: (100.0, 0.0), B: (110.0, 0.0), C: (120.0, 0.0)}  # where their head points start (tick 0)
+S = dataclasses.replace(load(PAPER), agents=tuple(  # (in the paper's scenario, moved there: heading 0, l = 0.5)
+    dataclasses.replace(a, start_m=(HEAD[a.id][0] - 0.5, HEAD[a.id][1])) if a.id in HEAD else a
+    for a in load(PAPER).agents))
 DT = S.meta.dt_s
 T = Timing()
-A, B, C = 1, 2, 3  # the node under test and two peers
 RADIUS = {a.id: a.radius_m for a in S.agents}
 
 
@@ -37,6 +41,11 @@ def clock(k: int, alive: tuple[int, ...] = (A, B, C), **kw: object) -> wire.Cloc
 
 def beacon(aid: int, k: int, px: float, py: float, rev: int = 0) -> wire.Beacon:
     return wire.Beacon(aid, k, k * DT, px, py, RADIUS[aid], rev)
+
+
+def no_cells(out: list[Output]) -> list[Output]:
+    """What goes on the wire (the cells to listen to are the adapter's business: tests/unit/test_neighbours.py)."""
+    return [o for o in out if not isinstance(o, Cells)]
 
 
 def cmds(out: list[Output]) -> list[wire.Cmd]:
@@ -87,7 +96,8 @@ def test_lockstep_waits_for_the_scan_the_state_announces() -> None:
     out = node.step([wire.Scan(A, 0, 0.0, pts)], 0.1)
     scan = {"diamond": np.array([[130.0, 0.0], [131.0, 1.0]])}
     assert [(c.ux, c.uy) for c in cmds(out)] == [reference(0, (100.0, 0.0), [], scan=scan)]
-    assert isinstance(out[-2], wire.ObstacleSet) and out[-2].rev == 1  # its knowledge grew: announced
+    grew = no_cells(out)[-2]
+    assert isinstance(grew, wire.ObstacleSet) and grew.rev == 1  # its knowledge grew: announced
     assert node.brain.rev == 1
 
 
@@ -126,7 +136,7 @@ def test_a_stuck_tick_announces_beacon_and_obstacle_set_again() -> None:
     node = started(peers=(B,))
     pts = ((130.0, 0.0, "diamond"), (131.0, 1.0, "diamond"), (131.0, -1.0, "diamond"))
     node.step([clock(0, (A, B)), state(0, 100.0, 0.0, scan_n=3), wire.Scan(A, 0, 0.0, pts),
-               beacon(B, 0, 400.0, 0.0)], 0.0)
+               beacon(B, 0, 140.0, 0.0)], 0.0)
     assert node.k == 0 and node.brain.rev == 1
     node.step([clock(1, (A, B)), state(1, 100.1, 0.0)], 1.0)
     # B stays silent, but was heard 1 s ago (< peer_silent_s): after beacon_again_s both go out again.
@@ -168,7 +178,7 @@ def test_a_repeated_tick_resends_the_same_command_without_planning_again() -> No
 
 def test_a_silent_peer_alive_by_its_token_is_not_waited_for() -> None:
     node = started(peers=(B,))
-    node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 300.0, 0.0)], 0.0)
+    node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 140.0, 0.0)], 0.0)
     node.step([clock(1, (A, B)), state(1, 100.05, 0.0)], T.peer_silent_s + 0.1)
     assert node.k == 1  # B's last beacon is older than peer_silent_s
     assert node.guessed_k == 1  # alive by its token, yet acted on without it: said
@@ -177,13 +187,13 @@ def test_a_silent_peer_alive_by_its_token_is_not_waited_for() -> None:
 def test_after_a_world_stall_a_peer_is_silent_only_counting_from_the_worlds_return() -> None:
     """Nobody has a state to announce while the world is frozen: B's beacon 10 s ago is not silence."""
     node = started(peers=(B,))
-    node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 300.0, 0.0)], 0.0)
+    node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 140.0, 0.0)], 0.0)
     node.step([WorldToken(False)], 2.0)
     node.step([WorldToken(True), clock(1, (A, B)), state(1, 100.05, 0.0)], 10.0)
     assert node.k == 0 and node.awaiting(10.0) == 1  # B's beacon for tick 1 is waited for
     node.step([], 10.0 + T.peer_silent_s - 0.01)
     assert node.k == 0
-    node.step([beacon(B, 1, 300.0, 0.0)], 11.0)
+    node.step([beacon(B, 1, 140.0, 0.0)], 11.0)
     assert node.k == 1 and node.guessed_k == -1  # deterministic
 
 def test_pruning_keeps_only_recent_ticks_and_the_merged_revision() -> None:
@@ -268,7 +278,8 @@ def test_a_restarted_agent_joining_late_merges_every_cached_obstacle_set() -> No
     far = wire.ObstacleSet(B, 300, 4, {"hexagon": ((600.0, 0.0), (601.0, 1.0), (601.0, -1.0))})
     out = node.step([far, clock(300, (A, B)), state(300, 100.0, 0.0), beacon(B, 300, 900.0, 0.0, rev=4)], 0.0)
     assert cmds(out)[0].k == 300 and "hexagon" in node.brain.obstacle_sets()  # B is far beyond link range
-    assert isinstance(out[-2], wire.ObstacleSet) and out[-2].rev == 1
+    grew = no_cells(out)[-2]
+    assert isinstance(grew, wire.ObstacleSet) and grew.rev == 1
 
 
 def test_a_late_joiner_waits_for_every_peers_cached_set_before_its_first_tick() -> None:

@@ -82,8 +82,9 @@ def test_keys_parse_every_key():
     k = wire.Keys("paper")
     assert k.parse(k.state(3)) == ("agent", 3, "state")
     assert k.parse(k.cmd(10)) == ("agent", 10, "cmd")
-    assert k.parse(k.beacon(1)) == ("agent", 1, "beacon")
-    assert k.parse(k.obstacles(2)) == ("agent", 2, "obstacles")
+    assert k.beacon((-3, 4), 1) == "swarm/paper/cell/-3_4/agent/1/beacon"
+    assert k.parse(k.beacon((-3, 4), 1)) == ("agent", 1, "beacon")
+    assert k.parse(k.obstacles((0, 12), 2)) == ("agent", 2, "obstacles")
     assert k.parse(k.scan(7)) == ("agent", 7, "scan")
     assert k.parse(k.clock) == ("clock", None, "")
     assert k.parse(k.event) == ("event", None, "")
@@ -92,7 +93,8 @@ def test_keys_parse_every_key():
     assert k.parse(k.alive_simworld) == ("alive", None, "simworld")
     assert k.parse(k.alive_monitor) == ("alive", None, "monitor")
     for bad in ("swarm/other/clock", "swarm/paper/agent/x/state", "swarm/paper/agent/-1/cmd", "swarm/paper/zzz",
-                "swarm/paper/agent/99999999999/cmd"):
+                "swarm/paper/agent/99999999999/cmd", "swarm/paper/cell/1-2/agent/1/beacon",
+                "swarm/paper/cell/1_2/agent/1/cmd", "swarm/paper/cell/x_2/agent/1/beacon"):
         with pytest.raises(wire.WireError):
             k.parse(bad)
 

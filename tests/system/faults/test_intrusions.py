@@ -19,6 +19,7 @@ from typing import Any
 import zenoh
 
 from reconswarm.net import wire
+from reconswarm.net.cells import CellGrid
 from reconswarm.net.session import ZenohOptions
 from reconswarm.scenario import load
 from tests.support import PAPER, ROOT, assert_all_gone, events, free_port, launcher_cmd, read_run_id, tick_count
@@ -93,11 +94,12 @@ def _attack(a: Attacker, until_t_s: float, timeout_s: float = 600.0) -> dict[str
         for k in (c.k, c.k + 1):
             put("cmd", a.keys.cmd(2), wire.cmd_to_wire(wire.Cmd(2, k, *u)))
         cx, cy = sum(tr.px) / len(tr.px), sum(tr.py) / len(tr.py)
-        put("beacon", a.keys.beacon(99), wire.beacon_to_wire(wire.Beacon(99, c.k, c.t, cx, cy, 1e6)))
-        put("beacon", a.keys.beacon(4), wire.beacon_to_wire(wire.Beacon(4, c.k, c.t, cx + 60.0, cy, 2.6)))
-        put("obstacles", a.keys.obstacles(99), wire.obstacles_to_wire(wire.ObstacleSet(99, c.k, 1, slab)))
-        put("obstacles", a.keys.obstacles(4), wire.obstacles_to_wire(wire.ObstacleSet(4, c.k, 99, slab)))
-        put("obstacles", a.keys.obstacles(4), wire.obstacles_to_wire(wire.ObstacleSet(4, c.k, 98, many)))
+        here = CellGrid.for_scenario(s).cell_of(cx, cy)  # the agents near the centroid listen to its cell
+        put("beacon", a.keys.beacon(here, 99), wire.beacon_to_wire(wire.Beacon(99, c.k, c.t, cx, cy, 1e6)))
+        put("beacon", a.keys.beacon(here, 4), wire.beacon_to_wire(wire.Beacon(4, c.k, c.t, cx + 60.0, cy, 2.6)))
+        put("obstacles", a.keys.obstacles(here, 99), wire.obstacles_to_wire(wire.ObstacleSet(99, c.k, 1, slab)))
+        put("obstacles", a.keys.obstacles(here, 4), wire.obstacles_to_wire(wire.ObstacleSet(4, c.k, 99, slab)))
+        put("obstacles", a.keys.obstacles(here, 4), wire.obstacles_to_wire(wire.ObstacleSet(4, c.k, 98, many)))
         put("clock", a.keys.clock, wire.clock_to_wire(wire.Clock(c.k + 1, c.t + s.meta.dt_s, c.alive,
                                                                  end=True, reason="converged")))
         put("clock", a.keys.clock, wire.clock_to_wire(wire.Clock(c.k + 1, c.t + s.meta.dt_s, c.alive,

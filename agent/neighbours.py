@@ -1,0 +1,185 @@
+"""Who an agent hears and waits for: its cells and its lockstep wait set, pure (no zenoh).
+
+Beacons and obstacle sets are published under the cell of the sender's head point
+(`swarm/<run>/cell/<cx>_<cy>/agent/<id>/...`, reconswarm/net/cells.py). An agent listens to every cell
+that meets the disk of radius reach + 3 V dt around its head point, V the scenario's speed bound:
+
+- at tick k, as soon as its state is in (before its beacon and long before its command), it adds the cells
+  around p_i(k) and publishes from the cell of p_i(k); once its command of tick k is out, it drops the cells
+  only p_i(k-1) needed. A peer within reach of p_i(k+1) at k+1 lies within reach + V dt of p_i(k): its
+  beacon of tick k+1 is published in a cell the agent already hears (zenoh keeps one session's order: the
+  router has our subscription before our command, hence before anyone's state, hence beacon, of tick k+1).
+- wait set at tick k (lockstep): the peers alive by their tokens whose head point at k-1 (their beacon of
+  tick k-1) lay within reach + 2 V dt of p_i(k-1). Anyone else cannot be within reach of p_i(k) at k, so it
+  contributes exact zeros to the tick (repulsion beyond d_max,ij, no link beyond link range): leaving it out
+  changes nothing, and the tick equals the in-process engine's row bit for bit. With no beacon of k-1 from a
+  peer (tick 0, or a peer that joined again), the position it is known to be held at counts: its last
+  beacon, else its start in the scenario.
+- a beacon of tick k from a peer outside the wait set but within reach of p_i(k) means the speed bound
+  was violated (or a beacon of k-1 came too late): whether it was in when the agent acted is a race, so
+  lockstep is no longer deterministic and the node says so (`guessed_k`).
+- until its first command an agent listens to every cell (it does not know yet where its robot is: a
+  restarted agent catches up on every peer's cached obstacle set, and its first tick mid-mission waits
+  for every live peer, as before the cells);
+- the virtual-leader benchmark is centralised (every agent computes the leader from the union of every
+  agent's set): in that mode the agent listens to every cell and waits for every live peer.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+from reconswarm.net import wire
+from reconswarm.net.cells import Cell, CellGrid
+from reconswarm.scenario import PlannerKind, Scenario
+
+XY = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Cells:
+    """Output of the node: publish from `home` from now on; listen to `listen` (None: every cell)."""
+
+    home: Cell
+    listen: frozenset[Cell] | None
+
+
+class Neighbourhood:
+    def __init__(self, s: Scenario, agent_id: int) -> None:
+        self.id, self.dt_s = agent_id, s.meta.dt_s
+        self.grid = CellGrid.for_scenario(s)
+        self.everyone = s.planner.kind == PlannerKind.VIRTUAL_LEADER
+        l_m, th = s.head_offsets, s.headings
+        self.start: dict[int, XY] = {
+            a.id: (float(a.start_m[0] + l_m[i] * math.cos(th[i])), float(a.start_m[1] + l_m[i] * math.sin(th[i])))
+            for i, a in enumerate(s.agents)}
+        self.joined: set[int] = set()  # peers whose token came back while we were acting, not heard since
+        self.near: dict[int, frozenset[int]] = {}  # tick -> peers that may matter at it (before the alive filter)
+        self.own: dict[int, XY] = {}  # tick -> our head point
+        # Every cell until our first command: a (re)started agent does not know where its robot is; so it
+        # gets every peer's cached obstacle set and hears the beacons of the tick before its first.
+        self.home: Cell = self.grid.cell_of(*self.start[agent_id])
+        self.listen: frozenset[Cell] | None = None
+        self._last_around: tuple[XY | None, frozenset[Cell]] = (None, frozenset())
+
+    # ------------------------------------------------------------------------------------ membership
+
+    def peer_joined(self, peer: int, acting: bool) -> None:
+        """A peer's token appeared. Once we act, it is a peer (re)joining: its robot is held where it was."""
+        if acting and peer != self.id:
+            self.joined.add(peer)
+
+    def peer_heard(self, peer: int) -> None:
+        self.joined.discard(peer)
+
+    # -------------------------------------------------------------------------------------- cells
+
+    def current(self) -> Cells:
+        """What a new session must declare (every cell until our first command)."""
+        return Cells(self.home, self.listen)
+
+    def on_state(self, k: int, p: XY) -> Cells | None:
+        """Our state of tick k is in: add the cells around p (keep the old ones until our command is out) and
+        publish from p's cell. None: nothing changes."""
+        self.own[k] = p
+        home = self.grid.cell_of(*p)
+        listen = None if self.listen is None else self.listen | self._around(p)
+        if home == self.home and listen == self.listen:
+            return None
+        self.home, self.listen = home, listen
+        return Cells(home, listen)
+
+    def after_command(self, k: int) -> Cells | None:
+        """Our command of tick k is out: listen only around p_i(k)."""
+        if self.everyone or k not in self.own:
+            return None
+        listen = self._around(self.own[k])
+        if listen == self.listen:
+            return None
+        self.listen = listen
+        return Cells(self.home, listen)
+
+    def _around(self, p: XY) -> frozenset[Cell]:
+        """The cells to listen to from p (computed once per position: on_state and after_command share it)."""
+        if self._last_around[0] != p:
+            self._last_around = (p, self.grid.listen_cells(*p))
+        return self._last_around[1]
+
+    # ----------------------------------------------------------------------------------- wait set
+
+    def wait_set(self, k: int, alive: Iterable[int], prev: Mapping[int, wire.Beacon],
+                 last_seen: Mapping[int, wire.Beacon]) -> frozenset[int]:
+        """The live peers tick k waits for (fixed at its first call for k, then filtered by `alive`).
+        prev: the peers' beacons of tick k-1."""
+        alive = {a for a in alive if a != self.id}
+        if self.everyone:
+            return frozenset(alive)
+        near = self.near.get(k)
+        if near is None:
+            near = self._near(k, alive, prev, last_seen)
+            self.near[k] = near
+        return near & alive
+
+    def _near(self, k: int, alive: set[int], prev: Mapping[int, wire.Beacon],
+              last_seen: Mapping[int, wire.Beacon]) -> frozenset[int]:
+        if k > 0 and self.listen is None and (k - 1) not in self.own:  # our first tick, joining: we hear all
+            return frozenset(alive)
+        own = self.own.get(k - 1, self.own.get(k))
+        if own is None:
+            return frozenset()
+        out = set()
+        for a in alive:
+            b = prev.get(a)
+            if b is not None:
+                pos: XY | None = (b.px, b.py)
+            elif k == 0 or a in self.joined:  # not moved since we knew it (its agent was away)
+                seen = last_seen.get(a)
+                pos = (seen.px, seen.py) if seen is not None else self.start.get(a)
+            else:
+                continue
+            if pos is not None and self.grid.may_matter(own, pos):
+                out.add(a)
+        return frozenset(out)
+
+    def near_now(self, p: XY, alive: Iterable[int], last_seen: Mapping[int, wire.Beacon]) -> set[int]:
+        """Realtime: the live peers whose latest beacon may matter to us at p."""
+        out = set()
+        for a in alive:
+            seen = last_seen.get(a)
+            pos = (seen.px, seen.py) if seen is not None else self.start.get(a)  # never heard: held at its start
+            if a != self.id and pos is not None and (self.everyone or self.grid.may_matter(p, pos)):
+                out.add(a)
+        return out
+
+    def intruder(self, k: int, b: wire.Beacon) -> bool:
+        """A beacon of tick k from a peer we did not wait for at k, within reach of us at k: the speed bound
+        was violated (whether it was in when we acted is a race)."""
+        near, own = self.near.get(k), self.own.get(k)
+        if self.everyone or near is None or own is None or b.id in near:
+            return False
+        return (b.px - own[0]) ** 2 + (b.py - own[1]) ** 2 <= self.grid.reach_m ** 2
+
+    def also_heard(self, alive: set[int], prev: Mapping[int, wire.Beacon], fresh: Mapping[int, wire.Beacon],
+                   waited: set[int]) -> int:
+        """How many beacons of this tick will come from peers we do not wait for (they published the tick
+        before in a cell we listen to): the adapter sleeps until they are in too, instead of waking early."""
+        cells = self.listen
+        return sum(1 for a, b in prev.items() if a in alive and a not in waited and a not in fresh
+                   and (cells is None or self.grid.cell_of(b.px, b.py) in cells))
+
+    def unexpected(self, b: wire.Beacon) -> str:
+        """Why an intruder's beacon makes the tick a guess (for the log)."""
+        v = self.grid.step_m / self.dt_s
+        return (f"agent {b.id} within reach at tick {b.k} though not expected (faster than the speed bound "
+                f"{v:g} m/s, or its beacon of the tick before came late)")
+
+    def audible(self, p: XY, b: wire.Beacon) -> bool:
+        """Is a peer's beacon at b still in a cell we listen to from p (else its position is stale)?"""
+        return self.everyone or self.grid.cell_of(b.px, b.py) in self._around(p)
+
+    def prune(self, k: int) -> None:
+        for store in (self.near, self.own):
+            for kk in [x for x in store if x < k - 4]:
+                del store[kk]

@@ -1,0 +1,46 @@
+"""The peers' obstacle sets an agent holds, by revision, and which revisions it merged already (pure)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from reconswarm.net import wire
+
+ObstacleSets = dict[str, np.ndarray]
+
+
+class PeerSets:
+    def __init__(self) -> None:
+        self.sets: dict[int, dict[int, ObstacleSets]] = {}  # peer -> rev -> obstacle sets
+        # Revisions already merged (into the brain's own set / the leader's union): merging a set again
+        # cannot change a hull, so it is skipped.
+        self.merged: dict[int, int] = {}
+        self.merged_union: dict[int, int] = {}
+
+    def add(self, m: wire.ObstacleSet) -> None:
+        self.sets.setdefault(m.id, {})[m.rev] = {oid: np.array(v, dtype=np.float64) for oid, v in m.obstacles.items()}
+
+    def unmerged(self, wanted: dict[int, int], merged: dict[int, int]) -> list[ObstacleSets]:
+        """The sets at the wanted revisions that are not merged yet (and mark them merged)."""
+        out = []
+        for a in sorted(wanted):
+            rev = wanted[a]
+            if rev == 0 or merged.get(a, 0) >= rev:
+                continue
+            out.append(self.latest(a, rev))
+            merged[a] = rev
+        return out
+
+    def latest(self, peer: int, rev: int | None) -> ObstacleSets:
+        revs = self.sets.get(peer, {})
+        if rev is not None and rev in revs:
+            return revs[rev]
+        usable = [r for r in revs if rev is None or r <= rev]
+        return revs[max(usable)] if usable else {}
+
+    def prune(self, leader: bool) -> None:
+        """Keep the newest merged revision of each peer and everything after it."""
+        for a, revs in self.sets.items():
+            done = min(self.merged.get(a, 0), self.merged_union.get(a, 0) if leader else 2**62)
+            for r in [r for r in revs if r < done]:
+                del revs[r]
