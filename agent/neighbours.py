@@ -51,6 +51,7 @@ class Neighbourhood:
         self.id, self.dt_s = agent_id, s.meta.dt_s
         self.grid = CellGrid.for_scenario(s)
         self.everyone = s.planner.kind == PlannerKind.VIRTUAL_LEADER
+        self.radius = {a.id: a.radius_m for a in s.agents}
         l_m, th = s.head_offsets, s.headings
         self.start: dict[int, XY] = {
             a.id: (float(a.start_m[0] + l_m[i] * math.cos(th[i])), float(a.start_m[1] + l_m[i] * math.sin(th[i])))

@@ -10,7 +10,8 @@ Lockstep (the clock says so): at tick k the agent waits for its state (and scan)
 at k (agent/neighbours.py: the cells it listens to and its wait set; every live agent for the virtual
 leader) and the obstacle sets of those within link range (all for the virtual leader), then plans and
 commands. Realtime: it acts shortly after each new state on whatever it has (latest beacons, sets).
-A lost peer is kept where it was last seen (a static obstacle); a live one out of our cells is dropped.
+A lost peer stays where last seen or where the world's scan reports it held; a live one out of our cells
+is dropped.
 
 The node outlives the adapter's zenoh sessions: after a new session (`reconnected`) it still knows its
 peers' last positions and radii, lost peers, its knowledge, revisions and escape state.
@@ -152,6 +153,9 @@ class AgentNode:
         elif isinstance(m, wire.Scan):
             if m.id == self.id:
                 self.scans[m.k] = m
+                # Held robots near us (their agents gone; maybe never heard: lost far away): obstacles there.
+                self.last_seen.update((a, wire.Beacon(a, m.k, m.t, x, y, self.nb.radius[a])) for a, x, y in m.bodies
+                                      if a in self.nb.radius and a not in self.alive and a != self.id)
         elif isinstance(m, wire.Beacon):
             self.beacons.setdefault(m.k, {})[m.id] = m
             self.heard[m.id] = now
@@ -325,9 +329,7 @@ class AgentNode:
             newest = max(self.states, default=None), max(self.clocks, default=None)
             return f"tick {k}: no state yet (newest state {newest[0]}, newest clock {newest[1]})"
         clock = self.clocks.get(k)
-        missing = [] if clock is not None else ["clock"]
-        if self.states[k].scan_n > 0 and k not in self.scans:
-            missing.append("scan")
+        missing = ["clock"] * (clock is None) + ["scan"] * (self.states[k].scan_n > 0 and k not in self.scans)
         fresh = self.beacons.get(k, {})
         peers = sorted(a for a in self._expected(k, clock) if a not in fresh)
         if peers:

@@ -28,6 +28,7 @@ import numpy as np
 
 from reconswarm.errors import ProcessFailure
 from reconswarm.net import wire
+from reconswarm.net.cells import CellGrid
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.net.wire import ClockMode
 from reconswarm.paper.planner import errors
@@ -77,6 +78,10 @@ class WorldNode:
         self.theta = s.headings.copy()
         self.l = s.head_offsets
         self.field = ContourField.from_scenario(s)
+        grid = CellGrid.for_scenario(s)
+        # Held robots (agents gone) are reported in the scans of agents this near: nearer than anything that
+        # can matter to them within the next tick (an agent hears only its cells' beacons).
+        self.body_range_m = grid.reach_m + 2.0 * grid.step_m
         n = len(self.ids)
         self.u = np.zeros((n, 2))
         self.u_k = np.full(n, -(10**9))  # tick of each robot's last command
@@ -271,23 +276,38 @@ class WorldNode:
                            self.stats() if end else {})
         true_d = self.field.true_distances(self.p, self.s.planner.sensing_range_m)
         qa, qs = self.field.scan(self.p, self.s.planner.sensing_range_m, true_d)
-        counts = np.bincount(qa, minlength=len(self.ids))
+        bodies = self.held_bodies()
+        counts = np.bincount(qa, minlength=len(self.ids)) + np.array([len(b) for b in bodies], dtype=np.int64)
         c = unicycle.body_centre(self.p, self.theta, self.l)
         truth = wire.Truth(k, t, tuple(self.ids), tuple(c[:, 0].tolist()), tuple(c[:, 1].tolist()),
                            tuple(self.theta.tolist()), tuple(self.p[:, 0].tolist()), tuple(self.p[:, 1].tolist()))
         states = [wire.State(a, k, t, float(c[i, 0]), float(c[i, 1]), float(self.theta[i]), float(self.p[i, 0]),
                              float(self.p[i, 1]), int(counts[i])) for i, a in enumerate(self.ids)]
         scans = []
-        if qa.size:
-            starts = np.searchsorted(qa, np.arange(len(self.ids)))
-            ends = np.searchsorted(qa, np.arange(len(self.ids)), side="right")
-            names = self.field.ids
-            for i in map(int, np.flatnonzero(counts)):
-                idx = qs[starts[i]:ends[i]]
-                pts = tuple(zip(*self.field.samples[idx].T.tolist(),
-                                [names[o] for o in self.field.owner[idx].tolist()], strict=True))
-                scans.append(wire.Scan(self.ids[i], k, t, pts))
+        starts = np.searchsorted(qa, np.arange(len(self.ids)))
+        ends = np.searchsorted(qa, np.arange(len(self.ids)), side="right")
+        names = self.field.ids
+        for i in map(int, np.flatnonzero(counts)):
+            idx = qs[starts[i]:ends[i]]
+            pts = tuple(zip(*self.field.samples[idx].T.tolist(),
+                            [names[o] for o in self.field.owner[idx].tolist()], strict=True))
+            scans.append(wire.Scan(self.ids[i], k, t, pts, bodies[i]))
         return TickOut(clock, truth, states, scans)
+
+    def held_bodies(self) -> list[tuple[tuple[int, float, float], ...]]:
+        """Per robot: the held robots (whose agents are gone) within body_range_m of its head point, as
+        (agent id, head x, y); none for a robot whose own agent is gone."""
+        out: list[tuple[tuple[int, float, float], ...]] = [()] * len(self.ids)
+        held = [i for i, a in enumerate(self.ids) if a not in self.alive]
+        if not held or len(held) == len(self.ids):
+            return out
+        hp = self.p[held]  # (H, 2)
+        d = np.hypot(*(self.p[:, None, :] - hp[None, :, :]).transpose(2, 0, 1))  # (N, H)
+        for i, a in enumerate(self.ids):
+            if a in self.alive:
+                out[i] = tuple((self.ids[held[j]], float(hp[j, 0]), float(hp[j, 1]))
+                               for j in map(int, np.flatnonzero(d[i] <= self.body_range_m)))
+        return out
 
     def apply(self, k: int) -> None:
         """Choose every robot's u for the step k -> k+1 and integrate."""

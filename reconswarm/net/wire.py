@@ -51,7 +51,7 @@ class State:
     theta: float
     px: float  # head point p
     py: float
-    scan_n: int = 0  # contour points in this tick's scan (0: no scan message follows)
+    scan_n: int = 0  # contour points and held bodies in this tick's scan (0: no scan message follows)
 
 
 @dataclass(frozen=True)
@@ -60,6 +60,10 @@ class Scan:
     k: int
     t: float
     points: tuple[tuple[float, float, str], ...]
+    # Held robots in range: (agent id, head point x, y) of robots whose agents are gone (the world holds them
+    # where they stopped). With spatial cells an agent hears only its neighbourhood, so a robot lost far
+    # away is known to it only once it comes near: the world's range sensing tells it.
+    bodies: tuple[tuple[int, float, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -131,7 +135,10 @@ def state_to_wire(m: State) -> bytes:
 
 
 def scan_to_wire(m: Scan) -> bytes:
-    return _pack({"id": m.id, "k": m.k, "t": m.t, "points": [[x, y, o] for x, y, o in m.points]})
+    d: dict[str, Any] = {"id": m.id, "k": m.k, "t": m.t, "points": [[x, y, o] for x, y, o in m.points]}
+    if m.bodies:
+        d["bodies"] = [[a, x, y] for a, x, y in m.bodies]
+    return _pack(d)
 
 
 def cmd_to_wire(m: Cmd) -> bytes:
@@ -246,7 +253,18 @@ def scan_from_wire(payload: bytes, key_id: int | None = None) -> Scan:
         if type(oid) is not str or not 0 < len(oid) <= MAX_STR:
             _str(oid, "point obstacle_id")
         out.append((x, y, oid))
-    return Scan(_agent_id(o, key_id), _int(o, "k"), _float(o, "t"), tuple(out))
+    return Scan(_agent_id(o, key_id), _int(o, "k"), _float(o, "t"), tuple(out), _bodies(o.get("bodies", [])))
+
+
+def _bodies(raw: Any) -> tuple[tuple[int, float, float], ...]:
+    if not isinstance(raw, list) or len(raw) > MAX_POINTS:
+        raise WireError("field 'bodies': expected a list of [agent_id, x, y]")
+    out = []
+    for b in raw:
+        if type(b) is not list or len(b) != 3 or type(b[0]) is not int or not 0 <= b[0] <= MAX_AGENT_ID:
+            raise WireError("field 'bodies': each body is [agent_id, x, y]")
+        out.append((b[0], _num(b[1], "body x"), _num(b[2], "body y")))
+    return tuple(out)
 
 
 def cmd_from_wire(payload: bytes, key_id: int | None = None) -> Cmd:

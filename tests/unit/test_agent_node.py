@@ -360,3 +360,29 @@ def test_dropped_messages_are_counted_in_the_next_beacon() -> None:
     node = started(peers=())
     out = node.step([Invalid("k", "bad"), Invalid("k", "bad"), clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
     assert beacons(out)[0].rejected == 2 and node.rejected == 2
+
+
+def test_a_robot_lost_out_of_hearing_is_an_obstacle_once_the_worlds_scan_reports_it_held() -> None:
+    """With cells an agent hears only its neighbourhood: a peer lost far away was never heard. When its held
+    robot comes within range, the world's scan reports it, and from then on it is a static obstacle."""
+    node = started(peers=(B, C))
+    node.step([Left(C)], 0.0)  # C's agent is gone; we never had a beacon of it
+    held = wire.Scan(A, 0, 0.0, (), ((C, 104.0, 0.0),))
+    out = node.step([clock(0, (A, B)), state(0, 100.0, 0.0, scan_n=1), held, beacon(B, 0, 110.0, 0.0)], 0.01)
+    ref = AgentBrain(S, A)
+    want = reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 104.0, 0.0, RADIUS[C])], brain=ref)
+    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(0, *want)]
+    assert want != reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B])])  # C's robot does push us
+    out = node.step([clock(1, (A, B)), state(1, 100.05, 0.0), beacon(B, 1, 110.0, 0.0)], 0.06)  # no scan now
+    want = reference(1, (100.05, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 104.0, 0.0, RADIUS[C])], brain=ref)
+    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(1, *want)]  # still there: held robots do not move
+    assert node.guessed_k == -1
+
+
+def test_a_held_body_reported_for_a_peer_alive_by_its_token_is_ignored() -> None:
+    """Only the membership says a peer is gone (the world may see its token go first): its beacons rule."""
+    node = started(peers=(B,))
+    out = node.step([clock(0, (A, B)), state(0, 100.0, 0.0, scan_n=1), wire.Scan(A, 0, 0.0, (), ((B, 104.0, 0.0),)),
+                     beacon(B, 0, 110.0, 0.0)], 0.01)
+    want = reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B])])
+    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(0, *want)]

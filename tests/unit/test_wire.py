@@ -32,6 +32,21 @@ def test_scan_round_trip(aid, k, t, pts):
 
 
 @settings(max_examples=100, deadline=None)
+@given(ids, ticks, finite, st.lists(st.tuples(ids, finite, finite), max_size=20))
+def test_scan_round_trip_with_held_bodies(aid, k, t, bodies):
+    m = wire.Scan(aid, k, t, ((1.0, 2.0, "a"),), tuple(bodies))
+    assert wire.scan_from_wire(wire.scan_to_wire(m), aid) == m
+
+
+@pytest.mark.parametrize("bodies", [[[1, 2.0]], [["1", 2.0, 3.0]], [[1, float("nan"), 3.0]], [[-1, 2.0, 3.0]],
+                                    [[True, 2.0, 3.0]], "x", [[1, 2.0, "y"]]])
+def test_malformed_held_bodies_are_refused(bodies):
+    payload = wire._pack({"id": 3, "k": 1, "t": 0.05, "points": [], "bodies": bodies})
+    with pytest.raises(wire.WireError, match="body|bodies"):
+        wire.scan_from_wire(payload, 3)
+
+
+@settings(max_examples=100, deadline=None)
 @given(ids, ticks, finite, finite)
 def test_cmd_round_trip(aid, k, ux, uy):
     m = wire.Cmd(aid, k, ux, uy)

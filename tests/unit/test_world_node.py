@@ -253,3 +253,23 @@ def test_a_world_stalled_itself_waits_afresh_and_stays_in_lockstep() -> None:
     node.command(wire.Cmd(IDS[1], 0, 0.5, 0.0), 10.1)
     node.step(10.2)
     assert node.k == 1 and node.u_k.tolist() == [0] * len(IDS) and not node.resumed
+
+
+def test_a_held_robot_is_in_the_scans_of_the_agents_near_it_and_only_theirs() -> None:
+    """An agent gone: its robot is held, and the world's range sensing reports it to the agents within
+    body_range_m (with cells they may never have heard its beacons), as (id, head point)."""
+    node = started()
+    gone, near, far = IDS[0], IDS[1], IDS[2]
+    node.p[:] = [(0.0, 1e4 + 100.0 * i) for i in range(len(IDS))]  # everyone far apart, no obstacle near
+    node.p[0] = (5000.0, 5000.0)
+    node.p[1] = (5000.0 + node.body_range_m - 1.0, 5000.0)  # just inside
+    node.p[2] = (5000.0, 5000.0 + node.body_range_m + 1.0)  # just outside
+    node.agent_up(gone, False)
+    (tick,) = node.step(0.0).out
+    scans = {sc.id: sc for sc in tick.scans}
+    assert scans[near].bodies == ((gone, 5000.0, 5000.0),) and scans[near].points == ()
+    assert far not in scans and gone not in scans  # nothing in range; the gone agent gets no scan
+    scan_n = {s.id: s.scan_n for s in tick.states}
+    assert scan_n[near] == 1 and scan_n[far] == 0  # the state announces the scan, so lockstep waits for it
+    node.agent_up(gone, True)  # back (a restarted agent): its robot is nobody's body any more
+    assert all(not b for b in node.held_bodies())
