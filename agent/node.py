@@ -153,9 +153,9 @@ class AgentNode:
         elif isinstance(m, wire.Scan):
             if m.id == self.id:
                 self.scans[m.k] = m
-                # Held robots near us (their agents gone; maybe never heard: lost far away): obstacles there.
+                # Held robots near us (the world says their agents are gone; maybe never heard: lost far away).
                 self.last_seen.update((a, wire.Beacon(a, m.k, m.t, x, y, self.nb.radius[a])) for a, x, y in m.bodies
-                                      if a in self.nb.radius and a not in self.alive and a != self.id)
+                                      if a in self.nb.radius and a != self.id)
         elif isinstance(m, wire.Beacon):
             self.beacons.setdefault(m.k, {})[m.id] = m
             self.heard[m.id] = now
@@ -199,14 +199,15 @@ class AgentNode:
 
     def _peers(self, k: int) -> list[wire.Beacon]:
         """Whom tick k plans with: every beacon of k; for the peers it waited for but lacks (a guess) and for
-        lost peers (their robots stay where they stopped), the latest beacon. An alive peer that may not
-        matter at k is left out: it contributes nothing, and its last position would be stale."""
-        fresh = self.beacons.get(k, {})
-        st = self.states[k]
+        lost peers (their robots stay where they stopped: gone by their token, or by the world's clock, which
+        a forged token cannot fool), the latest beacon. An alive peer that may not matter at k is left out: it
+        contributes nothing, and its last position would be stale."""
+        fresh, st = self.beacons.get(k, {}), self.states[k]
+        clock = self.clocks.get(k) or self.clocks.get(max(self.clocks, default=-1))  # (realtime: the newest)
         wanted = self._expected(k, None) if self.mode != "realtime" else set()
-        rt, p = self.mode == "realtime", (st.px, st.py)
-        return [fresh.get(a, b) for a, b in self.last_seen.items()
-                if a in fresh or a not in self.alive or a in wanted or (rt and self.nb.audible(p, b))]
+        rt, p, world = self.mode == "realtime", (st.px, st.py), self.alive if clock is None else set(clock.alive)
+        return [fresh.get(a, b) for a, b in self.last_seen.items() if a in fresh or a not in self.alive
+                or a not in world or a in wanted or (rt and self.nb.audible(p, b))]
 
     def _beacon(self, st: wire.State) -> wire.Beacon:
         return wire.Beacon(self.id, st.k, st.t, st.px, st.py, self.radius, self.brain.rev, self.rejected,

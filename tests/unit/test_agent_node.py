@@ -379,10 +379,20 @@ def test_a_robot_lost_out_of_hearing_is_an_obstacle_once_the_worlds_scan_reports
     assert node.guessed_k == -1
 
 
-def test_a_held_body_reported_for_a_peer_alive_by_its_token_is_ignored() -> None:
-    """Only the membership says a peer is gone (the world may see its token go first): its beacons rule."""
-    node = started(peers=(B,))
-    out = node.step([clock(0, (A, B)), state(0, 100.0, 0.0, scan_n=1), wire.Scan(A, 0, 0.0, (), ((B, 104.0, 0.0),)),
-                     beacon(B, 0, 110.0, 0.0)], 0.01)
-    want = reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B])])
-    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(0, *want)]
+def test_a_dead_peer_kept_alive_by_a_forged_token_is_still_an_obstacle() -> None:
+    """An outsider keeps a token on a dead agent's key: by its membership the peer lives, but the world (whose
+    clock a forged token does not change) counts it gone and holds its robot. Its last position and the
+    world's report of the held robot both keep it an obstacle; it is not waited for."""
+    node = started(peers=(B, C))
+    node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 110.0, 0.0), beacon(C, 0, 104.0, 0.0)], 0.0)
+    # C's agent dies; a token for C stays (forged), so no Left(C). The world's clock of tick 1 lacks C.
+    held = wire.Scan(A, 1, DT, (), ((C, 104.0, 0.0),))
+    out = node.step([clock(1, (A, B)), state(1, 100.05, 0.0, scan_n=1), held, beacon(B, 1, 110.0, 0.0)], 0.06)
+    ref = AgentBrain(S, A)
+    reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 104.0, 0.0, RADIUS[C])], brain=ref)
+    want = reference(1, (100.05, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 104.0, 0.0, RADIUS[C])], brain=ref)
+    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(1, *want)]
+    out = node.step([clock(2, (A, B)), state(2, 100.1, 0.0), beacon(B, 2, 110.0, 0.0)], 0.11)  # no beacon of C at 1
+    want = reference(2, (100.1, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 104.0, 0.0, RADIUS[C])], brain=ref)
+    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(2, *want)]
+    assert node.guessed_k == -1  # gone by the world's count: not a guess
