@@ -5,6 +5,8 @@
    one a third as long, so start-up does not count), messages received and loop wake-ups per agent per
    tick, simulated seconds per wall second;
 2. the paper mission in lockstep (--paper): sim/wall until it converges;
+   beside them the floor (bench/floor.py): the same message pattern with msgpack only and no planning,
+   `floor-cells` (the spatial cells) and `floor-all` (every beacon to everyone), in the same run;
 3. realtime at --speed 1 (the control loop at 1/dt = 20 Hz): the largest N whose missed-deadline ratio
    stays below 1 %, trying N in increasing order.
 `--checkout DIR` (repeatable) measures another checkout (a git worktree of an older commit with its own
@@ -28,6 +30,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import command_line, machine, median
+from floor import PATTERNS, floor_run
 from grid import grid_scenario
 
 from reconswarm.scenario import to_toml
@@ -113,6 +116,8 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--grid-agents", type=int, nargs="+", default=[16, 36, 64, 100])
     ap.add_argument("--grid-sim-s", type=float, default=10.0, help="simulated seconds per grid run")
+    ap.add_argument("--floor", nargs="*", choices=PATTERNS, default=list(PATTERNS),
+                    help="floor rows per N (bench/floor.py); none with an empty list")
     ap.add_argument("--checkout", type=Path, action="append", default=[],
                     help="also measure another checkout (a git worktree with its own .venv), side by side")
     ap.add_argument("--paper", action="store_true", help="also time the whole paper mission in lockstep")
@@ -140,6 +145,12 @@ def main() -> int:
                       f"{r['world_ms']:7.1f} {r['monitor_ms']:7.1f} {r['router_ms']:7.1f} {r['msgs_in']:7.1f} "
                       f"{r['wakeups']:7.1f}",
                       flush=True)
+            for pat in args.floor:  # the same ticks as a row's long run minus its short one
+                f = floor_run(n, pat, ticks=round(args.grid_sim_s * 2 / 3 / 0.05))
+                print(f"{'floor-' + pat:>12s} {n:4d} {f['ticks_per_s'] * 0.05:8.2f} {f['agent_ms']:7.2f} "
+                      f"{f['agents_ms']:8.1f} {f['world_ms']:7.1f} {'-':>7s} {f['router_ms']:7.1f} "
+                      f"{f['msgs_in']:7.1f} {f['wakeups']:7.1f}", flush=True)
+            print(f"# after N = {n}: {machine()}", flush=True)
         if args.paper:
             print("\n## the paper mission in lockstep (until it converges)")
             for name, co in versions:
