@@ -16,7 +16,8 @@ starts (bench/grid.py). Per tick:
   `all`: every beacon to everyone (`swarm/<run>/agent/<id>/beacon`, heard as `swarm/<run>/agent/*/beacon`).
 
 CPU per tick is measured over a window of ticks after a warm-up (start-up does not count): each agent and
-the world read their own rusage at the window's first and last tick; the router's CPU is read from
+the world read their own rusage (CPU, context switches: every thread of the process) at the window's
+first and last tick; the router's CPU is read from
 /proc/<pid>/stat when the world says it is at those ticks.
 
     .venv/bin/python bench/floor.py -n 16 36 64 --ticks 200
@@ -108,6 +109,12 @@ def cpu_s() -> float:
     return ru.ru_utime + ru.ru_stime
 
 
+def switches() -> int:
+    """Context switches of the process so far (voluntary: a thread waited; involuntary: preempted)."""
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    return ru.ru_nvcsw + ru.ru_nivcsw
+
+
 def session(port: int) -> Any:
     return open_session(ZenohOptions.build([f"tcp/127.0.0.1:{port}"], None, "client", None), "floor", 30.0)
 
@@ -152,9 +159,9 @@ def agent_main(port: int, run: str, n: int, aid: int, pattern: str, start: int, 
                 elif key.endswith("/state"):
                     states.add(m["k"])
                     if m["k"] == start:
-                        marks[start] = (cpu_s(), Inbox.samples_in, Inbox.wakeups)
+                        marks[start] = (cpu_s(), Inbox.samples_in, Inbox.wakeups, switches())
                 elif m["end"]:
-                    marks[end] = (cpu_s(), Inbox.samples_in, Inbox.wakeups)
+                    marks[end] = (cpu_s(), Inbox.samples_in, Inbox.wakeups, switches())
                     done = True
                 else:
                     clocks.add(m["k"])
@@ -173,10 +180,10 @@ def agent_main(port: int, run: str, n: int, aid: int, pattern: str, start: int, 
         for sub in subs:
             sub.undeclare()
         z.close()
-    (c0, m0, w0), (c1, m1, w1) = marks[start], marks[end]
+    (c0, m0, w0, s0), (c1, m1, w1, s1) = marks[start], marks[end]
     ticks = end - start
     print(json.dumps({"cpu_ms": 1000 * (c1 - c0) / ticks, "msgs_in": (m1 - m0) / ticks, "wakeups": (w1 - w0) / ticks,
-                      "heard": len(hear)}), flush=True)
+                      "switches": (s1 - s0) / ticks, "heard": len(hear)}), flush=True)
     return 0
 
 
@@ -318,7 +325,8 @@ def floor_run(n: int, pattern: str, ticks: int = 200, warmup: int = 20, timeout_
     return {"n": n, "ticks": ticks, "ticks_per_s": ticks / w["wall_s"], "agent_ms": med("cpu_ms"),
             "agents_ms": sum(r["cpu_ms"] for r in res), "world_ms": w["cpu_ms"],
             "router_ms": 1000 * (router_cpu[1] - router_cpu[0]) / ticks,
-            "msgs_in": med("msgs_in"), "wakeups": med("wakeups"), "heard": med("heard")}
+            "msgs_in": med("msgs_in"), "wakeups": med("wakeups"), "switches": med("switches"),
+            "heard": med("heard")}
 
 
 def main() -> int:
@@ -339,13 +347,13 @@ def main() -> int:
     print(f"# floor: router + world + N agents (zenoh clients), msgpack only, {args.ticks} ticks measured")
     print(f"# {machine()}")
     print(f"{'pattern':>8s} {'N':>4s} {'ticks/s':>7s} {'agent':>7s} {'agents':>8s} {'world':>7s} {'router':>7s} "
-          f"{'msgs in':>7s} {'wakeups':>7s} {'heard':>5s}")
+          f"{'msgs in':>7s} {'wakeups':>7s} {'ctxsw':>6s} {'heard':>5s}")
     for n in args.agents:
         for pat in args.pattern:
             r = floor_run(n, pat, args.ticks, args.warmup)
             print(f"{pat:>8s} {n:4d} {r['ticks_per_s']:7.1f} {r['agent_ms']:7.2f} {r['agents_ms']:8.1f} "
                   f"{r['world_ms']:7.2f} {r['router_ms']:7.2f} {r['msgs_in']:7.1f} {r['wakeups']:7.1f} "
-                  f"{r['heard']:5.0f}", flush=True)
+                  f"{r['switches']:6.1f} {r['heard']:5.0f}", flush=True)
     return 0
 
 
