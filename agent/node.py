@@ -192,7 +192,7 @@ class AgentNode:
         counts alive at k (lockstep); realtime: those whose latest beacon may matter."""
         p = (self.states[k].px, self.states[k].py)
         if self.mode == "realtime":
-            return self.nb.near_now(p, self.alive, self.last_seen)
+            return self.nb.near_now(k, p, self.alive, self.last_seen)
         self.nb.own.setdefault(k, p)
         near = self.nb.wait_set(k, self.alive, self.beacons.get(k - 1, {}), self.last_seen)
         return set(near if clock is None else near.intersection(clock.alive))
@@ -201,13 +201,13 @@ class AgentNode:
         """Whom tick k plans with: every beacon of k; for the peers it waited for but lacks (a guess) and for
         lost peers (their robots stay where they stopped: gone by their token, or by the world's clock, which
         a forged token cannot fool), the latest beacon. An alive peer that may not matter at k is left out: it
-        contributes nothing, and its last position would be stale."""
+        contributes nothing, and its last position would be stale (realtime: a beacon not `fresh`)."""
         fresh, st = self.beacons.get(k, {}), self.states[k]
         clock = self.clocks.get(k) or self.clocks.get(max(self.clocks, default=-1))  # (realtime: the newest)
         wanted = self._expected(k, None) if self.mode != "realtime" else set()
         rt, p, world = self.mode == "realtime", (st.px, st.py), self.alive if clock is None else set(clock.alive)
         return [fresh.get(a, b) for a, b in self.last_seen.items() if a in fresh or a not in self.alive
-                or a not in world or a in wanted or (rt and self.nb.audible(p, b))]
+                or a not in world or a in wanted or (rt and self.nb.fresh(k, b) and self.nb.audible(p, b))]
 
     def _beacon(self, st: wire.State) -> wire.Beacon:
         return wire.Beacon(self.id, st.k, st.t, st.px, st.py, self.radius, self.brain.rev, self.rejected,

@@ -14,7 +14,7 @@ import pytest
 
 from agent.brain import AgentBrain, Peer
 from agent.messages import Exit, Invalid, Joined, Left, Output, Reconnect, WorldToken
-from agent.neighbours import Cells
+from agent.neighbours import REALTIME_FRESH_S, Cells
 from agent.node import AgentNode
 from reconswarm.net import wire
 from reconswarm.net.timing import Timing
@@ -330,6 +330,21 @@ def test_realtime_acts_at_the_deadline_on_whatever_it_has() -> None:
     assert deadline is not None and not cmds(node.step([], deadline - 1e-4))
     out = node.step([], deadline)
     assert [c.k for c in cmds(out)] == [1]  # B's beacon of tick 0 stands in for tick 1's
+
+
+def test_realtime_a_live_peer_heard_no_more_is_not_a_ghost() -> None:
+    """Realtime: a live peer that left the cells we listen to is heard no more; its last beacon shows where it
+    was. Past REALTIME_FRESH_S it is neither waited for (we act as soon as the others are in) nor planned
+    with (seen: stale beacons pinned an agent in place for 180 s of a ROS 2 mission)."""
+    node = started(peers=(B, C))
+    rt = {"mode": "realtime", "speed": 1.0}
+    node.step([clock(0, (A, B, C), **rt), state(0, 100.0, 0.0), beacon(B, 0, 104.0, 0.0), beacon(C, 0, 110.0, 0.0)],
+              0.0)
+    k = round(REALTIME_FRESH_S / DT) + 1  # C has said nothing since tick 0: it left our cells
+    out = node.step([clock(k, (A, B, C), **rt), state(k, 100.0, 0.0), beacon(B, k, 104.0, 0.0)], 0.01)
+    want = reference(k, (100.0, 0.0), [Peer(B, 104.0, 0.0, RADIUS[B])])
+    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(k, *want)]  # at once (not at the deadline), without C
+    assert want != reference(k, (100.0, 0.0), [Peer(B, 104.0, 0.0, RADIUS[B]), Peer(C, 110.0, 0.0, RADIUS[C])])
 
 
 # --------------------------------------------------------------------------------- the watches and input

@@ -42,7 +42,7 @@ def test_scan_round_trip_with_held_bodies(aid, k, t, bodies):
                                     [[True, 2.0, 3.0]], "x", [[1, 2.0, "y"]]])
 def test_malformed_held_bodies_are_refused(bodies):
     payload = wire._pack({"id": 3, "k": 1, "t": 0.05, "points": [], "bodies": bodies})
-    with pytest.raises(wire.WireError, match="body|bodies"):
+    with pytest.raises(wire.WireError, match=r"body|bodies"):
         wire.scan_from_wire(payload, 3)
 
 
