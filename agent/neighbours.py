@@ -36,10 +36,11 @@ from reconswarm.net.cells import Cell, CellGrid
 from reconswarm.scenario import PlannerKind, Scenario
 
 XY = tuple[float, float]
-# Realtime: a live peer's latest beacon older than this (simulated seconds) shows where it was, not where it
-# is: it left the cells we listen to (we hear it no more), or it is stuck. Planned with, it is a ghost that can
-# pin an agent in place (seen: a ROS 2 mission where five ghosts held the last agent still for 180 s).
-REALTIME_FRESH_S = 0.5
+# Realtime: a live peer silent this long (wall seconds; at least 3 periods) has left the cells we listen to
+# (or is stuck): its last beacon shows where it was, not where it is, and planned with it is a ghost that can
+# pin an agent in place (seen: a ROS 2 mission where five ghosts held the last agent still for 180 s). Wall
+# time, not ticks: in an overloaded run every beacon is ticks old, yet a live neighbour is still heard.
+REALTIME_SILENT_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,6 @@ class Neighbourhood:
         self.grid = CellGrid.for_scenario(s)
         self.everyone = s.planner.kind == PlannerKind.VIRTUAL_LEADER
         self.radius = {a.id: a.radius_m for a in s.agents}
-        self.fresh_ticks = max(1, round(REALTIME_FRESH_S / self.dt_s))
         l_m, th = s.head_offsets, s.headings
         self.start: dict[int, XY] = {
             a.id: (float(a.start_m[0] + l_m[i] * math.cos(th[i])), float(a.start_m[1] + l_m[i] * math.sin(th[i])))
@@ -149,21 +149,21 @@ class Neighbourhood:
                 out.add(a)
         return frozenset(out)
 
-    def near_now(self, k: int, p: XY, alive: Iterable[int], last_seen: Mapping[int, wire.Beacon]) -> set[int]:
-        """Realtime: the live peers whose latest beacon is recent (`fresh`) and may matter to us at p."""
+    def near_now(self, p: XY, alive: Iterable[int], last_seen: Mapping[int, wire.Beacon]) -> set[int]:
+        """Realtime: the live peers whose latest beacon may matter to us at p."""
         out = set()
         for a in alive:
             seen = last_seen.get(a)
-            if seen is not None and not self.fresh(k, seen):
-                continue
             pos = (seen.px, seen.py) if seen is not None else self.start.get(a)  # never heard: held at its start
             if a != self.id and pos is not None and (self.everyone or self.grid.may_matter(p, pos)):
                 out.add(a)
         return out
 
-    def fresh(self, k: int, b: wire.Beacon) -> bool:
-        """Realtime: is a live peer's beacon recent enough at tick k to show where it is?"""
-        return k - b.k <= self.fresh_ticks
+    @staticmethod
+    def heard_lately(alive: Iterable[int], heard: Mapping[int, float], now: float, period_s: float) -> set[int]:
+        """Realtime: the live peers heard within REALTIME_SILENT_S (or 3 periods) of wall time."""
+        quiet = max(REALTIME_SILENT_S, 3.0 * period_s)
+        return {a for a in alive if now - heard.get(a, now) <= quiet}
 
     def intruder(self, k: int, b: wire.Beacon) -> bool:
         """A beacon of tick k from a peer we did not wait for at k, within reach of us at k: the speed bound

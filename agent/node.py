@@ -47,20 +47,17 @@ class AgentNode:
         self.clocks: dict[int, wire.Clock] = {}
         self.beacons: dict[int, dict[int, wire.Beacon]] = {}  # tick -> peer -> its beacon at that tick
         self.last_seen: dict[int, wire.Beacon] = {}  # peer -> its newest beacon (a lost peer stays there)
-        self.peer_sets = PeerSets()  # peers' sets by revision, and the revisions merged (agent/sets.py)
-        ps = self.peer_sets
+        ps = self.peer_sets = PeerSets()  # peers' sets by revision, and the revisions merged (agent/sets.py)
         self.sets, self.merged, self.merged_union = ps.sets, ps.merged, ps.merged_union
         self.alive: set[int] = set()
-        self.k = -1  # last tick commanded
-        self.beacon_sent = -1
+        self.k, self.beacon_sent = -1, -1  # last tick commanded, last tick announced
         self.wait_since: float | None = None
         self.guessed_k = -1  # lockstep: the first tick acted on without all its data (-1: none)
         self._guess = ""  # why the tick about to be acted on lacks data ("": it does not)
         self.mode = "lockstep"
-        self.period_s = 0.0
+        self.period_s, self.now = 0.0, now_s  # (now: the wall time of the latest step or awaiting call)
         self.act_at: float | None = None
-        self.last_clock = now_s
-        self.ended = False
+        self.last_clock, self.ended = now_s, False
         self.world_gone = False  # the world's token went away and no clock came since (a stalled world)
         self.started = False  # the mission began (first clock): the watches run from then on
         self.last_cmd: wire.Cmd | None = None
@@ -78,7 +75,7 @@ class AgentNode:
     def step(self, batch: Iterable[Input], now_s: float) -> list[Output]:
         """Take the messages that arrived, advance as far as the data allows, watch the world and our
         own progress. Returns what to publish or do, in order."""
-        self._out = []
+        self._out, self.now = [], now_s
         if self._announce_set:
             self._announce_set = False
             self._out.append(self._obstacle_set(max(self.k, 0)))
@@ -98,7 +95,7 @@ class AgentNode:
     def awaiting(self, now_s: float) -> int | None:
         """How many more messages the next tick needs at least (the adapter sleeps until that many are in, or
         its own state, or a timeout); None: nothing but our own state will let us act."""
-        newest = max(self.states, default=-1)
+        newest, self.now = max(self.states, default=-1), now_s
         k = self.k + 1 if self.mode != "realtime" and self.k >= 0 and (self.k + 1) in self.states else newest
         st = self.states.get(k)
         if st is None or k <= self.k:
@@ -192,7 +189,7 @@ class AgentNode:
         counts alive at k (lockstep); realtime: those whose latest beacon may matter."""
         p = (self.states[k].px, self.states[k].py)
         if self.mode == "realtime":
-            return self.nb.near_now(k, p, self.alive, self.last_seen)
+            return self.nb.near_now(p, self._lately(), self.last_seen)
         self.nb.own.setdefault(k, p)
         near = self.nb.wait_set(k, self.alive, self.beacons.get(k - 1, {}), self.last_seen)
         return set(near if clock is None else near.intersection(clock.alive))
@@ -201,13 +198,16 @@ class AgentNode:
         """Whom tick k plans with: every beacon of k; for the peers it waited for but lacks (a guess) and for
         lost peers (their robots stay where they stopped: gone by their token, or by the world's clock, which
         a forged token cannot fool), the latest beacon. An alive peer that may not matter at k is left out: it
-        contributes nothing, and its last position would be stale (realtime: a beacon not `fresh`)."""
+        contributes nothing, and its last position would be stale (realtime: one not heard lately)."""
         fresh, st = self.beacons.get(k, {}), self.states[k]
         clock = self.clocks.get(k) or self.clocks.get(max(self.clocks, default=-1))  # (realtime: the newest)
-        wanted = self._expected(k, None) if self.mode != "realtime" else set()
         rt, p, world = self.mode == "realtime", (st.px, st.py), self.alive if clock is None else set(clock.alive)
+        wanted = self._expected(k, None) if not rt else self._lately()
         return [fresh.get(a, b) for a, b in self.last_seen.items() if a in fresh or a not in self.alive
-                or a not in world or a in wanted or (rt and self.nb.fresh(k, b) and self.nb.audible(p, b))]
+                or a not in world or (a in wanted and (not rt or self.nb.audible(p, b)))]
+
+    def _lately(self) -> set[int]:
+        return self.nb.heard_lately(self.alive, self.heard, self.now, self.period_s)
 
     def _beacon(self, st: wire.State) -> wire.Beacon:
         return wire.Beacon(self.id, st.k, st.t, st.px, st.py, self.radius, self.brain.rev, self.rejected,

@@ -14,7 +14,7 @@ import pytest
 
 from agent.brain import AgentBrain, Peer
 from agent.messages import Exit, Invalid, Joined, Left, Output, Reconnect, WorldToken
-from agent.neighbours import REALTIME_FRESH_S, Cells
+from agent.neighbours import REALTIME_SILENT_S, Cells
 from agent.node import AgentNode
 from reconswarm.net import wire
 from reconswarm.net.timing import Timing
@@ -334,17 +334,32 @@ def test_realtime_acts_at_the_deadline_on_whatever_it_has() -> None:
 
 def test_realtime_a_live_peer_heard_no_more_is_not_a_ghost() -> None:
     """Realtime: a live peer that left the cells we listen to is heard no more; its last beacon shows where it
-    was. Past REALTIME_FRESH_S it is neither waited for (we act as soon as the others are in) nor planned
-    with (seen: stale beacons pinned an agent in place for 180 s of a ROS 2 mission)."""
+    was. Silent past REALTIME_SILENT_S (wall) it is neither waited for (we act as soon as the others are in)
+    nor planned with (seen: stale beacons pinned an agent in place for 180 s of a ROS 2 mission)."""
     node = started(peers=(B, C))
     rt = {"mode": "realtime", "speed": 1.0}
     node.step([clock(0, (A, B, C), **rt), state(0, 100.0, 0.0), beacon(B, 0, 104.0, 0.0), beacon(C, 0, 110.0, 0.0)],
               0.0)
-    k = round(REALTIME_FRESH_S / DT) + 1  # C has said nothing since tick 0: it left our cells
-    out = node.step([clock(k, (A, B, C), **rt), state(k, 100.0, 0.0), beacon(B, k, 104.0, 0.0)], 0.01)
+    k, now = 30, REALTIME_SILENT_S + 0.5  # C has said nothing since tick 0: it left our cells
+    node.step([beacon(B, k - 1, 104.0, 0.0)], now - 0.05)
+    out = node.step([clock(k, (A, B, C), **rt), state(k, 100.0, 0.0), beacon(B, k, 104.0, 0.0)], now)
     want = reference(k, (100.0, 0.0), [Peer(B, 104.0, 0.0, RADIUS[B])])
     assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(k, *want)]  # at once (not at the deadline), without C
     assert want != reference(k, (100.0, 0.0), [Peer(B, 104.0, 0.0, RADIUS[B]), Peer(C, 110.0, 0.0, RADIUS[C])])
+
+
+def test_realtime_an_overloaded_neighbour_is_still_planned_with() -> None:
+    """Overloaded realtime (the world far ahead of everyone): a neighbour's latest beacon is many ticks old,
+    but it was heard moments ago: it is where it was, near us, and must still push us away."""
+    node = started(peers=(B,))
+    rt = {"mode": "realtime", "speed": 10.0}
+    node.step([clock(0, (A, B), **rt), state(0, 100.0, 0.0), beacon(B, 0, 104.0, 0.0)], 0.0)
+    k = 40  # our newest state; B is 40 ticks behind, heard 0.1 s ago
+    node.step([clock(k, (A, B), **rt), state(k, 100.0, 0.0)], 0.1)
+    out = node.step([], node.wake_at_s() or 0.2)
+    want = reference(k, (100.0, 0.0), [Peer(B, 104.0, 0.0, RADIUS[B])])
+    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(k, *want)]
+    assert want != reference(k, (100.0, 0.0), [])
 
 
 # --------------------------------------------------------------------------------- the watches and input

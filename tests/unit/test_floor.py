@@ -26,7 +26,7 @@ def test_cells_pattern_waits_for_what_a_real_agent_waits_for(n: int) -> None:
         nb = Neighbourhood(s, aid)
         nb.on_state(0, pts[aid])
         nb.after_command(0)  # listening around p_i(0) from now on
-        prev = {a: wire.Beacon(a, 0, 0.0, *pts[a], 1.5) for a in ids if a != aid}
+        prev = {a: wire.Beacon(a, 0, 0.0, pts[a][0], pts[a][1], 1.5) for a in ids if a != aid}
         nb.on_state(1, pts[aid])  # robots still: the same point at tick 1
         waited = set(nb.wait_set(1, ids, prev, prev))
         also = nb.also_heard(ids, prev, {}, waited)
