@@ -41,7 +41,7 @@ class AgentNode:
         self.brain = AgentBrain(s, agent_id)
         self.nb = Neighbourhood(s, agent_id)  # our cells and whom a tick waits for (agent/neighbours.py)
         self.radius = float(self.brain.r[0])
-        self.rejected = 0  # messages dropped so far (announced in our beacons)
+        self.rejected = 0  # messages dropped so far (in our reports)
         self.states: dict[int, wire.State] = {}
         self.scans: dict[int, wire.Scan] = {}
         self.clocks: dict[int, wire.Clock] = {}
@@ -210,8 +210,7 @@ class AgentNode:
         return self.nb.heard_lately(self.alive, self.heard, self.now, self.period_s)
 
     def _beacon(self, st: wire.State) -> wire.Beacon:
-        return wire.Beacon(self.id, st.k, st.t, st.px, st.py, self.radius, self.brain.rev, self.rejected,
-                           self.guessed_k)
+        return wire.Beacon(self.id, st.k, st.t, st.px, st.py, self.radius, self.brain.rev)
 
     def _link(self, k: int, p: np.ndarray) -> None:
         """Which peers' sets tick k merges: those within link range of p by their beacons at k."""
@@ -240,7 +239,7 @@ class AgentNode:
             # Backing off (0.5, 1, 2 s, ...), the set only once: re-sent every 0.5 s it flooded a stuck N = 64.
             self.beacon_again = now + t.beacon_again_s * 2 ** self._again_n
         # Each way on without some of the tick's data is a guess: the command may differ from the in-process
-        # engine's from here on, so the node says so (`guessed_k` in its beacons, then the record's summary).
+        # engine's from here on, so the node says so (`guessed_k` in its reports, then the record's summary).
         self._guess = ""
         if clock is None or (st.scan_n > 0 and k not in self.scans):
             # The tick's clock or scan may have been lost (an outage): after a while, go on without it

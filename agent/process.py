@@ -6,7 +6,8 @@ publisher's current set) of the cells the node names (agent/neighbours.py: re-de
 moves, every cell for the virtual leader); it publishes its beacon and set under its own cell. It decodes
 what arrives into wire dataclasses (dropping and counting what is malformed),
 hands each batch to the node with the wall time, and publishes what the node returns: its beacon,
-obstacle set (advanced publisher, cached) and command; it declares the agent's liveliness token.
+obstacle set (advanced publisher, cached) and command, and its report (telemetry and heartbeat for the
+monitor); it declares the agent's liveliness token.
 When the node asks for a new session, the session is replaced and the node, with everything it knows,
 is kept.
 """
@@ -192,8 +193,10 @@ class AgentLink(Member):
         return 0
 
     def report(self, final: bool = False) -> None:
-        """Our intrusion tally to the monitor (when it changed; at most once a second unless final)."""
-        r = self.gate.report(time.monotonic(), final)
+        """Our telemetry to the monitor: counters every `telemetry_s` (our heartbeat) and at once when we first
+        acted on a guess; our intrusion tally when it changed (at most once a second unless final)."""
+        node = self.node
+        r = self.gate.report(time.monotonic(), final, (node.rejected, node.guessed_k), node.timing.telemetry_s)
         if r is not None:
             self.pub_report.put(report_to_wire(r))
 

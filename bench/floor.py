@@ -94,8 +94,7 @@ def clock_bytes(k: int, t: float, alive: list[int], end: bool = False) -> bytes:
 
 
 def beacon_bytes(aid: int, k: int, t: float, p: XY, radius_m: float) -> bytes:
-    return pack({"id": aid, "k": k, "t": t, "px": p[0], "py": p[1], "radius": radius_m, "rev": 0, "rejected": 0,
-                 "guessed_k": -1})
+    return pack({"id": aid, "k": k, "t": t, "px": p[0], "py": p[1], "radius": radius_m, "rev": 0})
 
 
 def cmd_bytes(aid: int, k: int) -> bytes:

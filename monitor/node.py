@@ -1,6 +1,6 @@
 """The monitor's logic as a pure state machine: no zenoh, no clock of its own.
 
-`MonitorNode` takes decoded messages (the world's clock and truth, the agents' beacons, liveliness
+`MonitorNode` takes decoded messages (the world's clock and truth, the agents' reports, liveliness
 changes) with the time `now_s` it is told, records the run through the `Recorder` (the same as the
 in-process engine) and collects every event it records in `outbox`, which the zenoh adapter
 (monitor/process.py) publishes on `swarm/<run>/event`: one code path, record then publish, the same
@@ -48,11 +48,10 @@ class MonitorNode:
         self.resume_from = resume_from
         self.rec = Recorder(s, writer)
         self.outbox: list[Event] = []  # recorded, not yet published
-        self.counts: dict[str, int] = {}  # messages rejected per process (from the clock and the beacons)
+        self.counts: dict[str, int] = {}  # messages rejected per process (from the clock and the reports)
         self.p = s.starts.copy()
         self.theta = s.headings.copy()
         self.pending: dict[int, wire.Truth] = {}
-        self.beacons: dict[int, dict[int, wire.Beacon]] = {}
         self.written = resume_from[0] if resume_from else -1
         self.t = resume_from[1] if resume_from else 0.0
         self.committed_t = self.t
@@ -195,17 +194,16 @@ class MonitorNode:
         if tr.k > self.written:
             self.pending[tr.k] = tr
 
-    def beacon(self, b: wire.Beacon) -> None:
-        if b.id not in self.index:
-            raise wire.WireError(f"agent {b.id} is not in the scenario")
-        self.counts[f"agent {b.id}"] = b.rejected
-        if b.guessed_k >= 0 and (self.guessed_k < 0 or b.guessed_k < self.guessed_k):
+    def telemetry(self, agent_id: int, rejected: int, guessed_k: int) -> None:
+        """An agent's counters (from its report): messages it rejected, the first tick it guessed (-1: none)."""
+        if agent_id not in self.index:
+            raise wire.WireError(f"agent {agent_id} is not in the scenario")
+        self.counts[f"agent {agent_id}"] = rejected
+        if guessed_k >= 0 and (self.guessed_k < 0 or guessed_k < self.guessed_k):
             if self.guessed_k < 0:
                 log.warning("agent %d acted on tick %d without all its data: lockstep is no longer deterministic",
-                            b.id, b.guessed_k)
-            self.guessed_k = b.guessed_k
-        if b.k > self.written:
-            self.beacons.setdefault(b.k, {})[b.id] = b
+                            agent_id, guessed_k)
+            self.guessed_k = guessed_k
 
     def flush(self) -> None:
         """Write the ticks received, in order; ticks that never came are a gap in the record."""
@@ -226,14 +224,6 @@ class MonitorNode:
                 log.warning("ticks %d..%d never received: noted as a gap in the record", self.written + 1, k - 1)
             for ev in self.rec.tick(k, t, self.p, self.theta, self.alive.copy()):
                 self.outbox.append(ev)  # recorded by the recorder: publish the same object
-            b = self.beacons.pop(k, {})
-            if b:
-                bp = np.full((len(self.ids), 2), np.nan)
-                for aid, x in b.items():
-                    bp[self.index[aid]] = (x.px, x.py)
-                self.writer.beacon(k, t, bp)
-            for kk in [x for x in self.beacons if x < k]:
-                del self.beacons[kk]
             self.written, self.t = k, t
             self.min_gap = min(self.min_gap, self.rec.safety.min_agent_gap_m)
             if t - self.committed_t >= self.timing.commit_sim_s:  # a killed monitor loses at most this much

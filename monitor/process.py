@@ -1,6 +1,7 @@
 """`reconswarm monitor record`: the monitor process, a thin zenoh adapter around `monitor.node.MonitorNode`.
 
-It decodes the truth, beacons, clock and liveliness changes into the node, publishes on
+It decodes the truth, clock, reports and liveliness changes into the node (it does not hear the agents'
+beacons: their counters and heartbeat come in their reports, about twice a second, whatever N is), publishes on
 `swarm/<run>/event` every event the node has recorded (the same objects, in order), and writes
 run.db through the node as it goes (same schema as the in-process engine, so every monitor command
 works on it). Restarted on an existing run.db it appends, and notes the gap. A full disk ends it
@@ -62,15 +63,15 @@ class MonitorAdapter(Member):
         z = session
         self.pub_event = z.declare_publisher(k.event, congestion_control=zenoh.CongestionControl.BLOCK)
         # Everything arrives in the inbox, taken in one batch per tick: the world's truth wakes the loop, the
-        # rest (beacons, clock, reports, membership) waits for it (the monitor is off the critical path).
+        # rest (clock, reports, membership) waits for it (the monitor is off the critical path).
         # The truth comes numbered from the world's advanced publisher: one that was lost (published while
         # the world's session came back from a stall) is fetched from its cache, and delivered in order.
         recovery = ext.RecoveryConfig(periodic_queries=None, heartbeat=True)
         self.subs = [ext.declare_advanced_subscriber(z, k.truth, self.inbox.handler(urgent=True), recovery=recovery),
                      *(z.declare_subscriber(key, self.inbox.handler())
-                       for key in (k.cell_agents(None, "beacon"), k.clock, k.report_all))]
+                       for key in (k.clock, k.report_all))]
         # Admission (what the run cannot contain is refused and counted, with the other processes' reports);
-        # an agent is alive while its token is there AND its own beacons keep coming.
+        # an agent is alive while its token is there AND its own reports (its heartbeat) keep coming.
         self.gate = Gate(node.s, "monitor")
         self.members = Membership()
         self.told: dict[int, bool] = {}
@@ -95,26 +96,34 @@ class MonitorAdapter(Member):
                 tr = wire.truth_from_wire(payload)
                 if gate.admit(tr, source, key, now):
                     node.truth(tr)
-            elif what == "agent" and aid is not None and leaf == "beacon":
-                b = wire.beacon_from_wire(payload, aid)
-                if gate.admit(b, source, key, now):
-                    self.members.data(b.id, now, node.t)
-                    node.beacon(b)
             elif what == "report":
-                self.report(key, leaf, aid, payload, source)
+                self.report(key, leaf, aid, payload, source, now)
         except wire.WireError as exc:
             self.rej.reject(key, str(exc))
 
-    def report(self, key: str, process: str, aid: int | None, payload: bytes, source: str) -> None:
-        """Another process's intrusion tally, if it comes from that process's own session."""
+    def report(self, key: str, process: str, aid: int | None, payload: bytes, source: str, now: float) -> None:
+        """Another process's report, if it comes from that process's own session (an agent's session is
+        pinned by its first report, as admission pins senders): its tally of intrusions when it changed, and
+        an agent's counters and heartbeat."""
         r = report_from_wire(payload, process)
         pins = self.gate.adm.pins
-        speaker = pins.world if aid is None else pins.agents.get(aid, ("", 0.0))[0]
-        if source != speaker:  # (a whole tally each time: the next one from the right session will do)
-            self.gate.refuse(Intrusion(IntrusionKind.IMPERSONATION, source, key,
-                                       f"{process} speaks from session {speaker or '(none yet)'}"), time.monotonic())
+        if aid is not None and aid not in self.node.index:
+            self.gate.refuse(Intrusion(IntrusionKind.UNKNOWN_AGENT, source, key,
+                                       f"agent {aid} is not in the scenario"), now)
             return
-        self.node.writer.intrusions(r.process, list(r.rows))
+        if aid is None:
+            ok, speaker = source == pins.world, pins.world
+        else:
+            ok, speaker = pins.agent(aid, source, now), pins.agents.get(aid, ("", 0.0))[0]
+        if not ok:  # (a whole tally each time: the next one from the right session will do)
+            self.gate.refuse(Intrusion(IntrusionKind.IMPERSONATION, source, key,
+                                       f"{process} speaks from session {speaker or '(none yet)'}"), now)
+            return
+        if aid is not None:
+            self.members.data(aid, now, self.node.t)
+            self.node.telemetry(aid, r.rejected, r.guessed_k)
+        if r.rows is not None:
+            self.node.writer.intrusions(r.process, list(r.rows))
 
     def sync(self, now: float) -> None:
         """Tell the node who is alive by the membership rule (token AND own beacons), as it changes."""

@@ -24,9 +24,9 @@ The rules (`R` = `swarm/<run>`) allow, per subject and nothing else:
 - simworld: put `R/clock`, `R/truth`, `R/agent/*/state`, `R/agent/*/scan`, `R/report/simworld`; token
   `R/alive/simworld`; subscribe `R/agent/*/cmd`, liveliness `R/alive/**`; the truth's advanced publisher
   (queryable `R/truth/@adv/pub/**` replying on `R/truth`, heartbeats put under `R/truth/@adv/pub/**`);
-- monitor: put `R/event`; token `R/alive/monitor`; subscribe `R/truth`, `R/cell/*/agent/*/beacon`, `R/clock`,
-  `R/report/*`, liveliness `R/alive/**`; recovery of a lost truth (subscribe the heartbeats
-  `R/truth/@adv/pub/**`, query `R/truth/@adv/**`, receive replies on `R/truth`);
+- monitor: put `R/event`; token `R/alive/monitor`; subscribe `R/truth`, `R/clock`, `R/report/*`, liveliness
+  `R/alive/**`; recovery of a lost truth (subscribe the heartbeats `R/truth/@adv/pub/**`, query
+  `R/truth/@adv/**`, receive replies on `R/truth`);
 - observer: subscribe `R/clock`, `R/event`;
 - intruder, or any other certificate of the CA: nothing.
 
@@ -231,7 +231,7 @@ def access_control(run: str, agent_ids: tuple[int, ...]) -> dict[str, Any]:
     ])
     grant("monitor", [
         *publish("monitor-pub", [f"{r}/event"]),
-        *subscribe("monitor-sub", [f"{r}/truth", f"{r}/cell/*/agent/*/beacon", f"{r}/clock", f"{r}/report/*"]),
+        *subscribe("monitor-sub", [f"{r}/truth", f"{r}/clock", f"{r}/report/*"]),
         *membership("monitor", f"{r}/alive/monitor"),
         # recovery of a lost truth: the world's heartbeats, queries to its cache and their replies
         *subscribe("monitor-truth-heartbeat", [f"{r}/truth/@adv/pub/**"]),

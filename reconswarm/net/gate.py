@@ -3,7 +3,8 @@
 Pure (no zenoh): the adapter decodes a sample, passes it here with its source (`session.sample_source`),
 and delivers it to its node only if `admit` says so. Refusals are counted per (kind, source), logged (the
 first of each kind and source at once, then at most one line a second), and summed up in a `Report` that
-the adapter publishes on `swarm/<run>/report/<process>` at most once a second when it changed.
+the adapter publishes on `swarm/<run>/report/<process>` at most once a second when it changed (an
+agent's report is also its heartbeat, with its counters: reconswarm/net/report.py).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ class Gate:
         self.report_every_s = report_every_s
         self._reported = 0  # nothing to report before the first intrusion
         self._last_report = -1e9
+        self._last_beat, self._guessed = -1e9, -1  # (agents: the last heartbeat, the guessed_k it carried)
         self._last_log = -1e9
         self._unlogged = 0
 
@@ -76,12 +78,20 @@ class Gate:
         else:
             self._unlogged += 1
 
-    def report(self, now_s: float, final: bool = False) -> Report | None:
-        """The tally to publish when it changed: at most every report_every_s, or now if `final`."""
+    def report(self, now_s: float, final: bool = False, counters: tuple[int, int] | None = None,
+               every_s: float | None = None) -> Report | None:
+        """What to publish on the process's report key, if anything: the tally when it changed (at most every
+        report_every_s, or now if `final`); with `counters` (an agent's rejected count and guessed_k) also
+        every `every_s` (its heartbeat), at once when guessed_k changed, and always if `final`."""
         total = self.tally.total
-        if total == self._reported:
+        rows_due = total != self._reported and (final or now_s - self._last_report >= self.report_every_s)
+        beat_due = counters is not None and (final or counters[1] != self._guessed
+                                             or (every_s is not None and now_s - self._last_beat >= every_s))
+        if not (rows_due or beat_due):
             return None
-        if not final and now_s - self._last_report < self.report_every_s:
-            return None
-        self._reported, self._last_report = total, now_s
-        return Report(self.process, tuple(self.tally.as_rows()))
+        if rows_due:
+            self._reported, self._last_report = total, now_s
+        if counters is not None:
+            self._last_beat, self._guessed = now_s, counters[1]
+        rejected, guessed_k = counters or (0, -1)
+        return Report(self.process, tuple(self.tally.as_rows()) if rows_due else None, rejected, guessed_k)

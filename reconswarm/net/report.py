@@ -1,8 +1,15 @@
-"""Intrusion reports: each process's tally of refused messages, sent to the monitor for the run record.
+"""Reports: each process's telemetry for the monitor, off the control messages.
 
-Key `swarm/<run>/report/<process>` (`simworld`, `agent-<id>`); payload `{v, process, rows: [[kind, source,
-count, first_t], ...]}`, the whole tally each time (at most `MAX_ROWS` rows), sent at most once a second
-and only when it changed. The monitor admits a report only from the session that speaks for that process.
+Key `swarm/<run>/report/<process>` (`simworld`, `agent-<id>`); payload `{v, process, rows?, rejected,
+guessed_k}`:
+- `rows: [[kind, source, count, first_t], ...]`: the process's whole tally of refused messages (at most
+  `MAX_ROWS` rows), present only when it changed (at most once a second);
+- `rejected`: the messages it dropped as malformed so far; `guessed_k`: lockstep, the first tick it acted
+  on without all its data (-1: none).
+An agent reports every `Timing.telemetry_s` of wall time (its heartbeat: the monitor counts an agent alive
+while its token is there and its reports keep coming), and at once when `guessed_k` is first set; the
+world reports only a changed tally (its `rejected` rides on its clock). The monitor admits a report only
+from the session that speaks for that process.
 """
 
 from __future__ import annotations
@@ -18,11 +25,16 @@ Row = tuple[str, str, int, float]  # kind, source, count, first_t
 @dataclass(frozen=True)
 class Report:
     process: str
-    rows: tuple[Row, ...]
+    rows: tuple[Row, ...] | None  # None: the tally did not change since the last report
+    rejected: int = 0
+    guessed_k: int = -1
 
 
 def report_to_wire(m: Report) -> bytes:
-    return _pack({"process": m.process, "rows": [list(r) for r in m.rows[:MAX_ROWS]]})
+    d: dict[str, object] = {"process": m.process, "rejected": m.rejected, "guessed_k": m.guessed_k}
+    if m.rows is not None:
+        d["rows"] = [list(r) for r in m.rows[:MAX_ROWS]]
+    return _pack(d)
 
 
 def report_from_wire(payload: bytes, process: str | None = None) -> Report:
@@ -31,7 +43,10 @@ def report_from_wire(payload: bytes, process: str | None = None) -> Report:
     proc = _str(o.get("process"), "field 'process'")
     if process is not None and proc != process:
         raise WireError(f"field 'process': {proc!r} on the key of {process!r}")
+    rejected, guessed_k = _int(o, "rejected", 0, 2**53, 0), _int(o, "guessed_k", -1, 2**53, -1)
     raw = o.get("rows")
+    if raw is None:
+        return Report(proc, None, rejected, guessed_k)
     if not isinstance(raw, list) or len(raw) > MAX_ROWS:
         raise WireError(f"field 'rows': expected a list of at most {MAX_ROWS} rows")
     rows: list[Row] = []
@@ -40,4 +55,4 @@ def report_from_wire(payload: bytes, process: str | None = None) -> Report:
             raise WireError("field 'rows': each row is [kind, source, count, first_t]")
         rows.append((_str(r[0], "row kind"), _str(r[1], "row source"), _int({"n": r[2]}, "n"),
                      _num(r[3], "row first_t")))
-    return Report(proc, tuple(rows))
+    return Report(proc, tuple(rows), rejected, guessed_k)

@@ -82,9 +82,7 @@ class Beacon:
     px: float
     py: float
     radius: float
-    rev: int = 0  # revision of the sender's obstacle set at tick k-1
-    rejected: int = 0  # messages this agent has rejected so far
-    guessed_k: int = -1  # lockstep: the first tick this agent acted on without all its data (-1: none)
+    rev: int = 0  # revision of the sender's obstacle set at tick k-1 (its counters go in its report)
 
 
 @dataclass(frozen=True)
@@ -146,8 +144,7 @@ def cmd_to_wire(m: Cmd) -> bytes:
 
 
 def beacon_to_wire(m: Beacon) -> bytes:
-    return _pack({"id": m.id, "k": m.k, "t": m.t, "px": m.px, "py": m.py, "radius": m.radius, "rev": m.rev,
-                  "rejected": m.rejected, "guessed_k": m.guessed_k})
+    return _pack({"id": m.id, "k": m.k, "t": m.t, "px": m.px, "py": m.py, "radius": m.radius, "rev": m.rev})
 
 
 def obstacles_to_wire(m: ObstacleSet) -> bytes:
@@ -278,7 +275,7 @@ def beacon_from_wire(payload: bytes, key_id: int | None = None) -> Beacon:
     if radius <= 0:
         raise WireError("field 'radius': must be > 0")
     return Beacon(_agent_id(o, key_id), _int(o, "k"), _float(o, "t"), _float(o, "px"), _float(o, "py"), radius,
-                  _int(o, "rev", 0, 2**53, 0), _int(o, "rejected", 0, 2**53, 0), _int(o, "guessed_k", -1, 2**53, -1))
+                  _int(o, "rev", 0, 2**53, 0))
 
 
 def obstacles_from_wire(payload: bytes, key_id: int | None = None) -> ObstacleSet:

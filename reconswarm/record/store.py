@@ -31,7 +31,6 @@ CREATE TABLE IF NOT EXISTS ticks (
     k INTEGER PRIMARY KEY, t REAL NOT NULL,
     px BLOB NOT NULL, py BLOB NOT NULL, theta BLOB NOT NULL, alive BLOB NOT NULL,
     max_error_m REAL, min_agent_gap_m REAL, min_obstacle_gap_m REAL, groups INTEGER);
-CREATE TABLE IF NOT EXISTS beacons (k INTEGER PRIMARY KEY, t REAL NOT NULL, px BLOB NOT NULL, py BLOB NOT NULL);
 CREATE TABLE IF NOT EXISTS events (seq INTEGER PRIMARY KEY AUTOINCREMENT, t REAL NOT NULL, kind TEXT NOT NULL,
     data TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS contacts (seq INTEGER PRIMARY KEY AUTOINCREMENT, kind TEXT NOT NULL, a TEXT NOT NULL,
@@ -124,10 +123,6 @@ class RunWriter:
         if self._rows:
             self.db.executemany("INSERT OR REPLACE INTO ticks VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", self._rows)
             self._rows = []
-
-    def beacon(self, k: int, t: float, p: Array) -> None:
-        self.db.execute("INSERT OR REPLACE INTO beacons VALUES (?, ?, ?, ?)",
-                        (k, t, _blob(p[:, 0], "<f8"), _blob(p[:, 1], "<f8")))
 
     def event(self, ev: Event) -> None:
         self.db.execute("INSERT INTO events(t, kind, data) VALUES (?, ?, ?)",

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 
+import msgpack
 import numpy as np
 import pytest
 
@@ -223,6 +224,14 @@ def test_report_round_trip_and_key() -> None:
         report_from_wire(report_to_wire(m), "agent-4")  # another process's key
     with pytest.raises(wire.WireError):
         report_from_wire(report_to_wire(Report("simworld", (("k", "s", -1, 0.0),))))
+    beat = Report("agent-3", None, 7, 412)  # a heartbeat: counters, the tally unchanged (no rows)
+    assert report_from_wire(report_to_wire(beat), "agent-3") == beat
+    assert "rows" not in msgpack.unpackb(report_to_wire(beat))
+    for field, bad_value in (("rejected", -1), ("guessed_k", -2), ("guessed_k", 1.5), ("rows", "x")):
+        raw = msgpack.unpackb(report_to_wire(beat))
+        raw[field] = bad_value
+        with pytest.raises(wire.WireError, match=field):
+            report_from_wire(msgpack.packb(raw), "agent-3")
     assert KEYS.parse(KEYS.report("agent-3")) == ("report", 3, "agent-3")
     assert KEYS.parse(KEYS.report("simworld")) == ("report", None, "simworld")
     for bad in ("monitor", "agent-x", "agent-1/x"):
@@ -247,11 +256,31 @@ def test_gate_delivers_the_runs_messages_and_counts_logs_and_reports_the_rest(ca
     lines = [r.getMessage() for r in caplog.records]
     assert len(lines) == 2 and all(X in ln for ln in lines)  # first of each (kind, source) at once, rest quiet
     r = g.report(1.5)
-    assert r is not None and r.process == "agent-3"
+    assert r is not None and r.process == "agent-3" and r.rows is not None
     assert {(k, s, n) for k, s, n, _ in r.rows} == {("not_from_world", X, 6), ("unknown_agent", X, 1)}
     assert g.report(1.6) is None  # unchanged
     g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.beacon((0, 0), 99), 1.7)
     assert g.report(1.8) is None and g.report(2.6) is not None  # changed, but at most once a second
+
+
+def test_an_agents_report_is_its_heartbeat_and_says_a_guess_at_once() -> None:
+    from reconswarm.net.gate import Gate
+
+    g = Gate(S, "agent-3")
+    first = g.report(0.0, counters=(0, -1), every_s=0.5)
+    assert first is not None and first.rows is None and (first.rejected, first.guessed_k) == (0, -1)
+    assert g.report(0.3, counters=(2, -1), every_s=0.5) is None  # a new count waits for the next beat
+    beat = g.report(0.5, counters=(2, -1), every_s=0.5)
+    assert beat is not None and (beat.rejected, beat.guessed_k, beat.rows) == (2, -1, None)
+    guess = g.report(0.6, counters=(2, 40), every_s=0.5)  # the first guess: at once
+    assert guess is not None and guess.guessed_k == 40
+    assert g.report(0.7, counters=(2, 40), every_s=0.5) is None
+    assert not g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.beacon((0, 0), 99), 0.8)
+    rows = g.report(1.1, counters=(2, 40), every_s=0.5)  # the beat, with the tally that changed
+    assert rows is not None and rows.rows is not None and [r[0] for r in rows.rows] == ["unknown_agent"]
+    final = g.report(1.2, final=True, counters=(3, 40), every_s=0.5)
+    assert final is not None and final.rejected == 3 and final.rows is None  # always, the tally unchanged
+    assert Gate(S, "simworld").report(5.0) is None  # the world: only a changed tally, no heartbeat
 
 
 def test_oversize_obstacle_sets_are_refused_before_decoding() -> None:

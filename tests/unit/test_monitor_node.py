@@ -159,10 +159,9 @@ def test_the_summary_says_whether_lockstep_stayed_deterministic(tmp_path: Path, 
     node = node_for(tmp_path)
     for k in range(10):
         tick(node, k, 0.01 * k)
-        for a in IDS:  # each agent announces the first tick it acted on without all its data (-1: none)
+        for a in IDS:  # each agent reports the first tick it acted on without all its data (-1: none)
             g = min((gk for ga, gk in guesses if ga == a and gk <= k), default=-1)
-            x, y = S.starts[IDS.index(a)]
-            node.beacon(wire.Beacon(a, k, k * DT, float(x), float(y), S.agents[IDS.index(a)].radius_m, 0, 0, g))
+            node.telemetry(a, 0, g)
     node.finish(0.2, 0)
     with RunRecord(tmp_path / "run.db") as rec:
         s = summarize(rec)
@@ -206,8 +205,8 @@ def test_bad_input_is_refused(tmp_path: Path) -> None:
     with pytest.raises(wire.WireError):
         node.truth(bad)
     with pytest.raises(wire.WireError):
-        node.beacon(wire.Beacon(999, 0, 0.0, 0.0, 0.0, 1.0, 0, 0))
-    node.beacon(wire.Beacon(IDS[0], 0, 0.0, 1.0, 2.0, 1.0, 0, 4))
+        node.telemetry(999, 0, -1)
+    node.telemetry(IDS[0], 4, -1)
     tick(node, 0, 0.0)
     assert node.counts[f"agent {IDS[0]}"] == 4
 

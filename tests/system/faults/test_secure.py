@@ -257,7 +257,7 @@ def test_agent_credentials_cannot_impersonate_another_agent(live: Live) -> None:
     beacons, cmds, sets, alive, clock, reads = Catch(), Catch(), Catch(), Catch(), Catch(), Catch()
     a3 = _open(sec / "agent-3.json5")
     try:
-        mon.declare_subscriber(f"{run}/cell/*/agent/*/beacon", beacons)
+        a2.declare_subscriber(f"{run}/cell/*/agent/*/beacon", beacons)  # (the monitor no longer hears beacons)
         mon.declare_subscriber(f"{run}/clock", clock)
         mon.liveliness().declare_subscriber(f"{run}/alive/**", alive, history=True)
         sim.declare_subscriber(f"{run}/agent/*/cmd", cmds)
