@@ -5,13 +5,12 @@ No transport and no clock of its own: `AgentNode.step(batch, now_s)` takes the m
 beacon, an obstacle set, a command) or to do (open a new session, exit). The AgentBrain is the math it
 calls. agent/process.py moves the bytes between zenoh and this class.
 
-Lockstep (the clock says so): at tick k the agent waits for its state (and scan), announces its beacon
+Lockstep (the clock says so): at tick k the agent waits for its state (its scan inside), announces its beacon
 (with the revision of its obstacle set at k-1), waits for the beacons of the live agents that may matter
 at k (agent/neighbours.py: the cells it listens to and its wait set; every live agent for the virtual
 leader) and the obstacle sets of those within link range (all for the virtual leader), then plans and
-commands. Realtime: it acts shortly after each new state on whatever it has (latest beacons, sets).
-A lost peer stays where last seen or where the world's scan reports it held; a live one out of our cells
-is dropped.
+commands. Realtime: it acts shortly after each new state on whatever it has (latest beacons, sets). A lost
+peer stays where last seen or where the world's scan reports it held; a live one out of our cells is dropped.
 
 The node outlives the adapter's zenoh sessions: after a new session (`reconnected`) it still knows its
 peers' last positions and radii, lost peers, its knowledge, revisions and escape state.
@@ -105,7 +104,7 @@ class AgentNode:
         need = sum(1 for a in waited if a not in fresh and now_s - self.heard.get(a, now_s) < silent)
         if self.mode != "realtime":
             need += self.nb.also_heard(self.alive, self.beacons.get(k - 1, {}), fresh, waited)
-            need += (clock is None) + (st.scan_n > 0 and k not in self.scans)
+            need += clock is None
             if self._linked[0] == k:
                 need += sum(1 for a, rev in self._linked[1].items() if rev and rev not in self.sets.get(a, ()))
         return max(1, need)
@@ -145,9 +144,11 @@ class AgentNode:
                 self._out.append(self.last_cmd)
                 return
             self.states[m.k] = m
+            if m.scan is not None:
+                self._take(m.scan, now)
             if self.mode == "realtime":
                 self.act_at = now + self.timing.realtime_act_fraction * self.period_s
-        elif isinstance(m, wire.Scan):
+        elif isinstance(m, wire.Scan):  # (in its state; in ROS 2 mode on its own key)
             if m.id == self.id:
                 self.scans[m.k] = m
                 # Held robots near us (the world says their agents are gone; maybe never heard: lost far away).
@@ -224,7 +225,7 @@ class AgentNode:
         st, clock = self.states.get(k), self.clocks.get(k)
         if st is None:
             return False
-        # Our beacon goes out as soon as our state is in: the peers wait for it (it needs neither clock nor scan).
+        # Our beacon goes out as soon as our state is in: the peers wait for it (it does not need the clock).
         if self.beacon_sent < k or now > self.beacon_again:  # (again if peers may have lost it)
             if self.beacon_sent < k:
                 self._move(k, st)
@@ -241,14 +242,14 @@ class AgentNode:
         # Each way on without some of the tick's data is a guess: the command may differ from the in-process
         # engine's from here on, so the node says so (`guessed_k` in its reports, then the record's summary).
         self._guess = ""
-        if clock is None or (st.scan_n > 0 and k not in self.scans):
-            # The tick's clock or scan may have been lost (an outage): after a while, go on without it
-            # (the newest clock's list of agents; the next scan sees the same contour again).
+        if clock is None:
+            # The tick's clock may have been lost (an outage): after a while, go on without it (the newest
+            # clock's list of agents).
             first = self.state_at.setdefault(k, now)
             if now - first < t.agent_wait_timeout_s or not self.clocks:
                 return False
             clock = self.clocks[max(self.clocks)]
-            self._guess = "the tick's clock or scan never came"
+            self._guess = "the tick's clock never came"
         if self.wait_since is not None and now - self.wait_since > t.agent_wait_timeout_s:
             self._guess = f"gave up waiting {t.agent_wait_timeout_s:g} s for peers' data"
             return True
@@ -329,7 +330,7 @@ class AgentNode:
             newest = max(self.states, default=None), max(self.clocks, default=None)
             return f"tick {k}: no state yet (newest state {newest[0]}, newest clock {newest[1]})"
         clock = self.clocks.get(k)
-        missing = ["clock"] * (clock is None) + ["scan"] * (self.states[k].scan_n > 0 and k not in self.scans)
+        missing = ["clock"] * (clock is None)
         fresh = self.beacons.get(k, {})
         peers = sorted(a for a in self._expected(k, clock) if a not in fresh)
         if peers:

@@ -1,6 +1,7 @@
 """`reconswarm agent --id I`: one agent as its own process, the AgentNode (agent/node.py) behind zenoh.
 
-This adapter only moves bytes: it subscribes to its state and scan, the clock, liveliness, and the beacons
+This adapter only moves bytes: it subscribes to its state (which carries its scan; in ROS 2 mode its odometry
+and its scan's own key), the clock, liveliness, and the beacons
 and obstacle sets (advanced subscribers: a late or restarted agent, or one entering a cell, receives each
 publisher's current set) of the cells the node names (agent/neighbours.py: re-declared as the agent
 moves, every cell for the virtual leader); it publishes its beacon and set under its own cell. It decodes
@@ -79,8 +80,8 @@ class AgentLink(Member):
         self.subs = [
             # Our state starts a tick: it wakes the loop at once; the rest wakes it only once the node's
             # count of what it still needs is in (one wake-up per tick, not one per message).
-            *([] if self.ros2 else [z.declare_subscriber(k.state(self.id), self.inbox.handler(urgent=True))]),
-            z.declare_subscriber(k.scan(self.id), cb),
+            *([z.declare_subscriber(k.scan(self.id), cb)] if self.ros2 else
+              [z.declare_subscriber(k.state(self.id), self.inbox.handler(urgent=True))]),
             z.declare_subscriber(k.clock, cb),
             z.liveliness().declare_subscriber(k.alive_all, cb, history=True),
         ]

@@ -48,7 +48,7 @@ class AgentRos2:
         for old in [kk for kk in self.theta if kk < k - 100]:
             del self.theta[old]
         self.odom_in += 1
-        return wire.State(self.id, k, o.t_s, o.x_m, o.y_m, o.theta_rad, px, py, 0)
+        return wire.State(self.id, k, o.t_s, o.x_m, o.y_m, o.theta_rad, px, py)  # (its scan: on its own key)
 
     def command(self, c: wire.Cmd) -> None:
         """The node's command for tick k as a Twist: (v, ω) = M(θ_k)⁻¹ u."""

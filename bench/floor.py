@@ -84,8 +84,7 @@ def pack(obj: dict[str, Any]) -> bytes:
 
 def state_bytes(aid: int, k: int, t: float, p: XY) -> bytes:
     """Same map as wire.state_to_wire (the body centre half a metre behind the head point)."""
-    return pack({"id": aid, "k": k, "t": t, "x": p[0] - 0.5, "y": p[1], "theta": 0.0, "px": p[0], "py": p[1],
-                 "scan_n": 0})
+    return pack({"id": aid, "k": k, "t": t, "x": p[0] - 0.5, "y": p[1], "theta": 0.0, "px": p[0], "py": p[1]})
 
 
 def clock_bytes(k: int, t: float, alive: list[int], end: bool = False) -> bytes:

@@ -196,7 +196,8 @@ def largest_messages(s: Scenario, scan: dict[str, int], hull: dict[str, int]) ->
     Worst values where the scenario leaves them open: tick k and time at the end of the duration, counters
     (rev, rejected) at 2^53, the longest end reason and MAX_STATS statistics of the longest keys, the event
     that splits the whole swarm into single agents with every optional field (kind and cause of MAX_STR).
-    State, cmd and beacon have a fixed size (< 200 bytes).
+    Cmd and beacon have a fixed size (< 200 bytes); the state grows with its scan (counted with every other robot
+    held near the agent: a bound, smaller than the truth's share per robot).
     """
     ids = [a.id for a in s.agents]
     n, a_max = len(ids), max(ids)
@@ -212,13 +213,17 @@ def largest_messages(s: Scenario, scan: dict[str, int], hull: dict[str, int]) ->
     event = (_keys("t", "kind", "before", "after", "agent", "cause", "t_confirmed", "duration_s", "wall_unix")
              + _FLOAT + _strlen(W.MAX_STR) + _container(1) + _container(n) + id_bytes + _container(n)
              + n * _container(1) + id_bytes + _uint(a_max) + _strlen(W.MAX_STR) + 3 * _FLOAT)
-    points = sum(scan.values())
-    scan_b = (_keys("id", "k", "t", "points") + _uint(a_max) + k + _FLOAT + _container(points)
-              + sum(c * (_container(3) + 2 * _FLOAT + _strlen(len(oid))) for oid, c in scan.items()))
+    # An agent's state with its scan: every contour point in range, every other robot held nearby.
+    points, others = sum(scan.values()), [i for i in ids if i != a_max]
+    state_b = (_keys("id", "k", "t", "x", "y", "theta", "px", "py", "points", *(["bodies"] if others else []))
+               + _uint(a_max) + k + 6 * _FLOAT + _container(points)
+               + sum(c * (_container(3) + 2 * _FLOAT + _strlen(len(oid))) for oid, c in scan.items())
+               + (_container(len(others)) + sum(_container(3) + _uint(i) + 2 * _FLOAT for i in others) if others
+                  else 0))
     sets = (_keys("id", "k", "rev", "obstacles") + _uint(a_max) + k + counter + _container(len(hull))
             + sum(_strlen(len(oid)) + _container(h) + h * (_container(2) + 2 * _FLOAT) for oid, h in hull.items()))
     return [("agents", "truth", truth), ("agents", "clock", clock), ("agents", "event", event),
-            ("planner.sensing_range_m", "scan", scan_b), ("obstacles", "obstacle set", sets)]
+            ("planner.sensing_range_m", "state", state_b), ("obstacles", "obstacle set", sets)]
 
 
 def hull_vertices_max(o: ObstacleSpec) -> int:

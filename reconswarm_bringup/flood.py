@@ -92,7 +92,7 @@ def run(cfg: FloodConfig) -> dict[str, int]:
         cells = _cells_now(session, k, ids, start)
         keys: list[tuple[str, int]] = [(k.clock, 0), (k.truth, 0), (k.event, 0)]
         for a in ids:
-            keys += [(k.state(a), a), (k.scan(a), a), (k.cmd(a), a), (k.beacon(cells[a], a), a),
+            keys += [(k.state(a), a), (k.cmd(a), a), (k.beacon(cells[a], a), a),
                      (k.obstacles(cells[a], a), a)]
         pubs = {key: session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
                 for key, _ in keys}

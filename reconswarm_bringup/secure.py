@@ -18,10 +18,10 @@ The rules (`R` = `swarm/<run>`) allow, per subject and nothing else:
 - agent i: put `R/agent/i/cmd`, `R/cell/*/agent/i/{beacon,obstacles}` (in any cell, under its own id
   only), its intrusion report `R/report/agent-i`; token `R/alive/agent/i`; the advanced publisher's cache
   (queryable `R/cell/*/agent/i/obstacles/@adv/pub/**`, replies on `R/cell/*/agent/i/obstacles`); subscribe
-  (and receive) `R/agent/i/{state,scan}`, `R/clock`, `R/cell/*/agent/*/beacon`,
+  (and receive) `R/agent/i/state`, `R/clock`, `R/cell/*/agent/*/beacon`,
   `R/cell/*/agent/*/obstacles` (one cell or all); history queries on `R/cell/*/agent/*/obstacles/@adv/**`;
   liveliness subscriptions on `R/alive/**` and `R/cell/*/agent/*/obstacles/@adv/pub/**`;
-- simworld: put `R/clock`, `R/truth`, `R/agent/*/state`, `R/agent/*/scan`, `R/report/simworld`; token
+- simworld: put `R/clock`, `R/truth`, `R/agent/*/state`, `R/report/simworld`; token
   `R/alive/simworld`; subscribe `R/agent/*/cmd`, liveliness `R/alive/**`; the truth's advanced publisher
   (queryable `R/truth/@adv/pub/**` replying on `R/truth`, heartbeats put under `R/truth/@adv/pub/**`);
 - monitor: put `R/event`; token `R/alive/monitor`; subscribe `R/truth`, `R/clock`, `R/report/*`, liveliness
@@ -213,15 +213,15 @@ def access_control(run: str, agent_ids: tuple[int, ...]) -> dict[str, Any]:
             *agents_common,
             *publish(f"agent-{i}-pub", [f"{a}/cmd", f"{own}/beacon", f"{own}/obstacles", f"{r}/report/agent-{i}"],
                      [f"{r}/agent/*/cmd", beacons, obstacles, f"{r}/report/*"]),
-            *subscribe(f"agent-{i}-own", [f"{a}/state", f"{a}/scan"]),
+            *subscribe(f"agent-{i}-own", [f"{a}/state"]),
             *membership(f"agent-{i}", f"{r}/alive/agent/{i}"),
             # its advanced publisher's cache: a queryable under its own key, replies with its own set only
             rule(f"agent-{i}-cache", ["declare_queryable"], ("ingress",), [f"{own}/obstacles/@adv/pub/**"]),
             rule(f"agent-{i}-cache-reply", ["reply"], ("ingress",), [f"{own}/obstacles"]),
         ])
     grant("simworld", [
-        *publish("simworld-pub", [f"{r}/clock", f"{r}/truth", f"{r}/agent/*/state", f"{r}/agent/*/scan",
-                                  f"{r}/report/simworld"], [f"{r}/report/*"]),
+        *publish("simworld-pub", [f"{r}/clock", f"{r}/truth", f"{r}/agent/*/state", f"{r}/report/simworld"],
+                 [f"{r}/report/*"]),
         *subscribe("simworld-sub", [f"{r}/agent/*/cmd"]),
         *membership("simworld", f"{r}/alive/simworld"),
         # the truth's advanced publisher: its cache (a queryable, replies with the truth only) and heartbeats

@@ -1,7 +1,8 @@
 """`reconswarm simworld`: the world process, a thin zenoh adapter around `simworld.world.WorldNode`.
 
 It decodes commands and liveliness changes into the node, calls `WorldNode.step` with the time, and
-puts what the step returns (clock, truth, states, scans) on the wire. The tick logic (readiness
+puts what the step returns on the wire: clock, truth, and each agent's state with its scan in one message (in
+ROS 2 mode the state as odometry and the scan on its own key). The tick logic (readiness
 barrier, lockstep and realtime clocks, re-publish, hold-then-stop, strikes) is in world.py.
 """
 
@@ -69,7 +70,8 @@ class WorldAdapter(Member):
                                                           sporadic_heartbeat=node.timing.truth_heartbeat_s))
         self.pub_state = {} if self.ros2 else {a: z.declare_publisher(k.state(a), congestion_control=block)
                                                 for a in node.ids}
-        self.pub_scan = {a: z.declare_publisher(k.scan(a), congestion_control=block) for a in node.ids}
+        self.pub_scan = {} if not self.ros2 else {a: z.declare_publisher(k.scan(a), congestion_control=block)
+                                                   for a in node.ids}
         # Admission: commands only from each agent's own session, bounded, for ticks we published; an agent is
         # alive while its token is there AND its commands keep coming (a token alone can be forged). In ROS 2
         # mode commands come as cmd_vel, without our ids: membership by the tokens, as before.
@@ -140,10 +142,12 @@ class WorldAdapter(Member):
             for _ in range(self.ros2.new_bad_attachments()):
                 self.rej.reject("/robot_<i>/cmd_vel", "a sample without a valid rmw_zenoh attachment")
             self.node.rejected = self.rej.count
-        for m in out.states if self.ros2 is None else ():
+            for m in out.states:
+                if m.scan is not None:
+                    self.pub_scan[m.id].put(wire.scan_to_wire(m.scan))
+            return
+        for m in out.states:
             self.pub_state[m.id].put(wire.state_to_wire(m))
-        for sc in out.scans:
-            self.pub_scan[sc.id].put(wire.scan_to_wire(sc))
 
     def run(self, stop: Stopper) -> str:
         """Feed the node until it ends the mission; returns the end reason."""

@@ -50,12 +50,11 @@ class Phase(Enum):
 
 @dataclass
 class TickOut:
-    """Everything one tick publishes: the clock, the truth, every robot's state and the non-empty scans."""
+    """Everything one tick publishes: the clock, the truth, every robot's state (with its scan, if any)."""
 
     clock: wire.Clock
     truth: wire.Truth
     states: list[wire.State]
-    scans: list[wire.Scan]
 
 
 @dataclass
@@ -281,9 +280,7 @@ class WorldNode:
         c = unicycle.body_centre(self.p, self.theta, self.l)
         truth = wire.Truth(k, t, tuple(self.ids), tuple(c[:, 0].tolist()), tuple(c[:, 1].tolist()),
                            tuple(self.theta.tolist()), tuple(self.p[:, 0].tolist()), tuple(self.p[:, 1].tolist()))
-        states = [wire.State(a, k, t, float(c[i, 0]), float(c[i, 1]), float(self.theta[i]), float(self.p[i, 0]),
-                             float(self.p[i, 1]), int(counts[i])) for i, a in enumerate(self.ids)]
-        scans = []
+        scans: list[wire.Scan | None] = [None] * len(self.ids)
         starts = np.searchsorted(qa, np.arange(len(self.ids)))
         ends = np.searchsorted(qa, np.arange(len(self.ids)), side="right")
         names = self.field.ids
@@ -291,8 +288,10 @@ class WorldNode:
             idx = qs[starts[i]:ends[i]]
             pts = tuple(zip(*self.field.samples[idx].T.tolist(),
                             [names[o] for o in self.field.owner[idx].tolist()], strict=True))
-            scans.append(wire.Scan(self.ids[i], k, t, pts, bodies[i]))
-        return TickOut(clock, truth, states, scans)
+            scans[i] = wire.Scan(self.ids[i], k, t, pts, bodies[i])
+        states = [wire.State(a, k, t, float(c[i, 0]), float(c[i, 1]), float(self.theta[i]), float(self.p[i, 0]),
+                             float(self.p[i, 1]), scans[i]) for i, a in enumerate(self.ids)]
+        return TickOut(clock, truth, states)
 
     def held_bodies(self) -> list[tuple[tuple[int, float, float], ...]]:
         """Per robot: the held robots (whose agents are gone) within body_range_m of its head point, as

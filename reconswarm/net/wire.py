@@ -42,19 +42,6 @@ class ClockMode(StrEnum):
 
 
 @dataclass(frozen=True)
-class State:
-    id: int
-    k: int
-    t: float
-    x: float  # body centre s
-    y: float
-    theta: float
-    px: float  # head point p
-    py: float
-    scan_n: int = 0  # contour points and held bodies in this tick's scan (0: no scan message follows)
-
-
-@dataclass(frozen=True)
 class Scan:
     id: int
     k: int
@@ -64,6 +51,22 @@ class Scan:
     # where they stopped). With spatial cells an agent hears only its neighbourhood, so a robot lost far
     # away is known to it only once it comes near: the world's range sensing tells it.
     bodies: tuple[tuple[int, float, float], ...] = ()
+
+
+@dataclass(frozen=True)
+class State:
+    """A robot's state at tick k and what it senses then: one message per agent per tick (`scan`: None when
+    nothing is within range; in ROS 2 mode the state comes as odometry and the scan on its own key)."""
+
+    id: int
+    k: int
+    t: float
+    x: float  # body centre s
+    y: float
+    theta: float
+    px: float  # head point p
+    py: float
+    scan: Scan | None = None
 
 
 @dataclass(frozen=True)
@@ -128,14 +131,22 @@ def _pack(obj: dict[str, Any]) -> bytes:
 
 
 def state_to_wire(m: State) -> bytes:
-    return _pack({"id": m.id, "k": m.k, "t": m.t, "x": m.x, "y": m.y, "theta": m.theta, "px": m.px, "py": m.py,
-                  "scan_n": m.scan_n})
+    d: dict[str, Any] = {"id": m.id, "k": m.k, "t": m.t, "x": m.x, "y": m.y, "theta": m.theta, "px": m.px,
+                         "py": m.py}
+    if m.scan is not None:
+        _scan_fields(d, m.scan)
+    return _pack(d)
+
+
+def _scan_fields(d: dict[str, Any], m: Scan) -> None:
+    d["points"] = [[x, y, o] for x, y, o in m.points]
+    if m.bodies:
+        d["bodies"] = [[a, x, y] for a, x, y in m.bodies]
 
 
 def scan_to_wire(m: Scan) -> bytes:
-    d: dict[str, Any] = {"id": m.id, "k": m.k, "t": m.t, "points": [[x, y, o] for x, y, o in m.points]}
-    if m.bodies:
-        d["bodies"] = [[a, x, y] for a, x, y in m.bodies]
+    d: dict[str, Any] = {"id": m.id, "k": m.k, "t": m.t}
+    _scan_fields(d, m)
     return _pack(d)
 
 
@@ -230,12 +241,18 @@ def _agent_id(obj: dict[str, Any], key_id: int | None) -> int:
 
 def state_from_wire(payload: bytes, key_id: int | None = None) -> State:
     o = _unpack(payload)
-    return State(_agent_id(o, key_id), _int(o, "k"), _float(o, "t"), _float(o, "x"), _float(o, "y"),
-                 _float(o, "theta"), _float(o, "px"), _float(o, "py"), _int(o, "scan_n", 0, MAX_POINTS, 0))
+    aid, k, t = _agent_id(o, key_id), _int(o, "k"), _float(o, "t")
+    scan = Scan(aid, k, t, _points(o), _bodies(o.get("bodies", []))) if "points" in o or "bodies" in o else None
+    return State(aid, k, t, _float(o, "x"), _float(o, "y"), _float(o, "theta"), _float(o, "px"), _float(o, "py"),
+                 scan)
 
 
 def scan_from_wire(payload: bytes, key_id: int | None = None) -> Scan:
     o = _unpack(payload)
+    return Scan(_agent_id(o, key_id), _int(o, "k"), _float(o, "t"), _points(o), _bodies(o.get("bodies", [])))
+
+
+def _points(o: dict[str, Any]) -> tuple[tuple[float, float, str], ...]:
     pts = o.get("points")
     if not isinstance(pts, list) or len(pts) > MAX_POINTS:
         raise WireError(f"field 'points': expected a list of at most {MAX_POINTS} points")
@@ -250,7 +267,7 @@ def scan_from_wire(payload: bytes, key_id: int | None = None) -> Scan:
         if type(oid) is not str or not 0 < len(oid) <= MAX_STR:
             _str(oid, "point obstacle_id")
         out.append((x, y, oid))
-    return Scan(_agent_id(o, key_id), _int(o, "k"), _float(o, "t"), tuple(out), _bodies(o.get("bodies", [])))
+    return tuple(out)
 
 
 def _bodies(raw: Any) -> tuple[tuple[int, float, float], ...]:

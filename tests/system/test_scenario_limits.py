@@ -133,7 +133,8 @@ def worst_messages(s) -> dict[str, bytes]:
                                                "r" * wire_limits.MAX_REASON, 2**53, stats)),
         "event": wire.event_to_wire(wire.Event(t, LONGEST_KIND, (ids,), tuple((i,) for i in ids), a_max,
                                                "c" * wire.MAX_STR, f, f, f)),
-        "scan": wire.scan_to_wire(wire.Scan(a_max, k, t, pts)),
+        "state": wire.state_to_wire(wire.State(a_max, k, t, f, f, f, f, f, wire.Scan(a_max, k, t, pts, tuple(
+            (i, f, f) for i in ids if i != a_max)))),
         "obstacle set": wire.obstacles_to_wire(wire.ObstacleSet(a_max, k, 2**53, {
             o.id: ((f, f),) * hull[o.id] for o in s.obstacles})),
     }
@@ -158,7 +159,7 @@ def test_computed_sizes_are_the_encoders_byte_for_byte(case):
     slack = {"event": (wire.MAX_STR + 2) - (len(LONGEST_KIND.value) + 1)}
     assert computed == {what: len(b) + slack.get(what, 0) for what, b in encoded.items()}
     decode = {"truth": wire.truth_from_wire, "clock": wire.clock_from_wire, "event": wire.event_from_wire,
-              "scan": wire.scan_from_wire, "obstacle set": wire.obstacles_from_wire}
+              "state": wire.state_from_wire, "obstacle set": wire.obstacles_from_wire}
     for what, payload in encoded.items():  # every message of an accepted scenario passes the wire's checks
         decode[what](payload)
 

@@ -31,8 +31,8 @@ T = Timing()
 RADIUS = {a.id: a.radius_m for a in S.agents}
 
 
-def state(k: int, px: float, py: float, aid: int = A, scan_n: int = 0) -> wire.State:
-    return wire.State(aid, k, k * DT, px, py, 0.0, px, py, scan_n)
+def state(k: int, px: float, py: float, aid: int = A, scan: wire.Scan | None = None) -> wire.State:
+    return wire.State(aid, k, k * DT, px, py, 0.0, px, py, scan)
 
 
 def clock(k: int, alive: tuple[int, ...] = (A, B, C), **kw: object) -> wire.Clock:
@@ -87,13 +87,11 @@ def test_lockstep_waits_for_every_live_peer_then_acts_once() -> None:
     assert node.step([], 0.04) == []  # nothing new: no second command, no second beacon
 
 
-def test_lockstep_waits_for_the_scan_the_state_announces() -> None:
+def test_lockstep_plans_with_the_scan_its_state_carries() -> None:
     node = started(peers=())
     pts = ((130.0, 0.0, "diamond"), (131.0, 1.0, "diamond"))
-    out = node.step([clock(0, (A,)), state(0, 100.0, 0.0, scan_n=2)], 0.0)
-    assert beacons(out) and not cmds(out)  # the beacon at once (peers wait for it), the command waits
-    assert node.awaiting(0.0) == 1  # for the scan
-    out = node.step([wire.Scan(A, 0, 0.0, pts)], 0.1)
+    out = node.step([clock(0, (A,)), state(0, 100.0, 0.0, scan=wire.Scan(A, 0, 0.0, pts))], 0.0)
+    assert beacons(out)  # one message, one step: beacon, then the command planned with the scan
     scan = {"diamond": np.array([[130.0, 0.0], [131.0, 1.0]])}
     assert [(c.ux, c.uy) for c in cmds(out)] == [reference(0, (100.0, 0.0), [], scan=scan)]
     grew = no_cells(out)[-2]
@@ -136,7 +134,7 @@ def test_a_peer_that_never_answers_is_given_up_after_the_wait_timeout() -> None:
 def test_a_stuck_tick_announces_beacon_and_obstacle_set_again() -> None:
     node = started(peers=(B,))
     pts = ((130.0, 0.0, "diamond"), (131.0, 1.0, "diamond"), (131.0, -1.0, "diamond"))
-    node.step([clock(0, (A, B)), state(0, 100.0, 0.0, scan_n=3), wire.Scan(A, 0, 0.0, pts),
+    node.step([clock(0, (A, B)), state(0, 100.0, 0.0, scan=wire.Scan(A, 0, 0.0, pts)),
                beacon(B, 0, 140.0, 0.0)], 0.0)
     assert node.k == 0 and node.brain.rev == 1
     node.step([clock(1, (A, B)), state(1, 100.1, 0.0)], 1.0)
@@ -263,7 +261,7 @@ def test_a_stalled_world_is_waited_for_not_answered_with_a_new_session() -> None
 def test_a_new_session_keeps_knowledge_revision_and_escape_state() -> None:
     node = started(peers=())
     pts = ((130.0, 0.0, "diamond"), (131.0, 1.0, "diamond"), (131.0, -1.0, "diamond"))
-    node.step([clock(0, (A,)), state(0, 100.0, 0.0, scan_n=3), wire.Scan(A, 0, 0.0, pts)], 0.0)
+    node.step([clock(0, (A,)), state(0, 100.0, 0.0, scan=wire.Scan(A, 0, 0.0, pts))], 0.0)
     brain, known = node.brain, dict(node.brain.obstacle_sets())
     assert node.step([], 10.0) == [Reconnect()]
     node.reconnected(10.0)
@@ -400,7 +398,7 @@ def test_a_robot_lost_out_of_hearing_is_an_obstacle_once_the_worlds_scan_reports
     node = started(peers=(B, C))
     node.step([Left(C)], 0.0)  # C's agent is gone; we never had a beacon of it
     held = wire.Scan(A, 0, 0.0, (), ((C, 104.0, 0.0),))
-    out = node.step([clock(0, (A, B)), state(0, 100.0, 0.0, scan_n=1), held, beacon(B, 0, 110.0, 0.0)], 0.01)
+    out = node.step([clock(0, (A, B)), state(0, 100.0, 0.0, scan=held), beacon(B, 0, 110.0, 0.0)], 0.01)
     ref = AgentBrain(S, A)
     want = reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 104.0, 0.0, RADIUS[C])], brain=ref)
     assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(0, *want)]
@@ -419,7 +417,7 @@ def test_a_dead_peer_kept_alive_by_a_forged_token_is_still_an_obstacle() -> None
     node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 110.0, 0.0), beacon(C, 0, 104.0, 0.0)], 0.0)
     # C's agent dies; a token for C stays (forged), so no Left(C). The world's clock of tick 1 lacks C.
     held = wire.Scan(A, 1, DT, (), ((C, 104.0, 0.0),))
-    out = node.step([clock(1, (A, B)), state(1, 100.05, 0.0, scan_n=1), held, beacon(B, 1, 110.0, 0.0)], 0.06)
+    out = node.step([clock(1, (A, B)), state(1, 100.05, 0.0, scan=held), beacon(B, 1, 110.0, 0.0)], 0.06)
     ref = AgentBrain(S, A)
     reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 104.0, 0.0, RADIUS[C])], brain=ref)
     want = reference(1, (100.05, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 104.0, 0.0, RADIUS[C])], brain=ref)

@@ -40,7 +40,7 @@ def test_cells_pattern_waits_for_what_a_real_agent_waits_for(n: int) -> None:
 def test_payloads_are_the_wire_maps() -> None:
     p = (12.345678901, -98.7654321)
     st = wire.state_from_wire(floor.state_bytes(7, 123, 6.15, p), 7)
-    assert (st.k, st.px, st.py, st.scan_n) == (123, p[0], p[1], 0)
+    assert (st.k, st.px, st.py, st.scan) == (123, p[0], p[1], None)
     assert len(floor.state_bytes(7, 123, 6.15, p)) == len(wire.state_to_wire(st))
     b = wire.beacon_from_wire(floor.beacon_bytes(7, 123, 6.15, p, 1.5), 7)
     assert len(floor.beacon_bytes(7, 123, 6.15, p, 1.5)) == len(wire.beacon_to_wire(b))

@@ -40,7 +40,7 @@ def beacon(aid: int, k: int, px: float, py: float) -> wire.Beacon:
 
 
 def state(k: int, px: float, py: float) -> wire.State:
-    return wire.State(A, k, k * DT, px, py, 0.0, px, py, 0)
+    return wire.State(A, k, k * DT, px, py, 0.0, px, py)
 
 
 def clock(k: int, alive: tuple[int, ...] = ALIVE) -> wire.Clock:
@@ -140,7 +140,7 @@ def test_cells_follow_the_agent_new_before_the_command_old_after_it() -> None:
 def test_the_node_moves_its_cells_before_its_beacon_and_puts_its_set_again_in_a_new_cell() -> None:
     node = node_with()
     pts = ((10.0, 5.0, "diamond"), (11.0, 6.0, "diamond"), (11.0, 4.0, "diamond"))
-    node.step([clock(0, (A,)), wire.State(A, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 3), wire.Scan(A, 0, 0.0, pts)], 0.0)
+    node.step([clock(0, (A,)), wire.State(A, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, wire.Scan(A, 0, 0.0, pts))], 0.0)
     assert node.k == 0 and node.brain.rev == 1
     x = G.width_m + 0.5  # tick 1 is in the next cell to the east
     out = node.step([clock(1, (A,)), state(1, x, 0.0)], 0.1)

@@ -18,10 +18,33 @@ names = st.text(alphabet="abcdefghijklmnopqrstuvwxyz0123456789-_", min_size=1, m
 
 
 @settings(max_examples=150, deadline=None)
-@given(ids, ticks, finite, finite, finite, finite, finite, finite, st.integers(0, 1000))
-def test_state_round_trip(aid, k, t, x, y, th, px, py, n):
-    m = wire.State(aid, k, t, x, y, th, px, py, n)
+@given(ids, ticks, finite, finite, finite, finite, finite, finite)
+def test_state_round_trip(aid, k, t, x, y, th, px, py):
+    m = wire.State(aid, k, t, x, y, th, px, py)
     assert wire.state_from_wire(wire.state_to_wire(m), aid) == m
+    assert not {"points", "bodies"} & msgpack.unpackb(wire.state_to_wire(m)).keys()  # nothing sensed: no scan
+
+
+@settings(max_examples=100, deadline=None)
+@given(ids, ticks, finite, finite, finite, st.lists(st.tuples(finite, finite, names), max_size=30),
+       st.lists(st.tuples(ids, finite, finite), max_size=5))
+def test_state_carries_its_scan_in_the_same_message(aid, k, t, px, py, pts, bodies):
+    scan = wire.Scan(aid, k, t, tuple(pts), tuple(bodies))
+    m = wire.State(aid, k, t, px - 0.5, py, 0.0, px, py, scan)
+    assert wire.state_from_wire(wire.state_to_wire(m), aid) == m
+    # the scan inside a state is the scan message's fields under the state's id, k and t
+    alone = msgpack.unpackb(wire.scan_to_wire(scan))
+    inside = msgpack.unpackb(wire.state_to_wire(m))
+    assert {f: inside[f] for f in alone} == alone
+
+
+@pytest.mark.parametrize("fields", [{"points": "x"}, {"points": [[1.0, 2.0]]}, {"bodies": [[1, 2.0, 3.0]]},
+                                    {"points": [], "bodies": [[1, 2.0]]}, {"points": [[1.0, 2.0, 7]]}])
+def test_a_state_with_a_malformed_scan_is_refused(fields):
+    payload = wire._pack({"id": 3, "k": 1, "t": 0.05, "x": 0.0, "y": 0.0, "theta": 0.0, "px": 0.5, "py": 0.0,
+                          **fields})
+    with pytest.raises(wire.WireError, match=r"point|bodies|body"):
+        wire.state_from_wire(payload, 3)
 
 
 @settings(max_examples=100, deadline=None)

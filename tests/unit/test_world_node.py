@@ -86,7 +86,7 @@ def test_lockstep_waits_for_every_command_then_integrates() -> None:
     (tick,) = st.out
     assert tick.clock.k == 0 and tick.clock.alive == tuple(sorted(IDS)) and not tick.clock.end
     assert [m.id for m in tick.states] == IDS and tick.truth.ids == tuple(IDS)
-    assert all(sc.points for sc in tick.scans)
+    assert all(m.scan.points for m in tick.states if m.scan is not None)
     p0, th0 = node.p.copy(), node.theta.copy()
     assert node.awaiting() == len(IDS)  # the adapter sleeps until every command could be in
     command_all(node, 0, (0.5, 0.2), 0.01, skip=(IDS[3],))
@@ -228,8 +228,8 @@ def test_a_robot_next_to_an_obstacle_gets_its_contour() -> None:
     vx, vy = ob.vertices_m[0]
     node.p[0] = (vx - 1.0, vy - 1.0)
     (tick,) = node.step(0.0).out
-    mine = [sc for sc in tick.scans if sc.id == IDS[0]]
-    assert len(mine) == 1 and tick.states[0].scan_n == len(mine[0].points) > 0
+    mine = [m.scan for m in tick.states if m.id == IDS[0] and m.scan is not None]
+    assert len(mine) == 1 and mine[0].id == IDS[0] and mine[0].k == tick.clock.k and len(mine[0].points) > 0
     assert all(o == ob.id or o in {x.id for x in S.obstacles} for _, _, o in mine[0].points)
     near = min(np.hypot(x - (vx - 1.0), y - (vy - 1.0)) for x, y, _ in mine[0].points)
     assert near <= np.sqrt(2.0) + 1e-9  # the vertex itself is within sqrt(2) m
@@ -266,10 +266,8 @@ def test_a_held_robot_is_in_the_scans_of_the_agents_near_it_and_only_theirs() ->
     node.p[2] = (5000.0, 5000.0 + node.body_range_m + 1.0)  # just outside
     node.agent_up(gone, False)
     (tick,) = node.step(0.0).out
-    scans = {sc.id: sc for sc in tick.scans}
+    scans = {m.id: m.scan for m in tick.states if m.scan is not None}  # (each scan rides in its state)
     assert scans[near].bodies == ((gone, 5000.0, 5000.0),) and scans[near].points == ()
     assert far not in scans and gone not in scans  # nothing in range; the gone agent gets no scan
-    scan_n = {s.id: s.scan_n for s in tick.states}
-    assert scan_n[near] == 1 and scan_n[far] == 0  # the state announces the scan, so lockstep waits for it
     node.agent_up(gone, True)  # back (a restarted agent): its robot is nobody's body any more
     assert all(not b for b in node.held_bodies())
