@@ -192,20 +192,23 @@ class AgentNode:
         if self.mode == "realtime":
             return self.nb.near_now(p, self._lately(), self.last_seen)
         self.nb.own.setdefault(k, p)
-        near = self.nb.wait_set(k, self.alive, self.beacons.get(k - 1, {}), self.last_seen)
-        return set(near if clock is None else near.intersection(clock.alive))
+        return set(self.nb.wait_set(k, self.alive, self.beacons.get(k - 1, {}), self.last_seen) & self._living(clock))
+
+    def _living(self, clock: wire.Clock | None) -> set[int]:
+        """The one notion of a live peer: alive by its token and, once a clock says, by the world's clock."""
+        return self.alive if clock is None else self.alive.intersection(clock.alive)
 
     def _peers(self, k: int) -> list[wire.Beacon]:
         """Whom tick k plans with: every beacon of k; for the peers it waited for but lacks (a guess) and for
-        lost peers (their robots stay where they stopped: gone by their token, or by the world's clock, which
-        a forged token cannot fool), the latest beacon. An alive peer that may not matter at k is left out: it
+        lost peers (not `_living`: their robots stay where they stopped; the world's clock is not fooled by a
+        forged token), the latest beacon. An alive peer that may not matter at k is left out: it
         contributes nothing, and its last position would be stale (realtime: one not heard lately)."""
         fresh, st = self.beacons.get(k, {}), self.states[k]
         clock = self.clocks.get(k) or self.clocks.get(max(self.clocks, default=-1))  # (realtime: the newest)
-        rt, p, world = self.mode == "realtime", (st.px, st.py), self.alive if clock is None else set(clock.alive)
+        rt, p, living = self.mode == "realtime", (st.px, st.py), self._living(clock)
         wanted = self._expected(k, None) if not rt else self._lately()
-        return [fresh.get(a, b) for a, b in self.last_seen.items() if a in fresh or a not in self.alive
-                or a not in world or (a in wanted and (not rt or self.nb.audible(p, b)))]
+        return [fresh.get(a, b) for a, b in self.last_seen.items()
+                if a in fresh or a not in living or (a in wanted and (not rt or self.nb.audible(p, b)))]
 
     def _lately(self) -> set[int]:
         return self.nb.heard_lately(self.alive, self.heard, self.now, self.period_s)
@@ -330,14 +333,11 @@ class AgentNode:
             newest = max(self.states, default=None), max(self.clocks, default=None)
             return f"tick {k}: no state yet (newest state {newest[0]}, newest clock {newest[1]})"
         clock = self.clocks.get(k)
-        missing = ["clock"] * (clock is None)
         fresh = self.beacons.get(k, {})
         peers = sorted(a for a in self._expected(k, clock) if a not in fresh)
-        if peers:
-            missing.append(f"beacons of {peers}")
         sets = sorted(a for a, rev in self._linked[1].items() if rev and rev not in self.sets.get(a, ()))
-        if sets:
-            missing.append(f"obstacle sets of {sets}")
+        missing = (["clock"] * (clock is None) + [f"beacons of {peers}"] * bool(peers)
+                   + [f"obstacle sets of {sets}"] * bool(sets))
         return f"tick {k}: waiting for {', '.join(missing) or 'nothing'}"
 
     def _obstacle_set(self, k: int) -> wire.ObstacleSet:
