@@ -19,6 +19,7 @@ from reconswarm.paper.leader import VirtualLeader
 from reconswarm.paper.link import linked
 from reconswarm.paper.planner import Neighbours, ObstacleView, command, errors, repulsion
 from reconswarm.scenario import PlannerKind, Scenario
+from reconswarm.sim.unicycle import inputs
 
 Array = NDArray[np.float64]
 
@@ -41,6 +42,7 @@ class AgentBrain:
         idx = s.agent_index(agent_id)
         spec = s.agents[idx]
         self.r = np.array([spec.radius_m])
+        self.l = np.array([s.head_offsets[idx]], dtype=np.float64)  # head offset (1,)
         self.offset = np.array([spec.offset_m], dtype=np.float64)
         self.target = np.asarray(s.target_m, dtype=np.float64)
         self.known = KnownObstacles()
@@ -55,6 +57,12 @@ class AgentBrain:
         w = window_ticks(self.cfg.stall_window_s, s.meta.dt_s)
         self.stall = StallState.create(1, w, [generator(s.meta.seed, agent_id)])
         self.leader = VirtualLeader(s) if self.cfg.kind == PlannerKind.VIRTUAL_LEADER else None
+
+    def inputs(self, u: Array, theta: float) -> tuple[float, float]:
+        """The command u (2,) as the unicycle's own inputs (v, ω) at heading θ: eq. 3 inverted
+        (reconswarm.sim.unicycle.inputs, which the in-process engine applies to everyone at once)."""
+        v, w = inputs(u[None, :], np.array([theta]), self.l)
+        return float(v[0]), float(w[0])
 
     def linked(self, p: Array, peers: list[Peer]) -> list[int]:
         """Ids of peers within link range of head point p (2,): whose obstacle sets we merge."""

@@ -315,14 +315,12 @@ class AgentNode:
         u, grew = self.brain.tick(k, p, scan, peers, shared, swarm)
         if grew:
             self._out.append(self._obstacle_set(k))
-        self.last_cmd = wire.Cmd(self.id, k, float(u[0]), float(u[1]))
+        self.last_cmd = wire.Cmd(self.id, k, *self.brain.inputs(u, st.theta))  # (v, ω) at our heading θ_k
         self._out.append(self.last_cmd)
         cells = self.nb.after_command(k)
         if cells is not None:
             self._out.append(cells)
-        self.last_act = now
-        self.k = k
-        self.wait_since = None
+        self.last_act, self.k, self.wait_since = now, k, None
         if k % 20 == 0:
             self._prune(k)
 

@@ -4,8 +4,8 @@ Instead of its state and command keys, agent i reads `/robot_<i>/odom` (nav_msgs
 s, θ and the simulated time) and publishes `/robot_<i>/cmd_vel` (geometry_msgs/Twist: linear.x = v,
 angular.z = ω), as node `agent_<i>` with rmw_zenoh's keys, attachments and liveliness tokens
 (reconswarm/net/ros2_node.py). The node (agent/node.py) does not change: an odometry becomes the state it
-knows (head point p = s + l [cos θ, sin θ], tick k = round(t / dt)), and its command u becomes
-(v, ω) = M(θ)⁻¹ u at the heading of the state it was planned from (eq. 3 inverted, `unicycle.inputs`).
+knows (head point p = s + l [cos θ, sin θ], tick k = round(t / dt)), and its command, already the unicycle's
+(v, ω) = M(θ)⁻¹ u at the heading of the state it was planned from (eq. 3 inverted), becomes the Twist.
 """
 
 from __future__ import annotations
@@ -13,12 +13,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import numpy as np
-
 from agent.messages import Invalid
 from reconswarm.net import ros2, wire
 from reconswarm.net.ros2_node import Ros2Node
-from reconswarm.sim.unicycle import inputs
 
 
 class AgentRos2:
@@ -30,7 +27,6 @@ class AgentRos2:
         self.odom_key = ros2.odom_key(domain_id, agent_id)
         self.cmd_vel = self.node.publisher(ros2.cmd_vel_topic(agent_id), ros2.TWIST)
         self.node.subscription(ros2.odom_topic(agent_id), ros2.ODOMETRY, callback)
-        self.theta: dict[int, float] = {}  # tick -> heading of its odometry (for the command planned from it)
         self.odom_in = self.cmd_out = self.counted = 0
 
     def owns(self, key: str) -> bool:
@@ -44,19 +40,12 @@ class AgentRos2:
             return Invalid(key, str(exc))
         k = round(o.t_s / self.dt)
         px, py = o.x_m + self.l * math.cos(o.theta_rad), o.y_m + self.l * math.sin(o.theta_rad)
-        self.theta[k] = o.theta_rad
-        for old in [kk for kk in self.theta if kk < k - 100]:
-            del self.theta[old]
         self.odom_in += 1
         return wire.State(self.id, k, o.t_s, o.x_m, o.y_m, o.theta_rad, px, py)  # (its scan: on its own key)
 
     def command(self, c: wire.Cmd) -> None:
-        """The node's command for tick k as a Twist: (v, ω) = M(θ_k)⁻¹ u."""
-        theta = self.theta.get(c.k)
-        if theta is None:  # (cannot happen: the node plans tick k from the state of tick k)
-            return
-        v, w = inputs(np.array([[c.ux, c.uy]]), np.array([theta]), np.array([self.l]))
-        self.cmd_vel.put(ros2.twist_to_ros(float(v[0]), float(w[0])))
+        """The node's command, already the unicycle's (v, ω), as a Twist."""
+        self.cmd_vel.put(ros2.twist_to_ros(c.v_mps, c.omega_radps))
         self.cmd_out += 1
 
     def take_invalid(self) -> list[Invalid]:

@@ -97,7 +97,7 @@ def beacon_bytes(aid: int, k: int, t: float, p: XY, radius_m: float) -> bytes:
 
 
 def cmd_bytes(aid: int, k: int) -> bytes:
-    return pack({"id": aid, "k": k, "ux": 0.123456789, "uy": -0.987654321})
+    return pack({"id": aid, "k": k, "v_mps": 0.123456789, "omega_radps": -0.987654321})
 
 
 # ------------------------------------------------------------------------------------------- processes

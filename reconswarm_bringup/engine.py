@@ -164,7 +164,9 @@ class Engine:
         return obstacle_view(self.p, n, col, rows, cols_q, self._edges[1])
 
     def advance(self, u: Array) -> None:
+        """Move the robots under the planners' u, as the distributed world does: sent as (v, ω), applied as u."""
         w = self.s.world
+        u = unicycle.through_inputs(u, self.theta, self.l)
         self.p, self.theta = unicycle.step(self.p, self.theta, u, self.l, self.s.meta.dt_s,
                                            w.max_speed_mps, w.max_turn_rate_radps)
 

@@ -27,7 +27,7 @@ from simworld.world import WorldNode
 
 
 class Ros2World(WorldNode):
-    """The world with (v, ω) commands: `self.u` rows are (v, ω), set by `twist`."""
+    """The world whose plant is a robot base: the (v, ω) of a cmd_vel (`twist`) moves the body on its arc."""
 
     def __init__(self, s: Scenario, speed: float, **kw: Any) -> None:
         super().__init__(s, ClockMode.REALTIME, speed, **kw)
@@ -43,9 +43,9 @@ class Ros2World(WorldNode):
         if sent is not None:
             self.latency_ms.append((now_s - sent) * 1000.0)
 
-    def integrate(self, u: np.ndarray) -> None:
+    def integrate(self, vw: np.ndarray) -> None:
         w = self.s.world
-        self.p, self.theta, v, om = unicycle.step_vw(self.p, self.theta, u[:, 0], u[:, 1], self.l, self.s.meta.dt_s,
+        self.p, self.theta, v, om = unicycle.step_vw(self.p, self.theta, vw[:, 0], vw[:, 1], self.l, self.s.meta.dt_s,
                                                      w.max_speed_mps, w.max_turn_rate_radps)
         self.vw = np.stack([v, om], axis=1)
 

@@ -82,9 +82,9 @@ class WorldNode:
         # can matter to them within the next tick (an agent hears only its cells' beacons).
         self.body_range_m = grid.reach_m + 2.0 * grid.step_m
         n = len(self.ids)
-        self.u = np.zeros((n, 2))
-        self.u_k = np.full(n, -(10**9))  # tick of each robot's last command
-        self.cmds: dict[int, dict[int, np.ndarray]] = {}  # tick -> agent index -> u
+        self.vw = np.zeros((n, 2))  # each robot's held command (v, ω)
+        self.vw_k = np.full(n, -(10**9))  # tick of each robot's last command
+        self.cmds: dict[int, dict[int, np.ndarray]] = {}  # tick -> agent index -> (v, ω)
         self.alive: set[int] = set()
         self.monitor: bool = False
         self.strikes: dict[int, int] = {}  # lockstep: consecutive step timeouts of each agent
@@ -122,7 +122,7 @@ class WorldNode:
     def command(self, c: wire.Cmd, now_s: float) -> None:
         if c.id not in self.index:
             raise wire.WireError(f"agent {c.id} is not in the scenario")
-        self.cmds.setdefault(c.k, {})[self.index[c.id]] = np.array([c.ux, c.uy])
+        self.cmds.setdefault(c.k, {})[self.index[c.id]] = np.array([c.v_mps, c.omega_radps])
         if c.id in self.unresponsive:
             self.unresponsive.discard(c.id)
             self.strikes.pop(c.id, None)
@@ -309,25 +309,27 @@ class WorldNode:
         return out
 
     def apply(self, k: int) -> None:
-        """Choose every robot's u for the step k -> k+1 and integrate."""
+        """Choose every robot's (v, ω) for the step k -> k+1 and integrate."""
         hold = max(1, round(self.timing.hold_sim_s / self.s.meta.dt_s))
         got = self.cmds.pop(k, {})
         for kk in sorted(x for x in self.cmds if x < k):  # late commands still count as the latest
-            for i, u in self.cmds.pop(kk).items():
-                if kk > self.u_k[i]:
-                    self.u[i], self.u_k[i] = u, kk
-        for i, u in got.items():
-            self.u[i], self.u_k[i] = u, k
+            for i, vw in self.cmds.pop(kk).items():
+                if kk > self.vw_k[i]:
+                    self.vw[i], self.vw_k[i] = vw, kk
+        for i, vw in got.items():
+            self.vw[i], self.vw_k[i] = vw, k
         if self.clock == ClockMode.REALTIME:
             live = [self.index[a] for a in self.alive]
             self.expected += len(live)
             self.missed += sum(1 for i in live if i not in got)
-        stale = (k - self.u_k) > hold
-        self.integrate(np.where(stale[:, None], 0.0, self.u))
+        stale = (k - self.vw_k) > hold
+        self.integrate(np.where(stale[:, None], 0.0, self.vw))
 
-    def integrate(self, u: np.ndarray) -> None:
-        """Move every robot over one step under its held command (N, 2) (zeros: stopped)."""
+    def integrate(self, vw: np.ndarray) -> None:
+        """Move every robot over one step under its held command (v, ω) (N, 2) (zeros: stopped): eq. 3 gives its
+        head point's velocity u = M(θ_k) [v, ω], held over the step, as the in-process engine does."""
         w = self.s.world
+        u = unicycle.head_velocity(vw[:, 0], vw[:, 1], self.theta, self.l)
         self.p, self.theta = unicycle.step(self.p, self.theta, u, self.l, self.s.meta.dt_s, w.max_speed_mps,
                                            w.max_turn_rate_radps)
 

@@ -119,6 +119,7 @@ class Admission:
         self.s = s
         self.pins = pins or Pins()
         self.radius = {a.id: a.radius_m for a in s.agents}
+        self.head_offset = {a.id: float(s.head_offsets[i]) for i, a in enumerate(s.agents)}
         self.polygons = {o.id: s.polygon(k) for k, o in enumerate(s.obstacles)}
         self.max_vertices = {o: int(sample_boundary(poly, SAMPLE_SPACING_M).shape[0])
                              for o, poly in self.polygons.items()}
@@ -178,7 +179,7 @@ class Admission:
 
     def check_cmd(self, c: wire.Cmd, source: str, key: str, now: float, world_k: int) -> Intrusion | None:
         """A command as the world receives it; world_k: the newest tick it has published."""
-        u = math.hypot(c.ux, c.uy)
+        u = math.hypot(c.v_mps, self.head_offset.get(c.id, 0.0) * c.omega_radps)  # |u| = |M(θ) [v, ω]|
         if u > self.u_max * (1.0 + COMMAND_TOL):
             return Intrusion(IntrusionKind.COMMAND, source, key, f"|u| = {u:.6g} m/s above the bound {self.u_max:.6g}")
         if c.k > world_k:

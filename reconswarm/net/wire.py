@@ -71,10 +71,13 @@ class State:
 
 @dataclass(frozen=True)
 class Cmd:
+    """The agent's command of tick k as the unicycle's own inputs (what a robot base and ROS 2's Twist take):
+    [v, ω] = M(θ_k)⁻¹ u, eq. 3 inverted at the heading of the state it planned from."""
+
     id: int
     k: int
-    ux: float
-    uy: float
+    v_mps: float
+    omega_radps: float
 
 
 @dataclass(frozen=True)
@@ -151,7 +154,7 @@ def scan_to_wire(m: Scan) -> bytes:
 
 
 def cmd_to_wire(m: Cmd) -> bytes:
-    return _pack({"id": m.id, "k": m.k, "ux": m.ux, "uy": m.uy})
+    return _pack({"id": m.id, "k": m.k, "v_mps": m.v_mps, "omega_radps": m.omega_radps})
 
 
 def beacon_to_wire(m: Beacon) -> bytes:
@@ -283,7 +286,7 @@ def _bodies(raw: Any) -> tuple[tuple[int, float, float], ...]:
 
 def cmd_from_wire(payload: bytes, key_id: int | None = None) -> Cmd:
     o = _unpack(payload)
-    return Cmd(_agent_id(o, key_id), _int(o, "k"), _float(o, "ux"), _float(o, "uy"))
+    return Cmd(_agent_id(o, key_id), _int(o, "k"), _float(o, "v_mps"), _float(o, "omega_radps"))
 
 
 def beacon_from_wire(payload: bytes, key_id: int | None = None) -> Beacon:

@@ -42,6 +42,20 @@ def inputs(u: Array, theta: Array, l: Array) -> tuple[Array, Array]:
     return v, w
 
 
+def head_velocity(v: Array, w: Array, theta: Array, l: Array) -> Array:
+    """u = M(θ) [v, ω] (eq. 3): the head point's velocity under the body's (v, ω): (N,) x 4 -> (N, 2)."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([v * c - l * w * s, v * s + l * w * c], axis=1)
+
+
+def through_inputs(u: Array, theta: Array, l: Array) -> Array:
+    """The command u as it reaches the robot: sent as its (v, ω) (`inputs`), applied as `head_velocity`.
+    The agent sends (v, ω) and the world rebuilds u; the in-process engine goes through the same two steps,
+    so both move the robots by the same bits. (N, 2) -> (N, 2), equal to u up to rounding."""
+    v, w = inputs(u, theta, l)
+    return head_velocity(v, w, theta, l)
+
+
 def step(p: Array, theta: Array, u: Array, l: Array, dt: float, max_speed: float = 0.0,
          max_turn_rate: float = 0.0) -> tuple[Array, Array]:
     """Advance the robots by dt under command u. Returns the new (p (N, 2), θ (N,)).

@@ -59,9 +59,10 @@ def beacons(out: list[Output]) -> list[wire.Beacon]:
 def reference(k: int, p: tuple[float, float], peers: list[Peer], brain: AgentBrain | None = None,
               scan: dict[str, np.ndarray] | None = None, shared: list[dict[str, np.ndarray]] | None = None,
               s: Scenario = S) -> tuple[float, float]:
+    """The command the node must send: the brain's u as (v, ω) at the state's heading (0 in these tests)."""
     brain = brain or AgentBrain(s, A)
     u, _ = brain.tick(k, np.array(p), scan or {}, peers, shared or [])
-    return float(u[0]), float(u[1])
+    return brain.inputs(u, 0.0)
 
 
 def started(node_s: Scenario = S, peers: tuple[int, ...] = (B, C), timing: Timing = T) -> AgentNode:
@@ -83,7 +84,7 @@ def test_lockstep_waits_for_every_live_peer_then_acts_once() -> None:
     assert "beacons of [3]" in node.waiting_for()
     out = node.step([beacon(C, 0, 300.0, 0.0)], 0.03)
     want = reference(0, (100.0, 0.0), [Peer(B, 200.0, 0.0, RADIUS[B]), Peer(C, 300.0, 0.0, RADIUS[C])])
-    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(0, *want)]
+    assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(0, *want)]
     assert node.step([], 0.04) == []  # nothing new: no second command, no second beacon
 
 
@@ -93,7 +94,7 @@ def test_lockstep_plans_with_the_scan_its_state_carries() -> None:
     out = node.step([clock(0, (A,)), state(0, 100.0, 0.0, scan=wire.Scan(A, 0, 0.0, pts))], 0.0)
     assert beacons(out)  # one message, one step: beacon, then the command planned with the scan
     scan = {"diamond": np.array([[130.0, 0.0], [131.0, 1.0]])}
-    assert [(c.ux, c.uy) for c in cmds(out)] == [reference(0, (100.0, 0.0), [], scan=scan)]
+    assert [(c.v_mps, c.omega_radps) for c in cmds(out)] == [reference(0, (100.0, 0.0), [], scan=scan)]
     grew = no_cells(out)[-2]
     assert isinstance(grew, wire.ObstacleSet) and grew.rev == 1  # its knowledge grew: announced
     assert node.brain.rev == 1
@@ -118,7 +119,8 @@ def test_a_late_peer_is_waited_for_and_the_node_acts_when_it_arrives() -> None:
     node.step([clock(0, (A, B)), state(0, 100.0, 0.0)], 0.0)
     assert not cmds(node.step([], 0.9 * T.agent_wait_timeout_s))
     out = node.step([beacon(B, 0, 110.0, 0.0)], 0.95 * T.agent_wait_timeout_s)
-    assert [(c.ux, c.uy) for c in cmds(out)] == [reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B])])]
+    want = reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B])])
+    assert [(c.v_mps, c.omega_radps) for c in cmds(out)] == [want]
     assert node.guessed_k == -1  # late, but complete: no guess
 
 
@@ -127,7 +129,7 @@ def test_a_peer_that_never_answers_is_given_up_after_the_wait_timeout() -> None:
     node.step([clock(0, (A, B)), state(0, 100.0, 0.0)], 0.0)
     assert not cmds(node.step([], T.agent_wait_timeout_s * 0.99))
     out = node.step([], T.agent_wait_timeout_s + 0.01)
-    assert [(c.ux, c.uy) for c in cmds(out)] == [reference(0, (100.0, 0.0), [])]
+    assert [(c.v_mps, c.omega_radps) for c in cmds(out)] == [reference(0, (100.0, 0.0), [])]
     assert node.guessed_k == 0  # acted without B's beacon: determinism lost from tick 0
 
 
@@ -155,7 +157,7 @@ def test_a_lost_peer_is_not_waited_for_and_stays_a_static_obstacle() -> None:
     ref = AgentBrain(S, A)
     reference(0, (100.0, 0.0), [Peer(B, 108.0, 0.0, RADIUS[B])], brain=ref)
     want = reference(1, (100.05, 0.0), [Peer(B, 108.0, 0.0, RADIUS[B])], brain=ref)
-    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(1, *want)]
+    assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(1, *want)]
     assert want != reference(1, (100.05, 0.0), [])  # B's last position does push the agent away
     assert node.guessed_k == -1  # B is gone by its membership: not a guess
 
@@ -230,7 +232,7 @@ def test_after_a_new_session_a_dead_peer_is_still_an_obstacle_at_its_last_positi
     for k, px in ((0, 100.0), (1, 100.05)):
         reference(k, (px, 0.0), peers, brain=ref)
     want = reference(2, (100.1, 0.0), peers, brain=ref)
-    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(2, *want)]
+    assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(2, *want)]
     assert want != reference(2, (100.1, 0.0), peers[:1])  # without C the command would differ
 
 
@@ -316,7 +318,7 @@ def test_realtime_acts_on_the_newest_state_when_every_beacon_is_in() -> None:
     assert node.wake_at_s() == pytest.approx(T.realtime_act_fraction * DT / 10.0)
     out = node.step([beacon(B, 5, 110.0, 0.0)], 0.001)
     want = reference(5, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B])])
-    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(5, *want)]
+    assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(5, *want)]
     assert node.wake_at_s() is None
 
 
@@ -343,7 +345,8 @@ def test_realtime_a_live_peer_heard_no_more_is_not_a_ghost() -> None:
     node.step([beacon(B, k - 1, 104.0, 0.0)], now - 0.05)
     out = node.step([clock(k, (A, B, C), **rt), state(k, 100.0, 0.0), beacon(B, k, 104.0, 0.0)], now)
     want = reference(k, (100.0, 0.0), [Peer(B, 104.0, 0.0, RADIUS[B])])
-    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(k, *want)]  # at once (not at the deadline), without C
+    # at once (not at the deadline), without C
+    assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(k, *want)]
     assert want != reference(k, (100.0, 0.0), [Peer(B, 104.0, 0.0, RADIUS[B]), Peer(C, 110.0, 0.0, RADIUS[C])])
 
 
@@ -357,7 +360,7 @@ def test_realtime_an_overloaded_neighbour_is_still_planned_with() -> None:
     node.step([clock(k, (A, B), **rt), state(k, 100.0, 0.0)], 0.1)
     out = node.step([], node.wake_at_s() or 0.2)
     want = reference(k, (100.0, 0.0), [Peer(B, 104.0, 0.0, RADIUS[B])])
-    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(k, *want)]
+    assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(k, *want)]
     assert want != reference(k, (100.0, 0.0), [])
 
 
@@ -401,11 +404,11 @@ def test_a_robot_lost_out_of_hearing_is_an_obstacle_once_the_worlds_scan_reports
     out = node.step([clock(0, (A, B)), state(0, 100.0, 0.0, scan=held), beacon(B, 0, 110.0, 0.0)], 0.01)
     ref = AgentBrain(S, A)
     want = reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 104.0, 0.0, RADIUS[C])], brain=ref)
-    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(0, *want)]
+    assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(0, *want)]
     assert want != reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B])])  # C's robot does push us
     out = node.step([clock(1, (A, B)), state(1, 100.05, 0.0), beacon(B, 1, 110.0, 0.0)], 0.06)  # no scan now
     want = reference(1, (100.05, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 104.0, 0.0, RADIUS[C])], brain=ref)
-    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(1, *want)]  # still there: held robots do not move
+    assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(1, *want)]  # still there: held robots do not move
     assert node.guessed_k == -1
 
 
@@ -421,8 +424,8 @@ def test_a_dead_peer_kept_alive_by_a_forged_token_is_still_an_obstacle() -> None
     ref = AgentBrain(S, A)
     reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 104.0, 0.0, RADIUS[C])], brain=ref)
     want = reference(1, (100.05, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 104.0, 0.0, RADIUS[C])], brain=ref)
-    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(1, *want)]
+    assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(1, *want)]
     out = node.step([clock(2, (A, B)), state(2, 100.1, 0.0), beacon(B, 2, 110.0, 0.0)], 0.11)  # no beacon of C at 1
     want = reference(2, (100.1, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 104.0, 0.0, RADIUS[C])], brain=ref)
-    assert [(c.k, c.ux, c.uy) for c in cmds(out)] == [(2, *want)]
+    assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(2, *want)]
     assert node.guessed_k == -1  # gone by the world's count: not a guess

@@ -58,8 +58,9 @@ def cmds(out: list[Output]) -> list[wire.Cmd]:
 
 
 def alone(k: int, p: tuple[float, float], peers: list[Peer] | None = None) -> tuple[float, float]:
-    u, _ = AgentBrain(S, A).tick(k, np.array(p), {}, peers or [], [])
-    return float(u[0]), float(u[1])
+    brain = AgentBrain(S, A)
+    u, _ = brain.tick(k, np.array(p), {}, peers or [], [])
+    return brain.inputs(u, 0.0)  # the command as sent: (v, ω) at the state's heading
 
 
 # ----------------------------------------------------------------------------------------- the wait set
@@ -164,7 +165,7 @@ def test_a_live_peer_that_left_is_neither_waited_for_nor_planned_with_at_its_sta
     # Tick 2: B's beacon of 1 was beyond reach + 2 V dt: not waited for; it says nothing more (out of our
     # cells). Our own state jumps next to B's last position: B must not be planned with there.
     out = node.step([clock(2), state(2, WAIT - 3.0, 0.0)], 0.1)
-    assert [(c.ux, c.uy) for c in cmds(out)] == [alone(2, (WAIT - 3.0, 0.0))]
+    assert [(c.v_mps, c.omega_radps) for c in cmds(out)] == [alone(2, (WAIT - 3.0, 0.0))]
     assert node.guessed_k == -1
 
 
@@ -174,7 +175,7 @@ def test_a_lost_peer_stays_an_obstacle_where_it_stopped() -> None:
     node.step([Left(B), clock(1, (A, C)), state(1, 20.0, 0.0)], 0.05)
     assert node.k == 1
     out = node.step([clock(2, (A, C)), state(2, 25.0, 0.0)], 0.1)
-    assert [(c.ux, c.uy) for c in cmds(out)] == [alone(2, (25.0, 0.0), [Peer(B, *HEAD[B], RADIUS[B])])]
+    assert [(c.v_mps, c.omega_radps) for c in cmds(out)] == [alone(2, (25.0, 0.0), [Peer(B, *HEAD[B], RADIUS[B])])]
 
 
 # ----------------------------------------------------------------------------------- violations

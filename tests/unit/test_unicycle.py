@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from reconswarm.sim.unicycle import body_centre, head_point, inputs, step, wrap
+from reconswarm.sim.unicycle import body_centre, head_point, head_velocity, inputs, step, through_inputs, wrap
 
 SETTINGS = settings(max_examples=60, deadline=None)
 
@@ -148,6 +148,8 @@ def test_zero_command_keeps_pose_and_inputs_invert_m():
         v, w = inputs(u, t, l)
         m = np.array([[math.cos(t[0]), -l[0] * math.sin(t[0])], [math.sin(t[0]), l[0] * math.cos(t[0])]])
         np.testing.assert_allclose(m @ np.array([v[0], w[0]]), u[0], atol=1e-12)
+        # head_velocity is M(θ) [v, ω] (eq. 3), row for row: what the world rebuilds from an agent's command
+        np.testing.assert_allclose(head_velocity(v, w, t, l)[0], m @ np.array([v[0], w[0]]), atol=1e-12)
     # eq. (2) and the body centre are inverse maps.
     s = body_centre(p, th, l)
     np.testing.assert_allclose(head_point(s, th, l), p, atol=1e-15)
@@ -218,3 +220,21 @@ def test_limited_arc_is_accurate_for_tiny_turn_rates():
         worst = max(worst, abs(travelled - v * dt) / (v * dt))
     # The exact arc of length v dt turning by ~1e-8 rad has a chord equal to v dt to ~1e-17 relative.
     assert worst < 1e-10  # rounding of |s| ~ 360 m alone is ~1e-12 relative; the cancelling formula gave 3e-8
+
+
+def test_a_command_sent_as_v_omega_moves_the_robots_as_the_engine_does_bit_for_bit():
+    """An agent sends its u as (v, ω) at its heading (one robot at a time); the world rebuilds u for all at
+    once; the engine converts everyone's u both ways at once (`through_inputs`). The same bits either way,
+    and within rounding of u itself."""
+    rng = np.random.default_rng(3)
+    n = 37
+    u = rng.normal(size=(n, 2)) * 5
+    th = rng.uniform(-4, 4, n)
+    l = rng.uniform(0.1, 1.0, n)
+    sent = [inputs(u[i:i + 1], th[i:i + 1], l[i:i + 1]) for i in range(n)]  # each agent, alone
+    v = np.array([float(a[0][0]) for a in sent])
+    w = np.array([float(a[1][0]) for a in sent])
+    world = head_velocity(v, w, th, l)
+    engine = through_inputs(u, th, l)
+    assert np.array_equal(world, engine)
+    np.testing.assert_allclose(engine, u, rtol=0, atol=1e-12)

@@ -71,8 +71,8 @@ def test_malformed_held_bodies_are_refused(bodies):
 
 @settings(max_examples=100, deadline=None)
 @given(ids, ticks, finite, finite)
-def test_cmd_round_trip(aid, k, ux, uy):
-    m = wire.Cmd(aid, k, ux, uy)
+def test_cmd_round_trip(aid, k, v, w):
+    m = wire.Cmd(aid, k, v, w)
     assert wire.cmd_from_wire(wire.cmd_to_wire(m), aid) == m
 
 

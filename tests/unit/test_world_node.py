@@ -95,7 +95,9 @@ def test_lockstep_waits_for_every_command_then_integrates() -> None:
     node.command(wire.Cmd(IDS[3], 0, 0.5, 0.2), 0.03)
     node.step(0.04)
     assert node.k == 1
-    u = np.tile([0.5, 0.2], (len(IDS), 1))
+    # the command is the unicycle's (v, ω) = (0.5 m/s, 0.2 rad/s); eq. 3 makes it the head point's velocity
+    u = np.stack([0.5 * np.cos(th0) - S.head_offsets * 0.2 * np.sin(th0),
+                  0.5 * np.sin(th0) + S.head_offsets * 0.2 * np.cos(th0)], axis=1)
     p1, th1 = unicycle.step(p0, th0, u, S.head_offsets, S.meta.dt_s, S.world.max_speed_mps,
                             S.world.max_turn_rate_radps)
     assert np.array_equal(node.p, p1) and np.array_equal(node.theta, th1)
@@ -155,7 +157,7 @@ def test_late_commands_count_as_the_latest() -> None:
     node.step(5.1)
     command_all(node, 1, (1.0, 0.0), 5.2, skip=(IDS[0],))
     advance(node, 5.2, 10.2)
-    assert node.u[0].tolist() == [0.3, 0.0] and node.u_k[0] == 0
+    assert node.vw[0].tolist() == [0.3, 0.0] and node.vw_k[0] == 0
 
 
 def test_unknown_agent_command_is_refused() -> None:
@@ -252,7 +254,7 @@ def test_a_world_stalled_itself_waits_afresh_and_stays_in_lockstep() -> None:
     node.command(wire.Cmd(IDS[0], 0, 0.5, 0.0), 10.1)
     node.command(wire.Cmd(IDS[1], 0, 0.5, 0.0), 10.1)
     node.step(10.2)
-    assert node.k == 1 and node.u_k.tolist() == [0] * len(IDS) and not node.resumed
+    assert node.k == 1 and node.vw_k.tolist() == [0] * len(IDS) and not node.resumed
 
 
 def test_a_held_robot_is_in_the_scans_of_the_agents_near_it_and_only_theirs() -> None:

@@ -16,12 +16,14 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import zenoh
 
 from reconswarm.net import wire
 from reconswarm.net.cells import CellGrid
 from reconswarm.net.session import ZenohOptions
 from reconswarm.scenario import load
+from reconswarm.sim.unicycle import inputs
 from tests.support import PAPER, ROOT, assert_all_gone, events, free_port, launcher_cmd, read_run_id, tick_count
 
 KILL_AT_S = 90.0
@@ -90,9 +92,10 @@ def _attack(a: Attacker, until_t_s: float, timeout_s: float = 600.0) -> dict[str
         p2 = (tr.px[idx[2]], tr.py[idx[2]])
         p5 = (tr.px[idx[5]], tr.py[idx[5]])
         d = math.hypot(p5[0] - p2[0], p5[1] - p2[1]) or 1.0
-        u = (40.0 * (p5[0] - p2[0]) / d, 40.0 * (p5[1] - p2[1]) / d)  # 40 m/s into agent 5
+        u = np.array([[40.0 * (p5[0] - p2[0]) / d, 40.0 * (p5[1] - p2[1]) / d]])  # 40 m/s into agent 5
+        v, w = inputs(u, np.array([tr.theta[idx[2]]]), s.head_offsets[[s.agent_index(2)]])  # as a command
         for k in (c.k, c.k + 1):
-            put("cmd", a.keys.cmd(2), wire.cmd_to_wire(wire.Cmd(2, k, *u)))
+            put("cmd", a.keys.cmd(2), wire.cmd_to_wire(wire.Cmd(2, k, float(v[0]), float(w[0]))))
         cx, cy = sum(tr.px) / len(tr.px), sum(tr.py) / len(tr.py)
         here = CellGrid.for_scenario(s).cell_of(cx, cy)  # the agents near the centroid listen to its cell
         put("beacon", a.keys.beacon(here, 99), wire.beacon_to_wire(wire.Beacon(99, c.k, c.t, cx, cy, 1e6)))
