@@ -9,7 +9,7 @@ starts (bench/grid.py). Per tick:
 - the world puts the clock (k, t, alive list) on `swarm/<run>/clock` and each agent's state on
   `swarm/<run>/agent/<id>/state`, then waits for every agent's command of the tick;
 - an agent, on its state, puts its beacon and waits for the clock and the beacons it hears, then puts its
-  command (k, ux, uy) on `swarm/<run>/agent/<id>/cmd`. Two patterns:
+  command (k, v_mps, omega_radps) on `swarm/<run>/agent/<id>/cmd`. Two patterns:
   `cells`: the beacon under its head point's cell (`swarm/<run>/cell/<cx>_<cy>/agent/<id>/beacon`), heard
   from the cells CellGrid.listen_cells names around it; it waits for every beacon of those cells, as the
   real agent does (its wait set plus the peers it hears anyway, agent/neighbours.py);
