@@ -43,6 +43,10 @@ class Ros2World(WorldNode):
         if sent is not None:
             self.latency_ms.append((now_s - sent) * 1000.0)
 
+    def plant_input(self, vw: np.ndarray, theta: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """A robot base holds its cmd_vel's (v, ω) itself (and moves on the arc: `integrate`)."""
+        return vw
+
     def integrate(self, vw: np.ndarray) -> None:
         w = self.s.world
         self.p, self.theta, v, om = unicycle.step_vw(self.p, self.theta, vw[:, 0], vw[:, 1], self.l, self.s.meta.dt_s,

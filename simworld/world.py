@@ -82,9 +82,10 @@ class WorldNode:
         # can matter to them within the next tick (an agent hears only its cells' beacons).
         self.body_range_m = grid.reach_m + 2.0 * grid.step_m
         n = len(self.ids)
-        self.vw = np.zeros((n, 2))  # each robot's held command (v, ω)
-        self.vw_k = np.full(n, -(10**9))  # tick of each robot's last command
+        self.held = np.zeros((n, 2))  # each robot's held input to the plant (`plant_input` of its last command)
+        self.held_k = np.full(n, -(10**9))  # tick of each robot's last command
         self.cmds: dict[int, dict[int, np.ndarray]] = {}  # tick -> agent index -> (v, ω)
+        self.headings: dict[int, np.ndarray] = {}  # θ at the recent ticks (a late command is its tick's)
         self.alive: set[int] = set()
         self.monitor: bool = False
         self.strikes: dict[int, int] = {}  # lockstep: consecutive step timeouts of each agent
@@ -309,27 +310,41 @@ class WorldNode:
         return out
 
     def apply(self, k: int) -> None:
-        """Choose every robot's (v, ω) for the step k -> k+1 and integrate."""
+        """Choose every robot's input for the step k -> k+1 and integrate."""
         hold = max(1, round(self.timing.hold_sim_s / self.s.meta.dt_s))
+        self.headings[k] = self.theta.copy()
+        for kk in [x for x in self.headings if x < k - hold - 1]:
+            del self.headings[kk]
         got = self.cmds.pop(k, {})
         for kk in sorted(x for x in self.cmds if x < k):  # late commands still count as the latest
-            for i, vw in self.cmds.pop(kk).items():
-                if kk > self.vw_k[i]:
-                    self.vw[i], self.vw_k[i] = vw, kk
-        for i, vw in got.items():
-            self.vw[i], self.vw_k[i] = vw, k
+            late = {i: vw for i, vw in self.cmds.pop(kk).items() if kk > self.held_k[i]}
+            if late and kk in self.headings:  # (older than the hold: stale anyway)
+                self._hold(kk, late)
+        if got:
+            self._hold(k, got)
         if self.clock == ClockMode.REALTIME:
             live = [self.index[a] for a in self.alive]
             self.expected += len(live)
             self.missed += sum(1 for i in live if i not in got)
-        stale = (k - self.vw_k) > hold
-        self.integrate(np.where(stale[:, None], 0.0, self.vw))
+        stale = (k - self.held_k) > hold
+        self.integrate(np.where(stale[:, None], 0.0, self.held))
 
-    def integrate(self, vw: np.ndarray) -> None:
-        """Move every robot over one step under its held command (v, ω) (N, 2) (zeros: stopped): eq. 3 gives its
-        head point's velocity u = M(θ_k) [v, ω], held over the step, as the in-process engine does."""
+    def _hold(self, k: int, cmds: dict[int, np.ndarray]) -> None:
+        """Hold the commands (v, ω) of tick k (agent index -> row) as the robots' plant inputs."""
+        rows = np.array(list(cmds), dtype=np.int64)
+        vw = np.array([cmds[i] for i in rows.tolist()])
+        self.held[rows] = self.plant_input(vw, self.headings[k][rows], rows)
+        self.held_k[rows] = k
+
+    def plant_input(self, vw: np.ndarray, theta: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """The input these robots' plant holds over the step: the head point's velocity u = M(θ_k) [v, ω]
+        (eq. 3) at the heading the agent planned from, the zero-order hold of u the in-process engine uses
+        (unicycle.through_inputs). vw: (n, 2), theta: (n,), rows: (n,) agent indices -> (n, 2)."""
+        return unicycle.head_velocity(vw[:, 0], vw[:, 1], theta, self.l[rows])
+
+    def integrate(self, u: np.ndarray) -> None:
+        """Move every robot over one step under its held input (N, 2) (zeros: stopped)."""
         w = self.s.world
-        u = unicycle.head_velocity(vw[:, 0], vw[:, 1], self.theta, self.l)
         self.p, self.theta = unicycle.step(self.p, self.theta, u, self.l, self.s.meta.dt_s, w.max_speed_mps,
                                            w.max_turn_rate_radps)
 

@@ -157,7 +157,9 @@ def test_late_commands_count_as_the_latest() -> None:
     node.step(5.1)
     command_all(node, 1, (1.0, 0.0), 5.2, skip=(IDS[0],))
     advance(node, 5.2, 10.2)
-    assert node.vw[0].tolist() == [0.3, 0.0] and node.vw_k[0] == 0
+    # held as the head point's velocity u = M(θ_0) [0.3, 0] at the heading of tick 0, the one it was planned at
+    th0 = S.headings[0]
+    assert node.held[0].tolist() == [0.3 * np.cos(th0), 0.3 * np.sin(th0)] and node.held_k[0] == 0
 
 
 def test_unknown_agent_command_is_refused() -> None:
@@ -254,7 +256,7 @@ def test_a_world_stalled_itself_waits_afresh_and_stays_in_lockstep() -> None:
     node.command(wire.Cmd(IDS[0], 0, 0.5, 0.0), 10.1)
     node.command(wire.Cmd(IDS[1], 0, 0.5, 0.0), 10.1)
     node.step(10.2)
-    assert node.k == 1 and node.vw_k.tolist() == [0] * len(IDS) and not node.resumed
+    assert node.k == 1 and node.held_k.tolist() == [0] * len(IDS) and not node.resumed
 
 
 def test_a_held_robot_is_in_the_scans_of_the_agents_near_it_and_only_theirs() -> None:
