@@ -25,7 +25,7 @@ from monitor.live import LiveFeed, LiveView
 from monitor.node import MonitorNode
 from reconswarm.errors import ProcessFailure
 from reconswarm.net import wire
-from reconswarm.net.admission import Intrusion, IntrusionKind, Membership
+from reconswarm.net.admission import Membership
 from reconswarm.net.gate import Gate
 from reconswarm.net.report import report_from_wire
 from reconswarm.net.session import Inbox, Member, Rejections, StartMark, Stopper, ZenohOptions, serving
@@ -106,18 +106,7 @@ class MonitorAdapter(Member):
         pinned by its first report, as admission pins senders): its tally of intrusions when it changed, and
         an agent's counters and heartbeat."""
         r = report_from_wire(payload, process)
-        pins = self.gate.adm.pins
-        if aid is not None and aid not in self.node.index:
-            self.gate.refuse(Intrusion(IntrusionKind.UNKNOWN_AGENT, source, key,
-                                       f"agent {aid} is not in the scenario"), now)
-            return
-        if aid is None:
-            ok, speaker = source == pins.world, pins.world
-        else:
-            ok, speaker = pins.agent(aid, source, now), pins.agents.get(aid, ("", 0.0))[0]
-        if not ok:  # (a whole tally each time: the next one from the right session will do)
-            self.gate.refuse(Intrusion(IntrusionKind.IMPERSONATION, source, key,
-                                       f"{process} speaks from session {speaker or '(none yet)'}"), now)
+        if not self.gate.admit(r, source, key, now):  # (a whole tally each time: the next one will do)
             return
         if aid is not None:
             self.members.data(aid, now, self.node.t)

@@ -219,6 +219,16 @@ class Admission:
             return f"a vertex {worst:.6g} m off the obstacle's boundary"
         return None
 
+    def check_report(self, agent_id: int | None, source: str, key: str, now: float) -> Intrusion | None:
+        """A report (reconswarm/net/report.py): an agent's like its other messages (a known agent, from its
+        pinned session); the world's only from the world's session."""
+        if agent_id is not None:
+            return self._agent(agent_id, source, key, now)
+        if source != self.pins.world:
+            return Intrusion(IntrusionKind.IMPERSONATION, source, key,
+                             f"simworld speaks from session {self.pins.world or '(none yet)'}")
+        return None
+
     # -- the world's messages -------------------------------------------------------------------------
 
     def check_world_source(self, source: str, key: str) -> Intrusion | None:

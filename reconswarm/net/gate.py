@@ -17,7 +17,7 @@ from reconswarm.net.report import Report
 from reconswarm.scenario import Scenario
 
 log = logging.getLogger("reconswarm.admission")
-Message = wire.Beacon | wire.Cmd | wire.ObstacleSet | wire.Clock | wire.State | wire.Scan | wire.Truth
+Message = wire.Beacon | wire.Cmd | wire.ObstacleSet | wire.Clock | wire.State | wire.Scan | wire.Truth | Report
 
 
 class Gate:
@@ -52,6 +52,8 @@ class Gate:
             got = adm.check_cmd(m, source, key, now_s, self.world_k)
         elif isinstance(m, wire.ObstacleSet):
             got = adm.check_obstacles(m, source, key)
+        elif isinstance(m, Report):
+            got = adm.check_report(m.agent_id, source, key, now_s)
         else:  # state, scan, truth: the world's
             got = adm.check_world_source(source, key)
         if got is None:

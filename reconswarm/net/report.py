@@ -29,6 +29,11 @@ class Report:
     rejected: int = 0
     guessed_k: int = -1
 
+    @property
+    def agent_id(self) -> int | None:
+        """Whose report: an agent's id, None for the world's (the key's parse checked the name)."""
+        return None if self.process == "simworld" else int(self.process.removeprefix("agent-"))
+
 
 def report_to_wire(m: Report) -> bytes:
     d: dict[str, object] = {"process": m.process, "rejected": m.rejected, "guessed_k": m.guessed_k}
