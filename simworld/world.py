@@ -135,8 +135,8 @@ class WorldNode:
     def sent(self, k: int, now_s: float) -> None:
         """The adapter put tick k's states on the wire at now_s (for state-to-command latency)."""
         self.pub_time[k] = now_s
-        for kk in [x for x in self.pub_time if x < k - 1000]:
-            del self.pub_time[kk]
+        while (oldest := next(iter(self.pub_time))) < k - 1000:  # (oldest first: ticks go out in order)
+            del self.pub_time[oldest]
 
     # ------------------------------------------------------------------------------------- the machine
 

@@ -39,7 +39,7 @@ from enum import Enum
 
 import numpy as np
 
-from reconswarm.geometry import distance_to_polygon, sample_boundary
+from reconswarm.geometry import Edges, sample_boundary, signed_distance
 from reconswarm.net import wire
 from reconswarm.paper.planner import max_repulsion_speed
 from reconswarm.scenario import Scenario
@@ -50,6 +50,7 @@ RADIUS_RTOL = 1e-9
 POSITION_MARGIN_M = 1.0
 COMMAND_TOL = 1e-9  # relative
 UNATTRIBUTED = "unattributed"  # the source of a message that carries no publisher id
+HULLS_KEPT = 4096  # hulls remembered as checked (a truthful swarm shares a few hundred distinct ones)
 
 
 class IntrusionKind(Enum):
@@ -121,6 +122,10 @@ class Admission:
         self.radius = {a.id: a.radius_m for a in s.agents}
         self.head_offset = {a.id: float(s.head_offsets[i]) for i, a in enumerate(s.agents)}
         self.polygons = {o.id: s.polygon(k) for k, o in enumerate(s.obstacles)}
+        self.edges = {o: Edges.of([poly]) for o, poly in self.polygons.items()}
+        # Hulls already found on their obstacle's boundary: peers share the same merged hulls over and over,
+        # and the check depends on the hull alone (a refused hull is never kept; the memory is bounded).
+        self.hulls_ok: set[tuple[str, tuple[tuple[float, float], ...]]] = set()
         self.max_vertices = {o: int(sample_boundary(poly, SAMPLE_SPACING_M).shape[0])
                              for o, poly in self.polygons.items()}
         self.u_max = command_bound_mps(s)
@@ -211,12 +216,16 @@ class Admission:
     def hull_problem(self, oid: str, hull: tuple[tuple[float, float], ...]) -> str | None:
         if len(hull) > self.max_vertices[oid]:
             return f"{len(hull)} vertices, at most {self.max_vertices[oid]} can be sensed"
-        if not hull:
+        if not hull or (oid, hull) in self.hulls_ok:
             return None
-        d, _ = distance_to_polygon(np.asarray(hull, dtype=np.float64).reshape(-1, 2), self.polygons[oid])
+        pts = np.asarray(hull, dtype=np.float64).reshape(-1, 2)
+        d = signed_distance(pts[:, 0:1], pts[:, 1:2], self.edges[oid], normals=False)  # (P, 1)
         worst = float(np.abs(d).max())
         if not worst <= HULL_TOL_M:
             return f"a vertex {worst:.6g} m off the obstacle's boundary"
+        if len(self.hulls_ok) >= HULLS_KEPT:
+            self.hulls_ok.clear()
+        self.hulls_ok.add((oid, hull))
         return None
 
     def check_report(self, agent_id: int | None, source: str, key: str, now: float) -> Intrusion | None:
