@@ -264,6 +264,7 @@ def free_port() -> int:
 def floor_run(n: int, pattern: str, ticks: int = 200, warmup: int = 20, timeout_s: float = 900.0) -> dict[str, float]:
     """One floor run: CPU-ms per tick per role over `ticks` ticks after `warmup`, samples and wake-ups in per
     agent per tick (medians over the agents), ticks per wall second. Every process is ended by its PID."""
+    from reconswarm_bringup.fleet import batch_policy
     from reconswarm_bringup.launcher import ZENOH_RUNTIME
 
     if pattern not in PATTERNS:
@@ -275,22 +276,27 @@ def floor_run(n: int, pattern: str, ticks: int = 200, warmup: int = 20, timeout_
     common = ["--port", str(port), "--run", run, "--agents", str(n), "--start", str(warmup),
               "--end", str(warmup + ticks)]
     procs: list[subprocess.Popen] = []
+
+    def spawn(cmd: list[str], **kw: Any) -> subprocess.Popen:
+        p = subprocess.Popen(cmd, **kw)
+        batch_policy(p.pid)  # the scheduling policy of a lockstep run's processes (reconswarm_bringup/fleet.py)
+        return p
+
     with tempfile.TemporaryDirectory(prefix="floor_") as tmp:
         logs = Path(tmp)
         try:
-            router = subprocess.Popen([sys.executable, "-m", "reconswarm_bringup.cli", "router", "--listen",
-                                       f"tcp/127.0.0.1:{port}"], env=env, cwd=ROOT, stdout=subprocess.DEVNULL,
-                                      stderr=(logs / "router.log").open("w"))
+            router = spawn([sys.executable, "-m", "reconswarm_bringup.cli", "router", "--listen",
+                            f"tcp/127.0.0.1:{port}"], env=env, cwd=ROOT, stdout=subprocess.DEVNULL,
+                           stderr=(logs / "router.log").open("w"))
             procs.append(router)
             agents: list[subprocess.Popen] = []
             for a in range(1, n + 1):
                 out = (logs / f"agent{a}.out").open("w")
-                agents.append(subprocess.Popen([*me, "agent", "--id", str(a), "--pattern", pattern, *common],
-                                               env=client_env, cwd=ROOT, stdout=out,
-                                               stderr=(logs / f"agent{a}.log").open("w")))
+                agents.append(spawn([*me, "agent", "--id", str(a), "--pattern", pattern, *common],
+                                    env=client_env, cwd=ROOT, stdout=out, stderr=(logs / f"agent{a}.log").open("w")))
             procs.extend(agents)
-            world = subprocess.Popen([*me, "world", *common], env=client_env, cwd=ROOT, stdout=subprocess.PIPE,
-                                     stderr=(logs / "world.log").open("w"), text=True)
+            world = spawn([*me, "world", *common], env=client_env, cwd=ROOT, stdout=subprocess.PIPE,
+                          stderr=(logs / "world.log").open("w"), text=True)
             procs.append(world)
             assert world.stdout is not None
             router_cpu = []

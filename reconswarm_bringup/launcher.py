@@ -120,7 +120,7 @@ def run(cfg: LaunchConfig) -> int:
     # routers: a router whose one tx thread waits on a dead link (a partition, until the lease runs out and
     # after) stops forwarding for everyone else too; measured: the whole of host A stalled for the 10 s cut.
     env.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)
-    fleet = Fleet(cfg.out, env, router_env=router_env)
+    fleet = Fleet(cfg.out, env, router_env=router_env, batch=cfg.clock == "lockstep")
     stop_sig: list[int] = []
 
     def on_signal(signum: int, _frame: Any) -> None:

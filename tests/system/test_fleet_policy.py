@@ -1,0 +1,33 @@
+"""The launcher's processes run under SCHED_BATCH in lockstep and under the default policy in realtime
+(reconswarm_bringup/fleet.py: Fleet.batch), threads included."""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from reconswarm_bringup.fleet import Fleet
+
+pytestmark = pytest.mark.skipif(not hasattr(os, "SCHED_BATCH"), reason="SCHED_BATCH is Linux's")
+
+# A child that starts a thread and prints the policy of both of its threads, as the kernel reports them.
+CHILD = ("import os, threading, time; t = threading.Thread(target=time.sleep, args=(0.5,)); t.start(); "
+         "print(os.sched_getscheduler(0), os.sched_getscheduler(t.native_id), flush=True); t.join()")
+
+
+def policies(tmp_path: Path, batch: bool) -> list[int]:
+    fleet = Fleet(tmp_path, dict(os.environ), batch=batch)
+    # Fleet starts `python -m reconswarm_bringup.cli ARGS`; the prefix turns that into `python -c CHILD`.
+    proc = fleet.start("probe", "-", [], prefix=[sys.executable, "-c", CHILD, "--"])
+    assert proc.popen.wait(timeout=60) == 0
+    time.sleep(0.05)
+    return [int(x) for x in proc.log_path.read_text().split()]
+
+
+def test_lockstep_processes_run_under_sched_batch_and_realtime_ones_do_not(tmp_path: Path) -> None:
+    assert policies(tmp_path / "lockstep", True) == [os.SCHED_BATCH, os.SCHED_BATCH]
+    assert policies(tmp_path / "realtime", False) == [os.SCHED_OTHER, os.SCHED_OTHER]
