@@ -8,7 +8,10 @@
    beside them the floor (bench/floor.py): the same message pattern with msgpack only and no planning,
    `floor-cells` (the spatial cells) and `floor-all` (every beacon to everyone), in the same run;
 3. realtime at --speed 1 (the control loop at 1/dt = 20 Hz): the largest N whose missed-deadline ratio
-   stays below 1 %, trying N in increasing order.
+   stays below 1 %, trying N in increasing order;
+4. lockstep = in-process (--equal-agents N): the grid of N agents in lockstep against `reconswarm sim` on
+   the same scenario, the largest difference of any head point or heading at any tick, optionally with
+   --equal-load busy processes running meanwhile (other work on the machine).
 `--checkout DIR` (repeatable) measures another checkout (a git worktree of an older commit with its own
 .venv) in the same run, row by row beside this one.
 
@@ -20,6 +23,8 @@ from __future__ import annotations
 
 import argparse
 import ast
+import csv
+import io
 import json
 import re
 import socket
@@ -112,9 +117,46 @@ def grid_row(tmp: Path, n: int, sim_s: float, checkout: Path | None) -> dict[str
             "wakeups": per_tick("agent", "wakeups", "median")}
 
 
+def cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "reconswarm_bringup.cli", *args], capture_output=True, text=True,
+                          cwd=ROOT, timeout=1800)
+
+
+def poses(db: Path) -> dict[tuple[str, str], tuple[float, float, float]]:
+    """(t, agent) -> (px, py, theta) of a run's record, as `reconswarm monitor export` gives them."""
+    p = cli("monitor", "export", str(db), "--format", "csv")
+    if p.returncode != 0:
+        raise RuntimeError(f"export failed: {p.stderr[-500:]}")
+    rows = csv.DictReader(io.StringIO(p.stdout))
+    return {(r["t_s"], r["agent"]): (float(r["px_m"]), float(r["py_m"]), float(r["theta_rad"])) for r in rows}
+
+
+def equal_run(tmp: Path, n: int, sim_s: float, load: int) -> str:
+    """The grid of n agents in lockstep and in process, with `load` busy processes meanwhile: one line."""
+    scen = tmp / f"equal{n}.toml"
+    scen.write_text(to_toml(grid_scenario(n, sim_s)))
+    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(load)]
+    try:
+        s = launch(tmp / f"equal{n}", scen, free_port())
+    finally:
+        for b in busy:
+            b.kill()
+            b.wait()
+    sim = cli("sim", str(scen), "-o", str(tmp / f"equal{n}-sim"), "--json")
+    if sim.returncode not in (0, 1):
+        raise RuntimeError(f"sim failed: {sim.stderr[-500:]}")
+    got, ref = poses(tmp / f"equal{n}" / "run.db"), poses(tmp / f"equal{n}-sim" / "run.db")
+    if got.keys() != ref.keys():
+        return f"N = {n}: different ticks or agents ({len(got)} rows against {len(ref)})"
+    diff = max(abs(a - b) for k in got for a, b in zip(got[k], ref[k], strict=True))
+    rate = s["duration_s"] / s["wall_time_s"]
+    return (f"N = {n}, {s['ticks']} ticks, {load} busy processes meanwhile: deterministic {s['deterministic']}, "
+            f"largest difference {diff:g} m (or rad) over {len(got)} poses, sim/wall {rate:.2f}")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--grid-agents", type=int, nargs="+", default=[16, 36, 64, 100])
+    ap.add_argument("--grid-agents", type=int, nargs="*", default=[16, 36, 64, 100])
     ap.add_argument("--grid-sim-s", type=float, default=10.0, help="simulated seconds per grid run")
     ap.add_argument("--floor", nargs="*", choices=PATTERNS, default=list(PATTERNS),
                     help="floor rows per N (bench/floor.py); none with an empty list")
@@ -123,6 +165,9 @@ def main() -> int:
     ap.add_argument("--paper", action="store_true", help="also time the whole paper mission in lockstep")
     ap.add_argument("--realtime-agents", type=int, nargs="*", default=[16, 36, 64, 100])
     ap.add_argument("--realtime-sim-s", type=float, default=20.0, help="simulated (= wall) seconds per run")
+    ap.add_argument("--equal-agents", type=int, nargs="*", default=[], help="lockstep = in-process on the grid")
+    ap.add_argument("--equal-sim-s", type=float, default=10.0)
+    ap.add_argument("--equal-load", type=int, default=0, help="busy processes running meanwhile")
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args()
     if args.quick:
@@ -133,11 +178,12 @@ def main() -> int:
     versions: list[tuple[str, Path | None]] = [("this", None), *((str(c), c) for c in args.checkout)]
     with tempfile.TemporaryDirectory(prefix="bench_deploy_") as t:
         tmp = Path(t)
-        print(f"\n## lockstep on a sparse grid (about 8 neighbours each), {args.grid_sim_s:g} s simulated per run")
-        print("CPU-ms per tick (user + sys, from each process's exit line); messages in and loop wake-ups per agent "
-              "per tick")
-        print(f"{'version':>12s} {'N':>4s} {'sim/wall':>8s} {'agent':>7s} {'agents':>8s} {'world':>7s} "
-              f"{'monitor':>7s} {'router':>7s} {'msgs in':>7s} {'wakeups':>7s}")
+        if args.grid_agents:
+            print(f"\n## lockstep on a sparse grid (about 8 neighbours each), {args.grid_sim_s:g} s simulated per run")
+            print("CPU-ms per tick (user + sys, from each process's exit line); messages in and loop wake-ups per "
+                  "agent per tick")
+            print(f"{'version':>12s} {'N':>4s} {'sim/wall':>8s} {'agent':>7s} {'agents':>8s} {'world':>7s} "
+                  f"{'monitor':>7s} {'router':>7s} {'msgs in':>7s} {'wakeups':>7s}")
         for n in args.grid_agents:
             for name, co in versions:
                 r = grid_row(tmp, n, args.grid_sim_s, co)
@@ -174,6 +220,10 @@ def main() -> int:
                         break
                     best = n
                 print(f"{name[-12:]:>12s}: largest N at 20 Hz with < 1 % missed: {best or 'none of those tried'}")
+        if args.equal_agents:
+            print(f"\n## lockstep = in-process on the grid, {args.equal_sim_s:g} s simulated")
+            for n in args.equal_agents:
+                print(equal_run(tmp, n, args.equal_sim_s, args.equal_load), flush=True)
     return 0
 
 
