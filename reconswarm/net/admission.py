@@ -50,7 +50,9 @@ RADIUS_RTOL = 1e-9
 POSITION_MARGIN_M = 1.0
 COMMAND_TOL = 1e-9  # relative
 UNATTRIBUTED = "unattributed"  # the source of a message that carries no publisher id
-HULLS_KEPT = 4096  # hulls remembered as checked (a truthful swarm shares a few hundred distinct ones)
+# Hull vertices remembered as checked (~100 bytes each: a few MB at most, however many distinct truthful
+# hulls a flood sends; the paper's swarm shares ~500 distinct hulls over a whole mission, ~10k vertices).
+HULL_VERTICES_KEPT = 65_536
 
 
 class IntrusionKind(Enum):
@@ -116,7 +118,7 @@ class Pins:
 class Admission:
     """The rules above for one scenario; `check_*` return None (admitted) or the Intrusion."""
 
-    def __init__(self, s: Scenario, pins: Pins | None = None) -> None:
+    def __init__(self, s: Scenario, pins: Pins | None = None, hull_vertices_kept: int = HULL_VERTICES_KEPT) -> None:
         self.s = s
         self.pins = pins or Pins()
         self.radius = {a.id: a.radius_m for a in s.agents}
@@ -126,6 +128,7 @@ class Admission:
         # Hulls already found on their obstacle's boundary: peers share the same merged hulls over and over,
         # and the check depends on the hull alone (a refused hull is never kept; the memory is bounded).
         self.hulls_ok: set[tuple[str, tuple[tuple[float, float], ...]]] = set()
+        self._kept_vertices, self._keep_vertices = 0, hull_vertices_kept
         self.max_vertices = {o: int(sample_boundary(poly, SAMPLE_SPACING_M).shape[0])
                              for o, poly in self.polygons.items()}
         self.u_max = command_bound_mps(s)
@@ -223,9 +226,11 @@ class Admission:
         worst = float(np.abs(d).max())
         if not worst <= HULL_TOL_M:
             return f"a vertex {worst:.6g} m off the obstacle's boundary"
-        if len(self.hulls_ok) >= HULLS_KEPT:
+        if self._kept_vertices + len(hull) > self._keep_vertices:
             self.hulls_ok.clear()
+            self._kept_vertices = 0
         self.hulls_ok.add((oid, hull))
+        self._kept_vertices += len(hull)
         return None
 
     def check_report(self, agent_id: int | None, source: str, key: str, now: float) -> Intrusion | None:

@@ -13,7 +13,6 @@ import pytest
 from reconswarm.geometry import convex_hull, norm2
 from reconswarm.net import wire
 from reconswarm.net.admission import (
-    HULLS_KEPT,
     UNATTRIBUTED,
     Admission,
     Intrusion,
@@ -130,7 +129,7 @@ def test_hulls_must_lie_on_the_true_obstacle() -> None:
 def test_a_hull_checked_once_is_remembered_and_a_bad_one_never_is() -> None:
     """Peers share the same merged hulls again and again: a hull found on the boundary is not measured
     again, a refused one is refused every time (it is never remembered), and the memory stays bounded."""
-    adm = started()
+    adm = Admission(S, hull_vertices_kept=50)
     field = ContourField.from_scenario(S)
     oid, poly = field.ids[0], field.polygons[0]
     good = tuple((float(x), float(y)) for x, y in poly[:3])
@@ -142,11 +141,13 @@ def test_a_hull_checked_once_is_remembered_and_a_bad_one_never_is() -> None:
         assert kind(adm.check_obstacles(wire.ObstacleSet(2, 1, 1, {oid: off}), A2, key)) is K.HULL
     assert (oid, good) in adm.hulls_ok and (oid, off) not in adm.hulls_ok
     edge = poly[:2]
-    for i in range(HULLS_KEPT + 5):  # distinct truthful hulls: two points on one edge
-        a = edge[0] + (i + 1) / (HULLS_KEPT + 10) * (edge[1] - edge[0])
+    n = 50 // 2 + 5
+    for i in range(n):  # distinct truthful hulls: two points on one edge
+        a = edge[0] + (i + 1) / (n + 5) * (edge[1] - edge[0])
         hull = ((float(edge[0][0]), float(edge[0][1])), (float(a[0]), float(a[1])))
         assert adm.check_obstacles(wire.ObstacleSet(2, 1, 1, {oid: hull}), A2, key) is None
-    assert len(adm.hulls_ok) <= HULLS_KEPT
+        assert sum(len(h) for _, h in adm.hulls_ok) <= 50
+    assert len(adm.hulls_ok) < n
 
 
 def test_an_obstacle_set_with_4000_ids_is_refused() -> None:
