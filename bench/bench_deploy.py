@@ -23,8 +23,6 @@ from __future__ import annotations
 
 import argparse
 import ast
-import csv
-import io
 import json
 import re
 import socket
@@ -34,10 +32,12 @@ import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import numpy as np
 from _common import command_line, machine, median
 from floor import PATTERNS, floor_run
 from grid import grid_scenario
 
+from reconswarm.record.store import RunRecord
 from reconswarm.scenario import to_toml
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -122,13 +122,11 @@ def cli(*args: str) -> subprocess.CompletedProcess[str]:
                           cwd=ROOT, timeout=1800)
 
 
-def poses(db: Path) -> dict[tuple[str, str], tuple[float, float, float]]:
-    """(t, agent) -> (px, py, theta) of a run's record, as `reconswarm monitor export` gives them."""
-    p = cli("monitor", "export", str(db), "--format", "csv")
-    if p.returncode != 0:
-        raise RuntimeError(f"export failed: {p.stderr[-500:]}")
-    rows = csv.DictReader(io.StringIO(p.stdout))
-    return {(r["t_s"], r["agent"]): (float(r["px_m"]), float(r["py_m"]), float(r["theta_rad"])) for r in rows}
+def poses(db: Path) -> tuple[list[int], list[int], np.ndarray]:
+    """A run's record as (ticks, agent ids, poses (T, N, 3): px, py, theta), read with RunRecord."""
+    with RunRecord(db) as rec:
+        tk = rec.ticks()
+        return tk.k.tolist(), list(rec.ids), np.stack([tk.px, tk.py, tk.theta], axis=-1)
 
 
 def equal_run(tmp: Path, n: int, sim_s: float, load: int) -> str:
@@ -145,13 +143,13 @@ def equal_run(tmp: Path, n: int, sim_s: float, load: int) -> str:
     sim = cli("sim", str(scen), "-o", str(tmp / f"equal{n}-sim"), "--json")
     if sim.returncode not in (0, 1):
         raise RuntimeError(f"sim failed: {sim.stderr[-500:]}")
-    got, ref = poses(tmp / f"equal{n}" / "run.db"), poses(tmp / f"equal{n}-sim" / "run.db")
-    if got.keys() != ref.keys():
-        return f"N = {n}: different ticks or agents ({len(got)} rows against {len(ref)})"
-    diff = max(abs(a - b) for k in got for a, b in zip(got[k], ref[k], strict=True))
+    (k, ids, got), (k_ref, ids_ref, ref) = poses(tmp / f"equal{n}" / "run.db"), poses(tmp / f"equal{n}-sim" / "run.db")
+    if (k, ids) != (k_ref, ids_ref):
+        return f"N = {n}: different ticks or agents ({got.shape} against {ref.shape})"
+    diff = float(np.abs(got - ref).max())
     rate = s["duration_s"] / s["wall_time_s"]
     return (f"N = {n}, {s['ticks']} ticks, {load} busy processes meanwhile: deterministic {s['deterministic']}, "
-            f"largest difference {diff:g} m (or rad) over {len(got)} poses, sim/wall {rate:.2f}")
+            f"largest difference {diff:g} m (or rad) over {got.shape[0] * got.shape[1]} poses, sim/wall {rate:.2f}")
 
 
 def main() -> int:
