@@ -81,7 +81,7 @@ class WorldAdapter(Member):
         # After the world itself stalled (SIGSTOP, a starved machine) its session may have lapsed: every token
         # it hears then goes and comes back within a moment. Until `settle_s` has passed, nobody is declared
         # gone for that (a clock listing no agent alive breaks lockstep's determinism); after it, the rule holds.
-        self.loop_s, self.settle_s = time.monotonic(), 0.0
+        self.settle_s = 0.0
         self.pub_report = z.declare_publisher(k.report("simworld"))
         self.subs = [*([] if self.ros2 else [z.declare_subscriber(k.all_agents("cmd"), self.inbox.handler())]),
                      z.liveliness().declare_subscriber(k.alive_all, self.inbox.handler(), history=True)]
@@ -164,9 +164,8 @@ class WorldAdapter(Member):
             # One wake-up per batch: the commands the tick waits for, or its due time, or 50 ms at most.
             items = self.inbox.take(want, min(0.05, max(0.0, wake_s - time.monotonic())))
             now = time.monotonic()
-            if now - self.loop_s >= self.node.timing.self_stall_s:  # we did not run: tokens may flap for a while
+            if self.node.stalled(now):  # we did not run: tokens may flap for a while (the node sees it at its step)
                 self.settle_s = now + self.node.timing.peer_silent_s
-            self.loop_s = now
             for item in items:
                 self.handle(*item)
             self.sync(time.monotonic())

@@ -142,8 +142,8 @@ class WorldNode:
 
     def step(self, now_s: float, stopping: bool = False) -> Step:
         """Advance as far as the messages received allow at now_s; at most one tick per call."""
-        if self.started and self.last_step_s is not None and now_s - self.last_step_s >= self.timing.self_stall_s:
-            self._own_stall(now_s, now_s - self.last_step_s)
+        if self.started and self.stalled(now_s):
+            self._own_stall(now_s, now_s - (self.last_step_s or now_s))
         self.last_step_s = now_s
         if self.phase == Phase.READY:
             return self._ready(now_s, stopping)
@@ -163,6 +163,10 @@ class WorldNode:
                 return self._advance(now_s)
             return Step([], self._deadline(now_s))
         return Step([], now_s, "stopped")
+
+    def stalled(self, now_s: float) -> bool:
+        """The world itself did not run for `self_stall_s` since its last step (its loop steps every 50 ms at most)."""
+        return self.last_step_s is not None and now_s - self.last_step_s >= self.timing.self_stall_s
 
     def _own_stall(self, now_s: float, gap_s: float) -> None:
         """The world itself did not run for gap_s (SIGSTOP, a starved machine): nobody was late, so no step
