@@ -9,8 +9,9 @@ that meets the disk of radius reach + 3 V dt around its head point, V the scenar
   only p_i(k-1) needed. A peer within reach of p_i(k+1) at k+1 lies within reach + V dt of p_i(k): its
   beacon of tick k+1 is published in a cell the agent already hears (zenoh keeps one session's order: the
   router has our subscription before our command, hence before anyone's state, hence beacon, of tick k+1).
-- wait set at tick k (lockstep): the peers alive by their tokens whose head point at k-1 (their beacon of
-  tick k-1) lay within reach + 2 V dt of p_i(k-1). Anyone else cannot be within reach of p_i(k) at k, so it
+- wait set at tick k (lockstep): the live peers (the node's rule: counted by the world's clock of k and not
+  gone by their tokens) whose head point at k-1 (their beacon of tick k-1) lay within reach + 2 V dt of
+  p_i(k-1). Anyone else cannot be within reach of p_i(k) at k, so it
   contributes exact zeros to the tick (repulsion beyond d_max,ij, no link beyond link range): leaving it out
   changes nothing, and the tick equals the in-process engine's row bit for bit. With no beacon of k-1 from a
   peer (tick 0, or a peer that joined again), the position it is known to be held at counts: its last
@@ -57,6 +58,7 @@ class Neighbourhood:
         self.grid = CellGrid.for_scenario(s)
         self.everyone = s.planner.kind == PlannerKind.VIRTUAL_LEADER
         self.radius = {a.id: a.radius_m for a in s.agents}
+        self.peers = frozenset(self.radius) - {agent_id}
         l_m, th = s.head_offsets, s.headings
         self.start: dict[int, XY] = {
             a.id: (float(a.start_m[0] + l_m[i] * math.cos(th[i])), float(a.start_m[1] + l_m[i] * math.sin(th[i])))
@@ -124,19 +126,20 @@ class Neighbourhood:
             return frozenset(alive)
         near = self.near.get(k)
         if near is None:
-            near = self._near(k, alive, prev, last_seen)
+            near = self._near(k, prev, last_seen)
             self.near[k] = near
         return near & alive
 
-    def _near(self, k: int, alive: set[int], prev: Mapping[int, wire.Beacon],
-              last_seen: Mapping[int, wire.Beacon]) -> frozenset[int]:
+    def _near(self, k: int, prev: Mapping[int, wire.Beacon], last_seen: Mapping[int, wire.Beacon]) -> frozenset[int]:
+        """Every peer of the scenario that may matter at k, alive or not: whom `alive` names may still grow
+        after this is fixed (a token heard after the clock that counted it)."""
         if k > 0 and self.listen is None and (k - 1) not in self.own:  # our first tick, joining: we hear all
-            return frozenset(alive)
+            return self.peers
         own = self.own.get(k - 1, self.own.get(k))
         if own is None:
             return frozenset()
         out = set()
-        for a in alive:
+        for a in self.peers:
             b = prev.get(a)
             if b is not None:
                 pos: XY | None = (b.px, b.py)

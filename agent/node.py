@@ -26,7 +26,7 @@ import numpy as np
 from agent.brain import AgentBrain, Peer
 from agent.messages import Exit, Input, Invalid, Joined, Left, Output, Reconnect, WorldToken
 from agent.neighbours import Neighbourhood
-from agent.sets import ObstacleSets, PeerSets
+from agent.sets import PeerSets, scan_sets
 from reconswarm.net import wire
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.scenario import Scenario
@@ -49,6 +49,7 @@ class AgentNode:
         ps = self.peer_sets = PeerSets()  # peers' sets by revision, and the revisions merged (agent/sets.py)
         self.sets, self.merged, self.merged_union = ps.sets, ps.merged, ps.merged_union
         self.alive: set[int] = set()
+        self.tokens_heard: set[int] = set()  # peers whose token we heard of (come or gone) at least once
         self.k, self.beacon_sent = -1, -1  # last tick commanded, last tick announced
         self.wait_since: float | None = None
         self.guessed_k = -1  # lockstep: the first tick acted on without all its data (-1: none)
@@ -118,10 +119,12 @@ class AgentNode:
     def _take(self, m: Input, now: float) -> None:
         if isinstance(m, Joined):
             self.alive.add(m.agent)
+            self.tokens_heard.add(m.agent)
             self.heard.setdefault(m.agent, now)
             self.nb.peer_joined(m.agent, self.k >= 0)
         elif isinstance(m, Left):
             self.alive.discard(m.agent)
+            self.tokens_heard.add(m.agent)
         elif isinstance(m, WorldToken):
             if m.up:
                 self._world_back(now)
@@ -132,6 +135,9 @@ class AgentNode:
         elif isinstance(m, wire.Clock):
             self.clocks[m.k] = m
             self.last_clock = now
+            for a in m.alive:  # counted before its token reached us: its silence counts from now
+                if a not in self.tokens_heard and a != self.id:
+                    self.heard.setdefault(a, now)
             self._world_back(now)
             self.mode = m.mode
             self.period_s = self.s.meta.dt_s / m.speed if m.speed > 0 else 0.0
@@ -176,15 +182,6 @@ class AgentNode:
 
     # --------------------------------------------------------------------------------------- planning
 
-    def _scan_sets(self, k_from: int, k_to: int) -> ObstacleSets:
-        pts: dict[str, list[tuple[float, float]]] = {}
-        for kk in range(k_from, k_to + 1):
-            sc = self.scans.pop(kk, None)
-            if sc is not None:
-                for x, y, oid in sc.points:
-                    pts.setdefault(oid, []).append((x, y))
-        return {oid: np.array(v, dtype=np.float64) for oid, v in pts.items()}
-
     def _expected(self, k: int, clock: wire.Clock | None) -> set[int]:
         """The live peers tick k waits for: those that may matter (agent/neighbours.py) and that the world
         counts alive at k (lockstep); realtime: those whose latest beacon may matter."""
@@ -192,11 +189,16 @@ class AgentNode:
         if self.mode == "realtime":
             return self.nb.near_now(p, self._lately(), self.last_seen)
         self.nb.own.setdefault(k, p)
-        return set(self.nb.wait_set(k, self.alive, self.beacons.get(k - 1, {}), self.last_seen) & self._living(clock))
+        return set(self.nb.wait_set(k, self._living(clock), self.beacons.get(k - 1, {}), self.last_seen))
 
     def _living(self, clock: wire.Clock | None) -> set[int]:
-        """The one notion of a live peer: alive by its token and, once a clock says, by the world's clock."""
-        return self.alive if clock is None else self.alive.intersection(clock.alive)
+        """The one notion of a live peer: alive by its token and, once a clock says, by the world's clock.
+        A peer the clock counts whose token we have not heard of at all counts too: the world saw its token,
+        whose news to us may come after the clock (zenoh-python runs each subscriber's callbacks on a thread
+        of its own, so no order holds between the liveliness and the data subscribers)."""
+        if clock is None:
+            return self.alive
+        return {a for a in clock.alive if a in self.alive or a not in self.tokens_heard}
 
     def _peers(self, k: int) -> list[wire.Beacon]:
         """Whom tick k plans with: every beacon of k; for the peers it waited for but lacks (a guess) and for
@@ -311,7 +313,7 @@ class AgentNode:
                      sorted(linked), sorted({o for revs in self.sets.values() for v in revs.values() for o in v}))
         shared = self.peer_sets.unmerged(linked, self.merged)
         swarm = self.peer_sets.unmerged(every, self.merged_union) if self.brain.leader is not None else None
-        scan = self._scan_sets(self.k + 1 if self.k >= 0 else k, k)
+        scan = scan_sets(self.scans, self.k + 1 if self.k >= 0 else k, k)
         u, grew = self.brain.tick(k, p, scan, peers, shared, swarm)
         if grew:
             self._out.append(self._obstacle_set(k))

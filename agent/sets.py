@@ -1,4 +1,5 @@
-"""The peers' obstacle sets an agent holds, by revision, and which revisions it merged already (pure)."""
+"""The peers' obstacle sets an agent holds, by revision, and which revisions it merged already; its own scans
+as obstacle sets (pure)."""
 
 from __future__ import annotations
 
@@ -44,3 +45,14 @@ class PeerSets:
             done = min(self.merged.get(a, 0), self.merged_union.get(a, 0) if leader else 2**62)
             for r in [r for r in revs if r < done]:
                 del revs[r]
+
+
+def scan_sets(scans: dict[int, wire.Scan], k_from: int, k_to: int) -> ObstacleSets:
+    """The points of our scans of ticks k_from..k_to by obstacle (those scans are taken out of `scans`)."""
+    pts: dict[str, list[tuple[float, float]]] = {}
+    for kk in range(k_from, k_to + 1):
+        sc = scans.pop(kk, None)
+        if sc is not None:
+            for x, y, oid in sc.points:
+                pts.setdefault(oid, []).append((x, y))
+    return {oid: np.array(v, dtype=np.float64) for oid, v in pts.items()}

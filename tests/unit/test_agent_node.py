@@ -124,6 +124,31 @@ def test_a_late_peer_is_waited_for_and_the_node_acts_when_it_arrives() -> None:
     assert node.guessed_k == -1  # late, but complete: no guess
 
 
+def test_a_peer_the_clock_counts_is_waited_for_though_its_token_comes_later() -> None:
+    """zenoh-python runs each subscriber's callbacks on a thread of their own: a peer's token may reach us after
+    the world's clock that counted it (seen in CI: agent 9 acted on tick 0 before agent 4's token was in, then
+    got its beacon within reach). The world saw the token: tick 0 waits for B's beacon all the same."""
+    node = started(peers=(C,))  # B's token is not in yet
+    out = node.step([clock(0), state(0, 100.0, 0.0), beacon(C, 0, 120.0, 0.0)], 0.0)
+    assert not cmds(out) and node.awaiting(0.0) == 1 and "beacons of [2]" in node.waiting_for()
+    out = node.step([beacon(B, 0, 110.0, 0.0)], 0.01)  # (its token still on its way)
+    want = reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 120.0, 0.0, RADIUS[C])])
+    assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(0, *want)]
+    assert node.guessed_k == -1  # nothing was guessed: the command is the in-process engine's
+    # A token we saw go is not waited for, though the clock (of the world's view a moment ago) still counts it.
+    node.step([Joined(B), Left(B)], 0.02)
+    node.step([clock(1), state(1, 100.05, 0.0), beacon(C, 1, 120.0, 0.0)], 0.05)
+    assert node.k == 1 and node.guessed_k == -1
+
+
+def test_a_peer_counted_by_the_clock_but_never_heard_is_given_up_after_peer_silent_s() -> None:
+    node = started(peers=(C,))
+    node.step([clock(0), state(0, 100.0, 0.0), beacon(C, 0, 120.0, 0.0)], 0.0)
+    assert not cmds(node.step([], T.peer_silent_s - 0.01))
+    assert [c.k for c in cmds(node.step([], T.peer_silent_s + 0.01))] == [0]
+    assert node.guessed_k == 0  # acted without B's beacon: said
+
+
 def test_a_peer_that_never_answers_is_given_up_after_the_wait_timeout() -> None:
     node = started(peers=(B,))
     node.step([clock(0, (A, B)), state(0, 100.0, 0.0)], 0.0)
