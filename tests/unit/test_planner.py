@@ -99,7 +99,9 @@ def attraction_case(draw):
 
 @st.composite
 def repulsion_case(draw):
-    """Agent i and up to 6 neighbours, each either inside its field (away from d_max) or beyond it."""
+    """Agent i and up to 6 neighbours, each either inside its field or beyond it, away from both breakpoints of
+    eq. (10)'s term (d_max, and contact where it goes on along its tangent) by more than the finite-difference
+    step: a central difference across one is not the gradient there (seen: a neighbour exactly at contact)."""
     d_safe = draw(st.floats(0.0, 5.0))
     d_max = d_safe + draw(st.floats(1.0, 20.0))
     psi = -draw(st.floats(1.0, 100.0))
@@ -111,6 +113,7 @@ def repulsion_case(draw):
         rj = draw(st.floats(0.5, 5.0))
         dmx = ri + rj + d_max
         frac = draw(st.one_of(st.floats(0.05, 0.97), st.floats(1.03, 2.0)))
+        assume(abs(frac * dmx - (ri + rj)) > 10 * H)
         a = draw(angle)
         nb_p.append(p + frac * dmx * np.array([math.cos(a), math.sin(a)]))
         nb_r.append(rj)
