@@ -135,9 +135,8 @@ class AgentNode:
         elif isinstance(m, wire.Clock):
             self.clocks[m.k] = m
             self.last_clock = now
-            for a in m.alive:  # counted before its token reached us: its silence counts from now
-                if a not in self.tokens_heard and a != self.id:
-                    self.heard.setdefault(a, now)
+            for a in set(m.alive) - self.tokens_heard - {self.id}:  # counted before its token reached us:
+                self.heard.setdefault(a, now)  # its silence counts from now
             self._world_back(now)
             self.mode = m.mode
             self.period_s = self.s.meta.dt_s / m.speed if m.speed > 0 else 0.0
@@ -198,7 +197,8 @@ class AgentNode:
         of its own, so no order holds between the liveliness and the data subscribers)."""
         if clock is None:
             return self.alive
-        return {a for a in clock.alive if a in self.alive or a not in self.tokens_heard}
+        counted = set(clock.alive)
+        return (counted & self.alive) | (counted - self.tokens_heard)
 
     def _peers(self, k: int) -> list[wire.Beacon]:
         """Whom tick k plans with: every beacon of k; for the peers it waited for but lacks (a guess) and for
