@@ -49,7 +49,7 @@ class AgentNode:
         ps = self.peer_sets = PeerSets()  # peers' sets by revision, and the revisions merged (agent/sets.py)
         self.sets, self.merged, self.merged_union = ps.sets, ps.merged, ps.merged_union
         self.alive: set[int] = set()
-        self.tokens_heard: set[int] = set()  # peers whose token we heard of (come or gone) at least once
+        self.gone: set[int] = set()  # peers whose token we saw go (and not come back)
         self.k, self.beacon_sent = -1, -1  # last tick commanded, last tick announced
         self.wait_since: float | None = None
         self.guessed_k = -1  # lockstep: the first tick acted on without all its data (-1: none)
@@ -119,12 +119,12 @@ class AgentNode:
     def _take(self, m: Input, now: float) -> None:
         if isinstance(m, Joined):
             self.alive.add(m.agent)
-            self.tokens_heard.add(m.agent)
+            self.gone.discard(m.agent)
             self.heard.setdefault(m.agent, now)
             self.nb.peer_joined(m.agent, self.k >= 0)
         elif isinstance(m, Left):
             self.alive.discard(m.agent)
-            self.tokens_heard.add(m.agent)
+            self.gone.add(m.agent)
         elif isinstance(m, WorldToken):
             if m.up:
                 self._world_back(now)
@@ -135,7 +135,7 @@ class AgentNode:
         elif isinstance(m, wire.Clock):
             self.clocks[m.k] = m
             self.last_clock = now
-            for a in set(m.alive) - self.tokens_heard - {self.id}:  # counted before its token reached us:
+            for a in set(m.alive) - self.alive - self.gone - {self.id}:  # counted before its token reached us:
                 self.heard.setdefault(a, now)  # its silence counts from now
             self._world_back(now)
             self.mode = m.mode
@@ -191,14 +191,11 @@ class AgentNode:
         return set(self.nb.wait_set(k, self._living(clock), self.beacons.get(k - 1, {}), self.last_seen))
 
     def _living(self, clock: wire.Clock | None) -> set[int]:
-        """The one notion of a live peer: alive by its token and, once a clock says, by the world's clock.
-        A peer the clock counts whose token we have not heard of at all counts too: the world saw its token,
-        whose news to us may come after the clock (zenoh-python runs each subscriber's callbacks on a thread
-        of its own, so no order holds between the liveliness and the data subscribers)."""
-        if clock is None:
-            return self.alive
-        counted = set(clock.alive)
-        return (counted & self.alive) | (counted - self.tokens_heard)
+        """The one notion of a live peer: alive by its token; once a clock says, counted by the world's clock
+        and not seen going by its token. Not `alive` there: the world saw its token, whose news to us may come
+        after the clock (zenoh-python runs each subscriber's callbacks on a thread of its own, so no order
+        holds between the liveliness and the data subscribers)."""
+        return self.alive if clock is None else set(clock.alive) - self.gone
 
     def _peers(self, k: int) -> list[wire.Beacon]:
         """Whom tick k plans with: every beacon of k; for the peers it waited for but lacks (a guess) and for
