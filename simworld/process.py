@@ -78,10 +78,6 @@ class WorldAdapter(Member):
         self.gate = Gate(node.s, "simworld")
         self.members = Membership()
         self.told: dict[int, bool] = {}
-        # After the world itself stalled (SIGSTOP, a starved machine) its session may have lapsed: every token
-        # it hears then goes and comes back within a moment. Until `settle_s` has passed, nobody is declared
-        # gone for that (a clock listing no agent alive breaks lockstep's determinism); after it, the rule holds.
-        self.settle_s = 0.0
         self.pub_report = z.declare_publisher(k.report("simworld"))
         self.subs = [*([] if self.ros2 else [z.declare_subscriber(k.all_agents("cmd"), self.inbox.handler())]),
                      z.liveliness().declare_subscriber(k.alive_all, self.inbox.handler(), history=True)]
@@ -128,8 +124,6 @@ class WorldAdapter(Member):
             self.members.start(now, sim)
         for aid in self.node.ids:
             up = self.members.alive(aid, now, sim)
-            if not up and now < self.settle_s:
-                continue  # (told stays as it was: decided again once the tokens have settled)
             if self.told.get(aid, False) != up:
                 self.told[aid] = up
                 self.node.agent_up(aid, up)
@@ -165,7 +159,7 @@ class WorldAdapter(Member):
             items = self.inbox.take(want, min(0.05, max(0.0, wake_s - time.monotonic())))
             now = time.monotonic()
             if self.node.stalled(now):  # we did not run: tokens may flap for a while (the node sees it at its step)
-                self.settle_s = now + self.node.timing.peer_silent_s
+                self.members.settle(now + self.node.timing.peer_silent_s)
             for item in items:
                 self.handle(*item)
             self.sync(time.monotonic())

@@ -278,8 +278,9 @@ class Membership:
     with a token counts until it has been silent both `fresh_s` of wall time and `fresh_sim_s` of
     simulated time (so neither a stalled world, during which nobody sends, nor a fast realtime clock makes
     a live agent look dead); an agent not heard since its token appeared (or since the start) gets
-    `grace_s` / `grace_sim_s` likewise. Times: `wall` (the caller's monotonic seconds), `sim` (the newest
-    simulated time it knows).
+    `grace_s` / `grace_sim_s` likewise. After the caller itself stalled (`settle`), a token that goes is
+    kept for a while. Times: `wall` (the caller's monotonic seconds), `sim` (the newest simulated time it
+    knows).
     """
 
     fresh_s: float = 2.0
@@ -289,14 +290,26 @@ class Membership:
     started: tuple[float, float] | None = None
     tokens: dict[int, tuple[float, float]] = field(default_factory=dict)  # id -> (wall, sim) it appeared
     heard: dict[int, tuple[float, float]] = field(default_factory=dict)  # id -> (wall, sim) of its last data
+    settle_until: float = -math.inf  # wall: a token that goes before then is kept (see settle)
+    going: set[int] = field(default_factory=set)  # the tokens that went while settling
 
     def start(self, wall: float, sim: float) -> None:
         if self.started is None:
             self.started = (wall, sim)
 
+    def settle(self, until_wall: float) -> None:
+        """The caller itself did not run for a while (SIGSTOP, a starved machine): its session may have lapsed,
+        and every token it hears may go and come back within a moment. Until `until_wall` a token that goes
+        is kept (a list of the living that is suddenly empty broke lockstep's determinism); it is let go
+        then, if it has not come back."""
+        self.settle_until = until_wall
+
     def token(self, agent_id: int, present: bool, wall: float, sim: float) -> None:
         if present:
+            self.going.discard(agent_id)
             self.tokens.setdefault(agent_id, (wall, sim))
+        elif wall < self.settle_until and agent_id in self.tokens:
+            self.going.add(agent_id)
         else:
             self.tokens.pop(agent_id, None)
 
@@ -304,6 +317,10 @@ class Membership:
         self.heard[agent_id] = (wall, sim)
 
     def alive(self, agent_id: int, wall: float, sim: float) -> bool:
+        if self.going and wall >= self.settle_until:  # settled: the tokens still gone are gone
+            for a in self.going:
+                self.tokens.pop(a, None)
+            self.going.clear()
         since = self.tokens.get(agent_id)
         if since is None:
             return False

@@ -205,6 +205,27 @@ def test_a_forged_liveliness_token_does_not_keep_a_dead_agent_alive() -> None:
     assert not m.alive(4, 30.0, 58.0)
 
 
+def test_after_the_callers_own_stall_a_token_that_goes_is_kept_until_settled() -> None:
+    """The world was frozen 10 s: its session lapsed, and every agent's token goes and comes back once it runs
+    again. Nobody is gone for that; a token still gone once settled is."""
+    m = Membership(fresh_s=2.0, fresh_sim_s=2.0, grace_s=10.0, grace_sim_s=5.0)
+    for a in (3, 4):
+        m.token(a, True, 0.0, 0.0)
+    m.start(1.0, 0.0)
+    for a in (3, 4):
+        m.data(a, 10.0, 20.0)
+    m.settle(until_wall=23.0)  # (at wall 20, after 10 s without running; simulated time stood still)
+    m.token(3, False, 20.1, 20.0)
+    m.token(4, False, 20.1, 20.0)
+    assert m.alive(3, 20.2, 20.0) and m.alive(4, 20.2, 20.0)  # kept while settling
+    m.token(3, True, 20.3, 20.0)  # 3's token is back; 4's is not (its agent died meanwhile)
+    assert m.alive(3, 22.9, 20.0) and m.alive(4, 22.9, 20.0)
+    assert m.alive(3, 23.0, 20.0) and not m.alive(4, 23.0, 20.0)  # settled: 4 is gone
+    assert m.alive_ids(23.0, 20.0) == [3]
+    m.token(3, False, 24.0, 20.0)  # after settling, a token that goes is gone at once
+    assert not m.alive(3, 24.0, 20.0)
+
+
 def test_command_bound_holds_for_the_planner_even_in_contact() -> None:
     """|u| of eq. (7) with every agent and obstacle repelling at once stays below command_bound_mps."""
     s, rng = S, np.random.default_rng(1)
