@@ -12,7 +12,7 @@ from typing import Annotated, Any
 import typer
 
 from reconswarm.errors import BadInput, ReconswarmError
-from reconswarm_bringup import validate
+from reconswarm_bringup import outdir, validate
 from reconswarm_bringup.console import fail, print_json
 
 monitor_app = typer.Typer(no_args_is_help=True, help="Record runs and read run records (run.db).")
@@ -89,6 +89,7 @@ def export_cmd(
         if fmt == "mcap":
             if out is None:
                 raise BadInput("--format mcap: give the file to write with -o FILE.mcap")
+            outdir.not_the_input("-o", out, db)
             validate.writable_file("-o", out)
             from monitor.mcap_export import export_mcap
 
@@ -101,6 +102,7 @@ def export_cmd(
                        f"{stats.events} events")
             return
         if out is not None:
+            outdir.not_the_input("-o", out, db)
             validate.writable_file("-o", out)
         rec = _open(db)
         tk = rec.ticks()
@@ -163,6 +165,7 @@ def animate_cmd(
     try:
         from monitor.animate import animate_run, check_request
 
+        outdir.not_the_input("-o", out, db)
         if at_s is None:
             check_request(out, fps, speed)  # before opening the record: bad requests fail fast
         elif out.suffix.lower() != ".png":
@@ -195,6 +198,7 @@ def plot_cmd(
     try:
         from monitor.plot import plot_run
 
+        outdir.not_the_input("-o", out, db)
         validate.writable_file("-o", out)
         rec = _open(db)
         plot_run(rec, out)

@@ -41,6 +41,7 @@ from reconswarm.record.summary import summarize
 from reconswarm.scenario import PlannerKind, Scenario
 from reconswarm.sim import unicycle
 from reconswarm.sim.sensing import ContourField
+from reconswarm_bringup.outdir import ENGINE_MODE, RecordClaim
 
 Array = NDArray[np.float64]
 
@@ -172,10 +173,18 @@ class Engine:
 
 
 def run(cfg: SimConfig) -> dict[str, Any]:
-    """Run the mission; write OUTDIR/run.db; return the summary."""
+    """Run the mission; write OUTDIR/run.db; return the summary. OUTDIR is claimed first (RecordClaim):
+    BadInput if a live run writes there or its run.db is a record the engine did not write."""
+    if not cfg.record:
+        return _run(cfg)
+    with RecordClaim(cfg.out_dir):
+        return _run(cfg)
+
+
+def _run(cfg: SimConfig) -> dict[str, Any]:
     s = cfg.scenario
     db = cfg.out_dir / "run.db"
-    writer = RunWriter(db, s, "inprocess") if cfg.record else None
+    writer = RunWriter(db, s, ENGINE_MODE) if cfg.record else None
     eng = Engine(s)
     rec = Recorder(s, writer)
     alive = np.ones(eng.n, dtype=bool)

@@ -1,0 +1,137 @@
+"""Output directories and files: a command never destroys what another run is writing, nor what it reads.
+
+- `RecordClaim`: the in-process engine's hold on OUTDIR while it writes OUTDIR/run.db, an exclusive `flock`
+  on OUTDIR/.record.lock (released by the kernel however the process ends). Before it replaces run.db it
+  refuses (BadInput, exit 2) when
+  * another engine holds the claim (a `reconswarm sim` still writing there);
+  * a launched run is alive there: a pid of OUTDIR/processes.tsv is alive and is a process of that run (its
+    command line names OUTDIR/scenario.toml, as every process of a launch does);
+  * OUTDIR/run.db is not a record the engine wrote (a launched run's record, or not a run record at all):
+    the engine replaces only its own records.
+- `not_the_input`: an output path that is the very file a command reads is refused.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import os
+import sqlite3
+from pathlib import Path
+from typing import IO
+
+from reconswarm.errors import BadInput
+
+LOCK_FILE = ".record.lock"
+ENGINE_MODE = "inprocess"  # the `mode` meta of a record the in-process engine wrote
+
+
+def same_file(a: Path, b: Path) -> bool:
+    """True if a and b name one file (the same inode if both exist, else the same resolved path)."""
+    with contextlib.suppress(OSError):
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    return a.resolve() == b.resolve()
+
+
+def not_the_input(option: str, out: Path, *inputs: Path) -> None:
+    """Refuse writing `out` when it is one of the files the command reads (or their WAL companions)."""
+    for src in inputs:
+        for companion in (src, Path(f"{src}-wal"), Path(f"{src}-shm")):
+            if same_file(out, companion):
+                raise BadInput(f"{option} {out}: is the record this command reads ({src}); "
+                               f"write to another file")
+
+
+def _live_launch_pid(out: Path) -> int | None:
+    """A live process of a launched run in `out` (by OUTDIR/processes.tsv and its command line), else None."""
+    tsv = out / "processes.tsv"
+    try:
+        lines = tsv.read_text().splitlines()
+    except OSError:
+        return None
+    marker = str((out / "scenario.toml").resolve()).encode()
+    for line in lines:
+        parts = line.split("\t")
+        if len(parts) != 3 or not parts[2].isdigit():
+            continue
+        try:
+            cmdline = Path(f"/proc/{parts[2]}/cmdline").read_bytes()
+        except OSError:
+            continue  # gone
+        if marker in cmdline.split(b"\0"):  # (the launcher passes OUTDIR resolved)
+            return int(parts[2])
+    return None
+
+
+def record_mode(db: Path) -> str | None:
+    """The `mode` meta of an existing record; None if db is not a readable run record."""
+    try:
+        con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+    except sqlite3.Error:
+        return None
+    try:
+        row = con.execute("SELECT value FROM meta WHERE key = 'mode'").fetchone()
+    except sqlite3.Error:
+        return None
+    finally:
+        con.close()
+    return None if row is None else str(row[0])
+
+
+class RecordClaim:
+    """The engine's exclusive hold on OUTDIR while it writes OUTDIR/run.db (see the module's docstring)."""
+
+    def __init__(self, out: Path, option: str = "-o") -> None:
+        self.out = out
+        self.option = option
+        self._fh: IO[str] | None = None
+
+    def acquire(self) -> None:
+        out, opt = self.out, self.option
+        out.mkdir(parents=True, exist_ok=True)
+        fh = (out / LOCK_FILE).open("a+")
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            fh.seek(0)
+            holder = fh.read().strip()
+            fh.close()
+            pid = "?"
+            with contextlib.suppress(ValueError, AttributeError):
+                pid = json.loads(holder).get("pid", "?")
+            raise BadInput(f"{opt} {out}: another run is writing its record there (pid {pid}); "
+                           f"choose another directory") from None
+        try:
+            live = _live_launch_pid(out)
+            if live is not None:
+                raise BadInput(f"{opt} {out}: a launched run is writing its record there (pid {live}); "
+                               f"choose another directory")
+            db = out / "run.db"
+            if db.exists():
+                mode = record_mode(db)
+                if mode != ENGINE_MODE:
+                    what = "not a run record" if mode is None else f"the record of a launched run (mode {mode})"
+                    raise BadInput(f"{opt} {out}: {db.name} there is {what}, which reconswarm sim does not "
+                                   f"replace; choose another directory")
+        except BaseException:
+            fh.close()
+            raise
+        fh.seek(0)
+        fh.truncate()
+        fh.write(json.dumps({"pid": os.getpid()}) + "\n")
+        fh.flush()
+        self._fh = fh
+
+    def release(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    def __enter__(self) -> RecordClaim:
+        self.acquire()
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.release()
