@@ -30,6 +30,7 @@ from reconswarm.net.gate import Gate
 from reconswarm.net.report import report_from_wire
 from reconswarm.net.session import Inbox, Member, Rejections, StartMark, Stopper, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
+from reconswarm.net.uplink import LinkChange, Uplink
 from reconswarm.record.store import RunWriter
 from reconswarm.scenario import load
 
@@ -71,9 +72,11 @@ class MonitorAdapter(Member):
                      *(z.declare_subscriber(key, self.inbox.handler())
                        for key in (k.clock, k.report_all))]
         # Admission (what the run cannot contain is refused and counted, with the other processes' reports);
-        # an agent is alive while its token is there AND its own reports (its heartbeat) keep coming.
+        # an agent is alive while its token is there AND its own reports (its heartbeat) keep coming; our own
+        # session losing its router is no agent's loss (Uplink, Membership.link).
         self.gate = Gate(node.s, "monitor")
-        self.members = Membership()
+        self.members = Membership(confirm_s=node.timing.token_confirm_s)
+        self.uplink = Uplink(session, "monitor")
         self.told: dict[int, bool] = {}
         self.subs.append(z.liveliness().declare_subscriber(k.alive_all, self.inbox.handler(), history=True))
         self.token = z.liveliness().declare_token(k.alive_monitor)
@@ -169,7 +172,10 @@ class MonitorAdapter(Member):
             mark = StartMark()
             while not stop.stopped:
                 mark(node.wall0 is not None)
-                for item in self.inbox.take(None, TIMING.monitor_wake_s):
+                items = self.inbox.take(None, TIMING.monitor_wake_s)
+                if (change := self.uplink.poll()) is not None:
+                    self.members.link(change is LinkChange.UP, time.monotonic(), node.t, node.timing.relink_settle_s)
+                for item in items:
                     self.handle(*item)
                 self.sync(time.monotonic())
                 done = node.poll(time.monotonic())

@@ -23,6 +23,7 @@ from reconswarm.net.gate import Gate
 from reconswarm.net.report import report_to_wire
 from reconswarm.net.session import Inbox, Member, Rejections, StartMark, Stopper, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
+from reconswarm.net.uplink import LinkChange, Uplink
 from reconswarm.net.wire import ClockMode
 from reconswarm.scenario import load
 from simworld.ros2_io import Ros2World, WorldRos2
@@ -74,9 +75,11 @@ class WorldAdapter(Member):
                                                    for a in node.ids}
         # Admission: commands only from each agent's own session, bounded, for ticks we published; an agent is
         # alive while its token is there AND its commands keep coming (a token alone can be forged). In ROS 2
-        # mode commands come as cmd_vel, without our ids: membership by the tokens, as before.
+        # mode commands come as cmd_vel, without our ids: membership by the tokens alone (never `start`ed).
+        # Our own session losing its router is no agent's loss (Uplink, Membership.link).
         self.gate = Gate(node.s, "simworld")
-        self.members = Membership()
+        self.members = Membership(confirm_s=node.timing.token_confirm_s)
+        self.uplink = Uplink(session, "simworld")
         self.told: dict[int, bool] = {}
         self.pub_report = z.declare_publisher(k.report("simworld"))
         self.subs = [*([] if self.ros2 else [z.declare_subscriber(k.all_agents("cmd"), self.inbox.handler())]),
@@ -98,8 +101,6 @@ class WorldAdapter(Member):
             if what == "alive":
                 if leaf == "monitor":
                     self.node.monitor_up(kind != "DELETE")
-                elif leaf == "agent" and aid is not None and self.ros2 is not None:
-                    self.node.agent_up(aid, kind != "DELETE")
                 elif leaf == "agent" and aid is not None:
                     self.members.token(aid, kind != "DELETE", now, sim)
                     self.sync(now)
@@ -116,11 +117,10 @@ class WorldAdapter(Member):
             self.node.rejected = self.rej.count
 
     def sync(self, now: float) -> None:
-        """Tell the node who is alive by the membership rule (token AND own commands), as it changes."""
-        if self.ros2 is not None:
-            return
+        """Tell the node who is alive by the membership rule (token AND own commands; in ROS 2 mode the token
+        alone), as it changes."""
         sim = self.node.k * self.node.s.meta.dt_s
-        if self.node.started:
+        if self.node.started and self.ros2 is None:
             self.members.start(now, sim)
         for aid in self.node.ids:
             up = self.members.alive(aid, now, sim)
@@ -160,6 +160,9 @@ class WorldAdapter(Member):
             now = time.monotonic()
             if self.node.stalled(now):  # we did not run: tokens may flap for a while (the node sees it at its step)
                 self.members.settle(now + self.node.timing.peer_silent_s)
+            if (change := self.uplink.poll()) is not None:
+                self.members.link(change is LinkChange.UP, now, self.node.k * self.node.s.meta.dt_s,
+                                  self.node.timing.relink_settle_s)
             for item in items:
                 self.handle(*item)
             self.sync(time.monotonic())

@@ -278,9 +278,11 @@ class Membership:
     with a token counts until it has been silent both `fresh_s` of wall time and `fresh_sim_s` of
     simulated time (so neither a stalled world, during which nobody sends, nor a fast realtime clock makes
     a live agent look dead); an agent not heard since its token appeared (or since the start) gets
-    `grace_s` / `grace_sim_s` likewise. After the caller itself stalled (`settle`), a token that goes is
-    kept for a while. Times: `wall` (the caller's monotonic seconds), `sim` (the newest simulated time it
-    knows).
+    `grace_s` / `grace_sim_s` likewise. A token that goes counts as gone `confirm_s` later (unless it is
+    back by then); after the caller itself stalled (`settle`), a token that goes is kept for a while; while
+    the caller's own session has no router (`link`), nobody is judged: every token goes at once then, and
+    nobody's data can come. Times: `wall` (the caller's monotonic seconds), `sim` (the newest simulated
+    time it knows).
     """
 
     fresh_s: float = 2.0
@@ -290,8 +292,13 @@ class Membership:
     started: tuple[float, float] | None = None
     tokens: dict[int, tuple[float, float]] = field(default_factory=dict)  # id -> (wall, sim) it appeared
     heard: dict[int, tuple[float, float]] = field(default_factory=dict)  # id -> (wall, sim) of its last data
+    # A token that goes is gone this long later, unless it came back: a router that dies takes every token
+    # with it a moment before the caller's session finds its own link gone (measured: the deletions come
+    # first, with the router still listed, in 1 of 5 trials), so `link(False)` still comes in time.
+    confirm_s: float = 0.0
     settle_until: float = -math.inf  # wall: a token that goes before then is kept (see settle)
-    going: set[int] = field(default_factory=set)  # the tokens that went while settling
+    going: dict[int, float] = field(default_factory=dict)  # tokens that went, not yet judged: id -> wall it went
+    unlinked: bool = False  # the caller's own session has no router (see link)
 
     def start(self, wall: float, sim: float) -> None:
         if self.started is None:
@@ -304,27 +311,45 @@ class Membership:
         then, if it has not come back."""
         self.settle_until = until_wall
 
+    def link(self, up: bool, wall: float, sim: float, settle_s: float) -> None:
+        """The caller's own session lost its router (up=False: a router that died or froze takes every token
+        with it, and nobody's data can reach us) or has one again (up=True, also when it is a new router).
+        While it has none nobody is judged; once back, tokens that went have `settle_s` to come back, and
+        everyone's data is awaited afresh (the grace, as after the start)."""
+        self.unlinked = not up
+        if up:
+            self.settle_until = max(self.settle_until, wall + settle_s)
+            if self.started is not None:
+                self.started = (wall, sim)
+                self.heard.clear()
+
     def token(self, agent_id: int, present: bool, wall: float, sim: float) -> None:
         if present:
-            self.going.discard(agent_id)
+            self.going.pop(agent_id, None)
             self.tokens.setdefault(agent_id, (wall, sim))
-        elif wall < self.settle_until and agent_id in self.tokens:
-            self.going.add(agent_id)
-        else:
-            self.tokens.pop(agent_id, None)
+        elif agent_id in self.tokens:
+            self.going.setdefault(agent_id, wall)
+            self._judge(wall)
+
+    def _judge(self, wall: float) -> None:
+        """Tokens that went: gone once confirmed and settled, unless the caller has no router."""
+        if self.unlinked:
+            return
+        for a, went in list(self.going.items()):
+            if wall >= max(went + self.confirm_s, self.settle_until):
+                self.tokens.pop(a, None)
+                del self.going[a]
 
     def data(self, agent_id: int, wall: float, sim: float) -> None:
         self.heard[agent_id] = (wall, sim)
 
     def alive(self, agent_id: int, wall: float, sim: float) -> bool:
-        if self.going and wall >= self.settle_until:  # settled: the tokens still gone are gone
-            for a in self.going:
-                self.tokens.pop(a, None)
-            self.going.clear()
+        if self.going:
+            self._judge(wall)
         since = self.tokens.get(agent_id)
         if since is None:
             return False
-        if self.started is None:
+        if self.started is None or self.unlinked:
             return True
         last = self.heard.get(agent_id)
         if last is not None and last[0] >= since[0]:
@@ -333,7 +358,8 @@ class Membership:
         return wall - ref[0] <= self.grace_s or sim - ref[1] <= self.grace_sim_s
 
     def alive_ids(self, wall: float, sim: float) -> list[int]:
-        return sorted(a for a in self.tokens if self.alive(a, wall, sim))
+        self._judge(wall)
+        return sorted(a for a in list(self.tokens) if self.alive(a, wall, sim))
 
 
 @dataclass

@@ -80,6 +80,14 @@ class Timing:
     # The world's clock silent this long (or its token gone) is a world stall (one world_stalled event).
     world_stall_s: float = 2.0
 
+    # --------------------------------------------------------------------------- simworld and monitor
+    # An agent's token that goes counts as gone this much later (unless back by then): a dying router takes
+    # every token with it a moment before our own session sees its link go (uplink.py).
+    token_confirm_s: float = 0.3
+    # Our own session connected to a router again: tokens that went have this long to come back (each client
+    # retries its router at most every 4 s, zenoh's default) and everyone's data gets the start's grace.
+    relink_settle_s: float = 10.0
+
     # --------------------------------------------------------------------------------------- session
     # A frozen process is declared gone after this (zenoh's default 10 s is too slow for robots).
     lease_ms: int = 2000

@@ -1,0 +1,59 @@
+"""Whether this process's own session still reaches its router.
+
+A client session (every process of a run but the routers) lists the routers it is connected to
+(`session.info.routers_zid()`, zenoh-python 1.10). When that router dies (or freezes past the lease), the
+list goes empty and every liveliness token learnt through it is deleted at once: that is this process's
+link going, not every agent dying. The client reconnects by itself when a router listens again on the
+endpoint (a restarted one has a new id), and the tokens come back. `Uplink.poll` tells the adapters
+(simworld, monitor) when the link goes and comes back, so that their membership (`admission.Membership`)
+judges nobody meanwhile.
+"""
+
+from __future__ import annotations
+
+import logging
+from contextlib import suppress
+from enum import Enum
+from typing import Any
+
+log = logging.getLogger("reconswarm")
+
+
+class LinkChange(Enum):
+    DOWN = "down"  # the session has no router any more
+    UP = "up"  # it has one again (or a different one: a router restarted between two polls)
+
+
+def router_ids(session: Any) -> frozenset[str]:
+    """The ids of the routers this session is connected to (empty if it cannot tell)."""
+    with suppress(Exception):
+        return frozenset(str(z) for z in session.info.routers_zid())
+    return frozenset()
+
+
+class Uplink:
+    """Follows a session's routers; a session that had none when opened (a peer, a router) is not followed."""
+
+    def __init__(self, session: Any, who: str) -> None:
+        self.session, self.who = session, who
+        self.routers = router_ids(session)
+        self.followed = bool(self.routers)
+        self.down = False
+
+    def poll(self) -> LinkChange | None:
+        """What changed since the last poll (~2 µs: cheap enough for every turn of a loop)."""
+        if not self.followed:
+            return None
+        now = router_ids(self.session)
+        if now == self.routers:
+            return None
+        before, self.routers = self.routers, now
+        if not now:
+            self.down = True
+            log.warning("%s: the router is gone (our own session's link): nobody's membership is judged until "
+                        "it is back", self.who)
+            return LinkChange.DOWN
+        if self.down or before:
+            log.warning("%s: connected to a router again (%s)", self.who, ", ".join(sorted(now)))
+        self.down = False
+        return LinkChange.UP

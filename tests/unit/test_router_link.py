@@ -1,0 +1,113 @@
+"""Our own session losing its router is no agent's loss: the membership rule (Membership.link, confirm_s)
+and the link as a real client session sees it (Uplink, a real router process killed and started again)."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+
+import zenoh
+
+from reconswarm.net.admission import Membership
+from reconswarm.net.session import ZenohOptions
+from reconswarm.net.uplink import LinkChange, Uplink
+from tests.support import ROOT, free_port
+
+
+def _members() -> Membership:
+    m = Membership(fresh_s=2.0, fresh_sim_s=2.0, grace_s=10.0, grace_sim_s=5.0, confirm_s=0.3)
+    for a in (1, 2, 3):
+        m.token(a, True, 0.0, 0.0)
+    m.start(1.0, 0.0)
+    for a in (1, 2, 3):
+        m.data(a, 10.0, 20.0)
+    return m
+
+
+def test_a_token_that_goes_is_gone_once_confirmed() -> None:
+    m = _members()
+    m.token(2, False, 10.5, 21.0)
+    assert m.alive(2, 10.7, 21.4)  # not yet confirmed
+    assert not m.alive(2, 10.8, 21.6)  # 0.3 s later: gone
+    m.token(3, False, 10.9, 21.8)
+    m.token(3, True, 11.0, 22.0)  # back within confirm_s: never gone
+    assert m.alive(3, 11.5, 23.0)
+
+
+def test_while_our_router_is_gone_nobody_is_lost() -> None:
+    """The router dies at wall 10.5: every token goes (before our session sees its link go, as measured),
+    nobody's data comes for 20 s while a realtime clock runs on; the router is back at 30.5 and the tokens
+    come back one by one, agent 3's never (it died meanwhile)."""
+    m = _members()
+    for a in (1, 2, 3):
+        m.token(a, False, 10.5, 21.0)
+    m.link(False, 10.6, 21.2, settle_s=10.0)  # within confirm_s of the tokens going
+    for w in (11.0, 15.0, 30.0):
+        assert m.alive_ids(w, 2 * w) == [1, 2, 3]  # no data for 20 s, tokens gone: nobody judged
+    m.link(True, 30.5, 61.0, settle_s=10.0)
+    m.token(1, True, 31.0, 62.0)
+    m.token(2, True, 34.0, 68.0)  # a client retries its router at most every 4 s
+    assert m.alive_ids(35.0, 70.0) == [1, 2, 3]  # settling: 3 still has time to come back
+    assert m.alive_ids(39.0, 78.0) == [1, 2, 3]  # no data yet since the link came back: within the grace
+    m.data(1, 40.0, 80.0)
+    m.data(2, 40.2, 80.4)
+    assert m.alive_ids(40.5, 81.0) == [1, 2]  # settled: 3 is gone; 1 and 2 speak again
+    assert m.alive_ids(45.0, 90.0) == []  # their data stopped again, past fresh_s and fresh_sim_s: gone
+
+
+def test_after_the_link_is_back_a_token_that_goes_is_judged_again() -> None:
+    m = _members()
+    m.link(False, 10.6, 21.2, settle_s=1.0)
+    m.link(True, 12.0, 24.0, settle_s=1.0)
+    m.data(2, 13.5, 27.0)
+    m.token(2, False, 14.0, 28.0)
+    assert not m.alive(2, 14.3, 28.6)
+
+
+def _router(endpoint: str) -> subprocess.Popen[bytes]:
+    return subprocess.Popen([sys.executable, "-m", "reconswarm_bringup.cli", "router", "--listen", endpoint],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, cwd=ROOT)
+
+
+def _wait(uplink: Uplink, timeout_s: float) -> LinkChange | None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        change = uplink.poll()
+        if change is not None:
+            return change
+        time.sleep(0.05)
+    return None
+
+
+def test_uplink_sees_its_router_killed_and_a_new_one_on_the_same_endpoint() -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = _router(endpoint)
+    session = None
+    try:
+        session = zenoh.open(ZenohOptions.build([endpoint], None, "client", None).config())
+        uplink = Uplink(session, "test")
+        assert uplink.followed and len(uplink.routers) == 1 and uplink.poll() is None
+        first = set(uplink.routers)
+        router.send_signal(signal.SIGKILL)
+        router.wait()
+        assert _wait(uplink, 10.0) is LinkChange.DOWN and uplink.down
+        router = _router(endpoint)
+        assert _wait(uplink, 30.0) is LinkChange.UP and not uplink.down
+        assert uplink.routers and set(uplink.routers) != first  # the client reconnected by itself, to a new router
+    finally:
+        if session is not None:
+            session.close()
+        router.kill()
+        router.wait()
+
+
+def test_a_peer_session_is_not_followed() -> None:
+    conf = ZenohOptions.build([], [f"tcp/127.0.0.1:{free_port()}"], "peer", None).config()
+    session = zenoh.open(conf)
+    try:
+        uplink = Uplink(session, "test")
+        assert not uplink.followed and uplink.poll() is None
+    finally:
+        session.close()
