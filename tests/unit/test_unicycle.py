@@ -15,7 +15,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from reconswarm.sim.unicycle import body_centre, head_point, head_velocity, inputs, step, through_inputs, wrap
+from reconswarm.sim.unicycle import (
+    SUBSTEPS,
+    body_centre,
+    head_point,
+    head_velocity,
+    inputs,
+    step,
+    through_inputs,
+    wrap,
+)
 
 SETTINGS = settings(max_examples=60, deadline=None)
 
@@ -202,6 +211,67 @@ def test_limited_step_matches_fine_integration_of_saturated_unicycle(case, v_max
     tol = 0.5 * (v_max + np.hypot(*u.T)) * dt / 10 * (w_max * dt) + 1e-9
     assert np.all(np.hypot(*(body_centre(p1, th1, l) - s_ref).T) <= tol * 4 + 1e-6)
     assert np.all(angle_diff(th1, th_ref) <= w_max * dt / 10 + 1e-9)
+
+
+def held_substeps(s: np.ndarray, th: np.ndarray, u: np.ndarray, l: np.ndarray, dt: float, v_max: float,
+                  w_max: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The world's model under limits, integrated numerically: over each of SUBSTEPS substeps of h = dt /
+    SUBSTEPS, [v, ω] = sat(M(θ)⁻¹ u) at the substep's start is held, and ṡ = v [cos θ, sin θ], θ̇ = ω is
+    integrated by RK4 with n steps of H = h / n. θ is linear in time, so RK4 is Simpson's rule on s: its
+    error over dt is at most dt H⁴ |v| ω⁴ / 2880."""
+    h = dt / SUBSTEPS
+    big_h = h / n
+    for _ in range(SUBSTEPS):
+        c, sn = np.cos(th), np.sin(th)
+        v = np.clip(u[:, 0] * c + u[:, 1] * sn, -v_max, v_max)
+        w = np.clip((-u[:, 0] * sn + u[:, 1] * c) / l, -w_max, w_max)
+        for _ in range(n):
+            # k2 = k3: the right-hand side v [cos θ, sin θ] does not depend on s
+            k1, k23, k4 = (np.stack([v * np.cos(a), v * np.sin(a)], axis=1)
+                           for a in (th, th + big_h / 2 * w, th + big_h * w))
+            s = s + big_h / 6 * (k1 + 4 * k23 + k4)
+            th = th + big_h * w
+    return s, th
+
+
+@settings(max_examples=40, deadline=None)
+@given(robots(n_max=4), st.floats(0.5, 8.0), st.floats(0.5, 4.0))
+def test_limited_step_is_exact_arcs_of_the_held_substep_inputs(case, v_max, w_max):
+    """Under limits each substep is the exact arc of its held (v, ω): against a fine RK4 of that same
+    model, the difference is RK4's truncation (dt H⁴ v_max ω_max⁴ / 2880) plus rounding, not the model's
+    first-order hold error (a chord along the substep's initial heading instead of the arc is off by about
+    v ω h dt / 2, millions of times more)."""
+    p, th, u, l, dt = case
+    n = 8
+    s_ref, th_ref = held_substeps(body_centre(p, th, l), th, u, l, dt, v_max, w_max, n)
+    p1, th1 = step(p, th, u, l, dt, v_max, w_max)
+    s1 = body_centre(p1, th1, l)
+    truncation = dt * (dt / SUBSTEPS / n) ** 4 * v_max * w_max**4 / 2880
+    # Rounding: |s| up to ~1e3 m, a few operations a step over SUBSTEPS (n + 1) steps of both integrations.
+    rounding = 16 * np.finfo(float).eps * (1.0 + np.abs(s_ref).max(axis=1)) * SUBSTEPS * (n + 1)
+    assert np.all(np.hypot(*(s1 - s_ref).T) <= 2 * truncation + rounding)
+    assert np.all(angle_diff(th1, th_ref) <= 1e-12)
+
+
+def test_limited_step_with_both_limits_binding_is_the_closed_form_circle():
+    """u 45° off the heading and far above both limits: v = v_max and ω = ω_max throughout the step (the
+    heading turns by 0.05 rad of the 0.785 it would need to unsaturate), so the body runs on the circle of
+    radius v_max / ω_max: s(dt) = s0 + (v/ω) [sin(θ0 + ω dt) - sin θ0, cos θ0 - cos(θ0 + ω dt)]."""
+    l = np.array([0.5, 1.5])
+    th0 = np.array([0.3, -2.0])
+    p = np.array([[10.0, -4.0], [-250.0, 300.0]])
+    u = 100.0 * np.stack([np.cos(th0 + math.pi / 4), np.sin(th0 + math.pi / 4)], axis=1)
+    v_max, w_max, dt = 2.0, 1.0, 0.05
+    v, w = inputs(u, th0, l)
+    assert np.all(v > v_max) and np.all(w > w_max)
+    s0 = body_centre(p, th0, l)
+    p1, th1 = step(p, th0, u, l, dt, v_max, w_max)
+    r = v_max / w_max
+    th_end = th0 + w_max * dt
+    s_exact = s0 + r * np.stack([np.sin(th_end) - np.sin(th0), np.cos(th0) - np.cos(th_end)], axis=1)
+    np.testing.assert_allclose(th1, th_end, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(body_centre(p1, th1, l), s_exact, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(p1, head(s_exact, th_end, l), rtol=0, atol=1e-12)
 
 
 def test_limited_arc_is_accurate_for_tiny_turn_rates():
