@@ -22,7 +22,7 @@ from reconswarm.net.admission import (
     command_bound_mps,
 )
 from reconswarm.pairs import pairs_within
-from reconswarm.paper.planner import command, max_repulsion_speed, neighbour_table
+from reconswarm.paper.planner import command, neighbour_table
 from reconswarm.scenario import load
 from reconswarm.sim.sensing import ContourField
 from tests.support import PAPER, view_of
@@ -226,25 +226,72 @@ def test_after_the_callers_own_stall_a_token_that_goes_is_kept_until_settled() -
     assert not m.alive(3, 24.0, 20.0)
 
 
+def _contact_push_mps(psi: float, d_safe: float, d_max: float) -> float:
+    """Eq. (11) at contact, from the equation: with D_max = r_i + r_j + d_max, D_min = r_i + r_j + d_safe and
+    the push held below contact (D = r_i + r_j), |Ψ| (D_max - (r_i + r_j)) / (D_max - D_min) = |Ψ| d_max /
+    (d_max - d_safe), whatever the radii (an obstacle: r_j = 0)."""
+    return abs(psi) * d_max / (d_max - d_safe)
+
+
+def _in_line_behind(i: int, at: np.ndarray, e: np.ndarray, n: int) -> np.ndarray:
+    """Agent i at `at`, every other agent on the ray from it along e at 0.1..0.9 m: all overlap agent i
+    (radii above 2 m), all in one direction, none on top of another."""
+    p = np.zeros((n, 2))
+    p[i] = at
+    others = [j for j in range(n) if j != i]
+    for m, j in enumerate(others):
+        p[j] = at + (0.1 + 0.8 * m / max(1, len(others) - 1)) * e
+    return p
+
+
+def test_repulsion_in_contact_is_the_contact_push_whatever_the_overlap() -> None:
+    """Every other agent overlapping agent i (by several metres), all on one side, obstacles and slot far
+    away: u_i is eq. (9)'s attraction (outside B(p*, R_c): R_c k_att toward p*) plus (N - 1) contact pushes
+    straight away from them, exactly; without the contact cap each push would grow with the overlap."""
+    s, cfg, n = S, S.planner, len(S.agents)
+    c = _contact_push_mps(cfg.psi_mps, cfg.d_safe_m, cfg.d_max_m)
+    polys = [s.polygon(k) for k in range(len(s.obstacles))]
+    target = np.array(s.target_m)
+    for i in range(n):
+        for ang in (0.0, 1.0, 2.5, -2.0):
+            e = np.array([math.cos(ang), math.sin(ang)])
+            at = np.array([100.0, -30.0 + 5.0 * i])  # 155 m from the nearest obstacle, 700 m from p*
+            p = _in_line_behind(i, at, e, n)
+            nb = neighbour_table(p, s.radii, pairs_within(p, 1e9), cfg.d_max_m)
+            ob = view_of(p, n, len(polys), [(a, j, polys[j]) for a in range(n) for j in range(len(polys))])
+            u = command(cfg, p, s.radii, s.offsets, target, nb, ob, np.zeros((n, 2)))
+            to_target = (target - p[i]) / np.hypot(*(target - p[i]))
+            expected = cfg.k_att * cfg.target_radius_m * to_target - (n - 1) * c * e
+            np.testing.assert_allclose(u[i], expected, rtol=0, atol=1e-9)
+
+
 def test_command_bound_holds_for_the_planner_even_in_contact() -> None:
-    """|u| of eq. (7) with every agent and obstacle repelling at once stays below command_bound_mps."""
+    """|u| of eq. (7) with every agent and obstacle repelling at once stays below the bound from the
+    equations: attraction at most k_att (R_c + max |Δ_i|) (eq. 9), each of the N - 1 agents' and M obstacles'
+    terms at most its contact push (eq. 11 held at contact). Configurations include every other agent
+    overlapping one agent from one side, where the pushes add up in one direction: without the contact cap
+    they would exceed the bound."""
     s, rng = S, np.random.default_rng(1)
     cfg, n = s.planner, len(s.agents)
-    bound = command_bound_mps(s)
-    cap = max_repulsion_speed(cfg.psi_mps, cfg.d_safe_m, cfg.d_max_m)
-    assert bound == pytest.approx(cfg.k_att * (cfg.target_radius_m + max(math.hypot(*o) for o in s.offsets))
-                                  + cap * (n - 1 + len(s.obstacles)))
+    c = _contact_push_mps(cfg.psi_mps, cfg.d_safe_m, cfg.d_max_m)
+    bound = cfg.k_att * (cfg.target_radius_m + max(math.hypot(*o) for o in s.offsets)) + c * (n - 1 + len(s.obstacles))
+    assert command_bound_mps(s) == pytest.approx(bound)  # what admission refuses above
     worst = 0.0
     polys = [s.polygon(k) for k in range(len(s.obstacles))]
-    for trial in range(200):
+    for trial in range(300):
         centre = polys[trial % len(polys)].mean(axis=0)
-        p = centre + rng.uniform(-15.0, 15.0, (n, 2)) * (1.0 if trial % 2 else 100.0)  # crowded, in contact
+        if trial % 3 == 2:  # every other agent pressed into one, from one side, next to an obstacle
+            e = rng.normal(size=2)
+            p = _in_line_behind(trial % n, centre + rng.uniform(-20.0, 20.0, 2), e / np.hypot(*e), n)
+        else:
+            p = centre + rng.uniform(-15.0, 15.0, (n, 2)) * (1.0 if trial % 3 else 100.0)  # crowded, in contact
         nb = neighbour_table(p, s.radii, pairs_within(p, 1e9), cfg.d_max_m)
         ob = view_of(p, n, len(polys), [(i, j, polys[j]) for i in range(n) for j in range(len(polys))])
         u = command(cfg, p, s.radii, s.offsets, np.array(s.target_m), nb, ob, np.zeros((n, 2)))
         worst = max(worst, float(norm2(u).max()))
     assert worst <= bound
-    print(f"largest |u| in 200 crowded configurations: {worst:.1f} m/s (bound {bound:.1f})")
+    assert worst >= (n - 1) * c - cfg.k_att * cfg.target_radius_m  # the aligned pushes were reached
+    print(f"largest |u| in 300 crowded configurations: {worst:.1f} m/s (bound {bound:.1f})")
 
 
 def test_tally_counts_per_kind_and_source() -> None:
