@@ -7,12 +7,14 @@ reproduces `reconswarm sim` (see reconswarm/engine.py for the tick order).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from reconswarm.geometry import Edges, norm2
+from reconswarm.paper.blocked import blocked_hulls, pass_gap_m
 from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
 from reconswarm.paper.knowledge import KnownObstacles, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
@@ -53,6 +55,8 @@ class AgentBrain:
         self._edges_rev = 0
         self._centres = np.zeros((0, 2))
         self._reach = np.zeros(0)
+        self._blocked_key: tuple[int, tuple[tuple[int, float, float, float], ...]] = (-1, ())
+        self._blocked: tuple[Edges | None, list[Peer]] = (None, [])  # (the hulls with lost robots, the rest)
         self._seen: set[tuple[float, float]] = set()  # contour points already merged (merging again is a no-op)
         w = window_ticks(self.cfg.stall_window_s, s.meta.dt_s)
         self.stall = StallState.create(1, w, [generator(s.meta.seed, agent_id)])
@@ -73,12 +77,14 @@ class AgentBrain:
         return [peers[k].id for k in np.flatnonzero(linked(d, self.cfg.link_range_m))]
 
     def tick(self, k: int, p: Array, scan: dict[str, Array], peers: list[Peer],
-             shared: list[dict[str, Array]], swarm_sets: list[dict[str, Array]] | None = None) -> tuple[Array, bool]:
+             shared: list[dict[str, Array]], swarm_sets: list[dict[str, Array]] | None = None,
+             lost: Sequence[Peer] = ()) -> tuple[Array, bool]:
         """Plan tick k. Returns (u (2,), whether the obstacle set grew).
 
         p (2,) own head point at k; scan: obstacle id -> contour points (P, 2) sensed at k; peers: every
         other agent's last announcement (at k when fresh); shared: the obstacle sets at k-1 of the peers
-        within link range; swarm_sets (virtual leader only): every agent's set at k-1, own excluded.
+        within link range; swarm_sets (virtual leader only): every agent's set at k-1, own excluded;
+        lost: where the robots of peers whose agents are gone stand (still, for good).
         """
         c = self.cfg
         pos = p.reshape(1, 2)
@@ -98,8 +104,12 @@ class AgentBrain:
         if grew:
             self.rev += 1
 
-        nb = self._neighbours(pos, peers)
-        ob = self._obstacles(pos)
+        if lost:  # robots whose agents are gone: obstacles where they block a passage (reconswarm.paper.blocked)
+            ob, alone = self._obstacles_with_lost(pos, lost)
+            nb = self._neighbours(pos, [*peers, *alone])
+        else:
+            nb = self._neighbours(pos, peers)
+            ob = self._obstacles(pos)
         e = errors(pos, center.reshape(-1, 2)[0], self.offset)
         rep = repulsion(c, pos, self.r, nb, ob)
         push = rep[0] + rep[1]
@@ -137,6 +147,23 @@ class AgentBrain:
             return ObstacleView.empty(1)
         m = self._edges.ax.shape[0]
         return obstacle_view(pos, 1, m, np.zeros(m, dtype=np.int64), np.arange(m), self._edges)
+
+    def _obstacles_with_lost(self, pos: Array, lost: Sequence[Peer]) -> tuple[ObstacleView, list[Peer]]:
+        """The known hulls with each lost robot that blocks a passage merged into one convex obstacle with
+        what it blocks; the lost robots that block nothing, to be avoided as neighbours."""
+        key = (self.rev, tuple(sorted((b.id, b.px, b.py, b.radius) for b in lost)))
+        if key != self._blocked_key:  # (lost robots stand still: this changes when they or the hulls do)
+            discs = np.array([[b.px, b.py, b.radius] for b in lost], dtype=np.float64)
+            hulls, absorbed = blocked_hulls([h for _, h in self.known.sorted_items()], discs,
+                                            pass_gap_m(float(self.r[0]), self.cfg.d_max_m))
+            alone = [b for b, a in zip(lost, absorbed.tolist(), strict=True) if not a]
+            edges = Edges.of(hulls) if hulls else None
+            self._blocked_key, self._blocked = key, (edges, alone)
+        edges, alone = self._blocked
+        if edges is None:
+            return ObstacleView.empty(1), alone
+        m = edges.ax.shape[0]
+        return obstacle_view(pos, 1, m, np.zeros(m, dtype=np.int64), np.arange(m), edges), alone
 
     def _new_points(self, scan: dict[str, Array]) -> dict[str, Array]:
         out = {}

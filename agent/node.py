@@ -197,17 +197,25 @@ class AgentNode:
         holds between the liveliness and the data subscribers)."""
         return self.alive if clock is None else set(clock.alive) - self.gone
 
-    def _peers(self, k: int) -> list[wire.Beacon]:
-        """Whom tick k plans with: every beacon of k; for the peers it waited for but lacks (a guess) and for
-        lost peers (not `_living`: their robots stay where they stopped; the world's clock is not fooled by a
-        forged token), the latest beacon. An alive peer that may not matter at k is left out: it
-        contributes nothing, and its last position would be stale (realtime: one not heard lately)."""
+    def _peers(self, k: int) -> tuple[list[Peer], list[Peer]]:
+        """Whom tick k plans with, (live peers, lost peers). Live: every beacon of k, and for the peers it
+        waited for but lacks (a guess), the latest beacon. Lost (not `_living`: the world's clock is not
+        fooled by a forged token): where their robots stopped, by the latest beacon or the world's scan.
+        An alive peer that may not matter at k is left out: it contributes nothing, and its last position
+        would be stale (realtime: one not heard lately)."""
         fresh, st = self.beacons.get(k, {}), self.states[k]
         clock = self.clocks.get(k) or self.clocks.get(max(self.clocks, default=-1))  # (realtime: the newest)
         rt, p, living = self.mode == "realtime", (st.px, st.py), self._living(clock)
         wanted = self._expected(k, None) if not rt else self._lately()
-        return [fresh.get(a, b) for a, b in self.last_seen.items()
-                if a in fresh or a not in living or (a in wanted and (not rt or self.nb.audible(p, b)))]
+        live: list[Peer] = []
+        lost: list[Peer] = []
+        for a, b in self.last_seen.items():
+            b = fresh.get(a, b)
+            if a in fresh or (a in living and a in wanted and (not rt or self.nb.audible(p, b))):
+                live.append(Peer(b.id, b.px, b.py, b.radius))
+            elif a not in living:
+                lost.append(Peer(b.id, b.px, b.py, b.radius))
+        return live, lost
 
     def _lately(self) -> set[int]:
         return self.nb.heard_lately(self.alive, self.heard, self.now, self.period_s)
@@ -295,14 +303,14 @@ class AgentNode:
                         self.id, k, self._guess)
         self._guess = ""
         p = np.array([st.px, st.py])
-        peers = [Peer(b.id, b.px, b.py, b.radius) for b in self._peers(k)]
+        peers, lost = self._peers(k)
         if self.mode == "lockstep":  # exactly the peers' sets at k-1, as their beacons at k announce
             if self._linked[0] != k:  # (the wait gave up before all beacons came)
                 self._link(k, p)
             linked = self._linked[1]
             every = {a: b.rev for a, b in self.beacons.get(k, {}).items()}
         else:  # realtime: whatever is latest
-            linked = {a: max(self.sets.get(a, {0: {}})) for a in self.brain.linked(p, peers)}
+            linked = {a: max(self.sets.get(a, {0: {}})) for a in self.brain.linked(p, [*peers, *lost])}
             every = {a: max(revs) for a, revs in self.sets.items() if revs}
         if self.k < 0 and k > 0:  # joining a mission under way: catch up on everything peers have cached
             linked = {a: max(revs) for a, revs in self.sets.items() if revs}
@@ -311,7 +319,7 @@ class AgentNode:
         shared = self.peer_sets.unmerged(linked, self.merged)
         swarm = self.peer_sets.unmerged(every, self.merged_union) if self.brain.leader is not None else None
         scan = scan_sets(self.scans, self.k + 1 if self.k >= 0 else k, k)
-        u, grew = self.brain.tick(k, p, scan, peers, shared, swarm)
+        u, grew = self.brain.tick(k, p, scan, peers, shared, swarm, lost)
         if grew:
             self._out.append(self._obstacle_set(k))
         self.last_cmd = wire.Cmd(self.id, k, *self.brain.inputs(u, st.theta))  # (v, ω) at our heading θ_k

@@ -1,0 +1,105 @@
+"""Lost robots as obstacles: what the escape needs past a robot that died in the swarm's path.
+
+A robot whose agent is gone stands still where it stopped: known, static and round. Beside a known
+obstacle it makes a pocket that the paper's law cannot leave: attraction pulls an agent into the corner
+between the obstacle's face and the dead robot, both repulsions push back, and the sum vanishes there
+(a local minimum Remark 1 does not cover: it is made by a robot, not by the geometry the paper assumes).
+
+The remedy keeps the law and changes what it is applied to: an agent treats a lost robot that is too
+close to a known obstacle (or to another lost robot) for it to pass between them, as one convex obstacle
+with them: the convex hull of the obstacle's known hull and the robot's disc. A convex obstacle has no
+pocket, so the agent slides along it and round it as it does round any obstacle. "Too close to pass"
+is a gap below `2 (r_i + d_max)`: between two repulsors closer than that the agent feels both at once,
+and that is where the pocket forms. A lost robot alone, far from everything, stays a neighbour (one
+disc makes no pocket).
+
+Pure: hulls (V, 2) counter-clockwise, discs (L, 3) as (x, y, radius); no state, no I/O.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from reconswarm.geometry import convex_hull, distance_to_polygon, norm2
+
+Array = NDArray[np.float64]
+
+DISC_SIDES = 16
+
+
+def disc_polygon(x_m: float, y_m: float, radius_m: float, sides: int = DISC_SIDES) -> Array:
+    """The regular polygon circumscribed about the disc (it holds the whole disc): (sides, 2), CCW."""
+    a = np.arange(sides) * (2 * np.pi / sides)
+    rr = radius_m / np.cos(np.pi / sides)
+    return np.stack([x_m + rr * np.cos(a), y_m + rr * np.sin(a)], axis=1)
+
+
+def pass_gap_m(radius_m: float, d_max_m: float) -> float:
+    """The narrowest gap an agent of this radius passes without feeling both sides' repulsion at once."""
+    return 2.0 * (radius_m + d_max_m)
+
+
+def blocked_hulls(hulls: list[Array], discs: Array, gap_m: float) -> tuple[list[Array], NDArray[np.bool_]]:
+    """Group each lost robot's disc with the known hulls and the other discs closer to it than gap_m.
+
+    hulls: M known hulls (V, 2); discs (L, 3). Returns (the hulls to plan with: every known hull that is in
+    no group, in the given order, then one convex hull per group of two or more members, in the order of
+    their first disc), absorbed (L,): which discs went into a group (the others stay neighbours).
+    Hulls are never grouped with each other: only a lost robot joins things.
+    """
+    n_l, n_m = discs.shape[0], len(hulls)
+    parent = list(range(n_l + n_m))  # union-find: discs 0..L-1, then hulls L..L+M-1
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    def join(i: int, j: int) -> None:
+        parent[root(i)] = root(j)
+
+    c = discs[:, :2]  # (L, 2)
+    for i in range(n_l):
+        d = norm2(c[i + 1:] - c[i]) - discs[i + 1:, 2] - discs[i, 2]  # (L-i-1,) disc to disc gaps
+        for j in np.flatnonzero(d < gap_m).tolist():
+            join(i, i + 1 + j)
+    for m, h in enumerate(hulls):
+        if h.shape[0] == 0:
+            continue
+        if h.shape[0] < 3:  # a point or a segment: distance to its vertices and edge
+            gap = _distance_to_degenerate(c, h) - discs[:, 2]
+        else:
+            gap = distance_to_polygon(c, h)[0] - discs[:, 2]  # (L,)
+        for i in np.flatnonzero(gap < gap_m).tolist():
+            join(i, n_l + m)
+    groups: dict[int, list[int]] = {}
+    for i in range(n_l + n_m):
+        groups.setdefault(root(i), []).append(i)
+    absorbed = np.zeros(n_l, dtype=bool)
+    merged: list[Array] = []
+    grouped_hulls: set[int] = set()
+    for members in sorted(groups.values(), key=min):
+        if len(members) < 2 or min(members) >= n_l:  # alone, or hulls only (cannot happen: never joined)
+            continue
+        pts = []
+        for i in members:
+            if i < n_l:
+                absorbed[i] = True
+                pts.append(disc_polygon(*discs[i].tolist()))
+            else:
+                grouped_hulls.add(i - n_l)
+                pts.append(hulls[i - n_l])
+        merged.append(convex_hull(np.concatenate(pts)))
+    kept = [h for m, h in enumerate(hulls) if m not in grouped_hulls]
+    return kept + merged, absorbed
+
+
+def _distance_to_degenerate(c: Array, h: Array) -> Array:
+    """Distance from points c (L, 2) to a point or segment h (1 or 2, 2)."""
+    a, b = h[0], h[-1]
+    ab = b - a
+    den = float(ab @ ab)
+    t = np.clip(((c - a) @ ab) / den, 0.0, 1.0) if den > 0 else np.zeros(c.shape[0])
+    return norm2(c - (a + t[:, None] * ab))
