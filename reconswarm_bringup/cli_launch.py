@@ -57,6 +57,8 @@ def launch_cmd(
         ] = False,
     ros_domain_id: Annotated[int | None, typer.Option("--ros-domain-id", metavar="D",
         help="ROS 2 domain (default: ROS_DOMAIN_ID, else 0).")] = None,
+    agents_per_process: Annotated[str, typer.Option("--agents-per-process", metavar="K|auto",
+        help="Agents per process (one zenoh session each; default 1); auto: ceil(N / CPUs).")] = "1",
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
     no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress bar.")] = False,
     debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False,
@@ -65,7 +67,7 @@ def launch_cmd(
     from reconswarm.net.ros2 import resolve_domain_id
     from reconswarm.scenario import PLANNERS
     from reconswarm_bringup import faults as faults_mod
-    from reconswarm_bringup import validate
+    from reconswarm_bringup import packing, validate
     from reconswarm_bringup.config import LaunchConfig
     from reconswarm_bringup.launcher import run
 
@@ -85,6 +87,10 @@ def launch_cmd(
         if secure and (ros2 or foxglove is not None):
             raise BadInput(f"{'--ros2' if ros2 else '--foxglove'} and --secure cannot be combined (the access rules "
                            "cover neither the ROS 2 keys nor the live view's reading of the obstacle sets)")
+        per_process = packing.parse(agents_per_process)
+        if per_process != 1 and (secure or ros2):
+            raise BadInput(f"--agents-per-process {agents_per_process}: {'--secure' if secure else '--ros2'} runs one "
+                           "agent per process (its credentials and ROS 2 node are per agent)")
         if ros_domain_id is not None and not ros2:
             raise BadInput("--ros-domain-id: only with --ros2")
         domain = resolve_domain_id(ros_domain_id, os.environ) if ros2 else None
@@ -96,7 +102,7 @@ def launch_cmd(
                            planner=planner, router=router, secure=secure,
                            faults=tuple(faults_mod.parse(f) for f in fault or []), timeout_s=timeout,
                            progress=not no_progress, as_json=as_json, hosts=hosts,
-                           foxglove_port=foxglove, ros_domain_id=domain)
+                           foxglove_port=foxglove, ros_domain_id=domain, agents_per_process=per_process)
         code = run(cfg)
     except ReconswarmError as exc:
         fail(exc, PROG)

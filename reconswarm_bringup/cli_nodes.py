@@ -65,16 +65,20 @@ def _guard(fn: Callable[[], int]) -> None:
 
 
 def agent_cmd(
-    agent_id: Annotated[int, typer.Option("--id", help="This agent's id (from the scenario).")],
     scenario: Annotated[Path, typer.Option("--scenario", help="Scenario TOML file.")],
+    agent_id: Annotated[list[int] | None, typer.Option("--id",
+        help="This agent's id (from the scenario); repeatable: those agents in this process.")] = None,
+    ids: Annotated[str | None, typer.Option("--ids", metavar="1-5,9",
+        help="Host these agents in this process (one zenoh session; each keeps its own keys and token).")] = None,
     connect: Connect = None, listen: Listen = None, mode: Mode = "client", zenoh_config: ZConfig = None,
     run_id: RunId = None, ros2: Ros2 = False, ros_domain_id: RosDomain = None,
 ) -> None:
-    """One agent process: plans its own commands from its state, scan and neighbours' announcements."""
-    from agent.process import AgentConfig, run
+    """One agent process (or a host of several): plans commands from states, scans and neighbours' announcements."""
+    from agent.process import AgentConfig, parse_ids, run
 
     def go() -> int:
-        return run(AgentConfig(agent_id, scenario, ZenohOptions.build(connect, listen, mode, zenoh_config), run_id,
+        return run(AgentConfig(parse_ids(agent_id, ids), scenario,
+                               ZenohOptions.build(connect, listen, mode, zenoh_config), run_id,
                                ros2_domain_id=_domain(ros2, ros_domain_id)))
 
     _guard(go)

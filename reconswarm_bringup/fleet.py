@@ -24,6 +24,12 @@ class Proc:
     log_path: Path
     prefix: list[str] = field(default_factory=list)  # e.g. `ip netns exec NS` for host B
     expected_exit: bool = False  # stopped on purpose (a fault or the end of the run)
+    members: tuple[str, ...] = ()  # an agent host: the agents it runs (its id names them all, e.g. 1-5)
+
+    @property
+    def idents(self) -> tuple[str, ...]:
+        """Whom this process stands for: its id, or each agent of a host."""
+        return self.members or (self.id,)
 
 
 @dataclass
@@ -42,7 +48,9 @@ class Fleet:
     # Realtime keeps the default policy: there a woken process should run at once.
     batch: bool = False
 
-    def start(self, role: str, ident: str, args: list[str], prefix: list[str] | None = None) -> Proc:
+    def start(self, role: str, ident: str, args: list[str], prefix: list[str] | None = None,
+              members: tuple[str, ...] = ()) -> Proc:
+        """Start a process; processes.tsv gets a line per agent it runs (an agent host's share its pid)."""
         logs = self.out / "logs"
         logs.mkdir(parents=True, exist_ok=True)
         name = role if ident == "-" else f"{role}-{ident}"
@@ -55,18 +63,19 @@ class Fleet:
         fh.close()
         if self.batch:  # Popen returns once the child exec'd, before its interpreter starts a thread (they inherit it)
             batch_policy(popen.pid)
-        proc = Proc(role, ident, args, popen, log_path, list(prefix or []))
+        proc = Proc(role, ident, args, popen, log_path, list(prefix or []), members=tuple(members))
         self.procs.append(proc)
         with (self.out / "processes.tsv").open("a") as tsv:
-            tsv.write(f"{role}\t{ident}\t{popen.pid}\n")
+            tsv.writelines(f"{role}\t{who}\t{popen.pid}\n" for who in proc.idents)
         return proc
 
     def find(self, role: str, ident: str = "-") -> Proc | None:
-        live = [p for p in self.procs if p.role == role and p.id == ident]
+        """The newest process of that role standing for ident (an agent: its own process or its host)."""
+        live = [p for p in self.procs if p.role == role and ident in p.idents]
         return live[-1] if live else None
 
     def restart(self, proc: Proc) -> Proc:
-        return self.start(proc.role, proc.id, proc.args, proc.prefix)
+        return self.start(proc.role, proc.id, proc.args, proc.prefix, proc.members)
 
     def signal(self, proc: Proc, sig: int) -> None:
         if proc.popen.poll() is None:

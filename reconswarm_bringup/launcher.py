@@ -34,7 +34,7 @@ from reconswarm.net.timing import TIMING
 from reconswarm.record.store import RunRecord
 from reconswarm.record.summary import render, summarize
 from reconswarm.scenario import Scenario, load, parse, to_toml, warnings
-from reconswarm_bringup import chaos, netns, runid, validate
+from reconswarm_bringup import chaos, netns, packing, runid, validate
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.console import mission_exit_code
 from reconswarm_bringup.fleet import ROOT, Fleet, Proc
@@ -149,10 +149,7 @@ def run(cfg: LaunchConfig) -> int:
         mon = fleet.start("monitor", "-", ["monitor", "record", "--scenario", str(scen_path), "--db",
                                            str(cfg.out / "run.db"), "--no-live", *live, *run_arg, *zargs], prefix)
         ros = [] if cfg.ros_domain_id is None else ["--ros2", "--ros-domain-id", str(cfg.ros_domain_id)]
-        for a in s.agents:
-            prefix, zargs = net.zopt("agent", str(a.id))
-            fleet.start("agent", str(a.id), ["agent", "--id", str(a.id), "--scenario", str(scen_path), *ros,
-                                             *run_arg, *zargs], prefix)
+        packing.start_agents(fleet, s, cfg.agents_per_process, net.zopt, ["--scenario", str(scen_path), *ros, *run_arg])
         prefix, zargs = net.zopt("simworld")
         world = fleet.start("simworld", "-", ["simworld", "--scenario", str(scen_path), "--clock", cfg.clock,
                                               "--speed", str(cfg.speed), "--start-timeout", str(cfg.start_timeout_s),

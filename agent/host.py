@@ -1,0 +1,228 @@
+"""An agent process's session: one or many agents (`reconswarm agent --ids 1-5,9`) on one zenoh session.
+
+Zenoh's guidance is one session per process, shared by its nodes (as rmw_zenoh gives every ROS 2 node of a
+process one session). The host holds the session's subscriptions and hands each sample to the agents it
+is for, through one inbox and one loop that steps every hosted node (agent/node.py) with the wall time:
+
+- shared by all hosted agents: the clock, liveliness (every token, with history), and each cell's beacons
+  and obstacle sets (advanced subscriber: publishers' cached sets), declared while at least one hosted
+  agent listens to that cell (agent/neighbours.py) and handed to those that do; an agent that starts
+  listening to a cell the host already hears gets the newest set of each publisher there (what its own
+  advanced subscriber's history would have brought), from the host's copy;
+- per agent: its state (urgent: it starts a tick; in ROS 2 mode its odometry and its scan);
+- a sample is decoded once; each agent takes it through its own link (agent/link.py: its gate, counters).
+
+With more than one agent the subscriptions take local samples too (co-hosted agents hear each other
+without the router); each agent drops its own beacon and set coming back. A single agent takes remote
+samples only, as it always did.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+from zenoh import ext
+
+from agent.link import AgentLink, Decoded, decode_sample
+from agent.messages import Exit, Input, Reconnect
+from agent.neighbours import Cells
+from reconswarm.net import wire
+from reconswarm.net.cells import Cell
+from reconswarm.net.session import Inbox, Item, StartMark, Stopper, to_item
+
+log = logging.getLogger("reconswarm.agent")
+RECONNECT = -1  # AgentHost.run's answer when the session must be opened again
+ALL = ("all", None)  # the tag of a sample for every hosted agent (clock, liveliness)
+Tag = tuple[str, Any]  # ALL | ("own", agent id) | ("cell", cell or None): the subscription it came through
+
+
+class TaggedInbox:
+    """Samples from zenoh with the subscription they came through, held raw until the loop takes them all at
+    once (session.Inbox's rules: an urgent sample, or `want` of them, wake the loop; nothing blocks or calls
+    zenoh in a callback); counted in session.Inbox's process totals."""
+
+    def __init__(self) -> None:
+        self._samples: deque[tuple[Tag, Any, float]] = deque()
+        self._ready = threading.Event()
+        self._want: float = 1
+        self._urgent = False
+
+    def callback(self, tag: Tag, urgent: bool = False) -> Callable[[Any], None]:
+        def cb(sample: Any) -> None:
+            self._samples.append((tag, sample, time.monotonic()))
+            if urgent:
+                self._urgent = True
+                self._ready.set()
+            elif len(self._samples) >= self._want:
+                self._ready.set()
+
+        return cb
+
+    def handler(self, tag: Tag, urgent: bool = False) -> Any:
+        return zenoh.handlers.Callback(self.callback(tag, urgent))
+
+    def take(self, want: int | None, timeout: float | None) -> list[tuple[Tag, Item]]:
+        self._want = math.inf if want is None else max(1, want)
+        self._ready.clear()
+        if not self._urgent and len(self._samples) < self._want and (timeout is None or timeout > 0):
+            self._ready.wait(timeout)
+        self._urgent = False
+        Inbox.wakeups += 1
+        out = []
+        while self._samples:
+            tag, sample, at = self._samples.popleft()
+            item = to_item(sample, at)
+            if item is not None:
+                out.append((tag, item))
+        Inbox.samples_in += len(out)
+        return out
+
+
+class AgentHost:
+    """The session's subscriptions around the hosted agents' links; `run` is the process's loop."""
+
+    def __init__(self, session: zenoh.Session, keys: wire.Keys, links: dict[int, AgentLink],
+                 inbox: TaggedInbox) -> None:
+        self.z, self.keys, self.links, self.inbox = session, keys, links, inbox
+        self.active = dict(links)  # the agents still running (one that exited leaves this)
+        self.locality = zenoh.Locality.REMOTE if len(links) == 1 else zenoh.Locality.ANY
+        self.listeners: dict[Cell | None, set[int]] = {}  # cell -> hosted agents listening to it
+        self.cell_subs: dict[Cell | None, tuple[Any, Any]] = {}
+        self.sets: dict[Cell | None, dict[str, Item]] = {}  # cell -> key -> newest obstacle set heard there
+        self.pending: list[tuple[int, Tag, Item]] = []  # (agent, tag, item) for that agent alone (replayed sets)
+        self.known = {a.id for a in next(iter(links.values())).node.s.agents}
+        self.max_set_bytes = next(iter(links.values())).gate.adm.max_set_bytes
+        z, k = session, keys
+        self.subs: list[Any] = []
+        for aid, link in links.items():
+            self.listen(aid, link.node.nb.current())
+            # Our state starts a tick: it wakes the loop at once; the rest wakes it only once the nodes' count of
+            # what they still need is in.
+            if link.ros2 is None:
+                self.subs.append(z.declare_subscriber(k.state(aid), inbox.handler(("own", aid), urgent=True)))
+            else:
+                self.subs.append(z.declare_subscriber(k.scan(aid), inbox.handler(("own", aid))))
+        self.subs += [z.declare_subscriber(k.clock, inbox.handler(ALL)),
+                      z.liveliness().declare_subscriber(k.alive_all, inbox.handler(ALL), history=True)]
+        for link in links.values():  # declared last: a token tells the world its agent is ready to receive
+            link.announce()
+
+    # ------------------------------------------------------------------------------------ listening
+
+    def listen(self, aid: int, c: Cells) -> None:
+        """Agent aid listens to c.listen from now on: cells new to the host are declared before the ones nobody
+        listens to any more go; a cell the host already hears replays its newest sets to aid."""
+        want: set[Cell | None] = {None} if c.listen is None else set(c.listen)
+        had = {cell for cell, who in self.listeners.items() if aid in who}
+        for cell in want - had:
+            who = self.listeners.setdefault(cell, set())
+            who.add(aid)
+            if cell in self.cell_subs:
+                self.pending += [(aid, ("cell", cell), item) for item in self.sets.get(cell, {}).values()]
+                continue
+            tag, k = ("cell", cell), self.keys
+            self.cell_subs[cell] = (
+                self.z.declare_subscriber(k.cell_agents(cell, "beacon"), self.inbox.handler(tag),
+                                          allowed_origin=self.locality),
+                ext.declare_advanced_subscriber(self.z, k.cell_agents(cell, "obstacles"), self.inbox.handler(tag),
+                                                allowed_origin=self.locality,
+                                                history=ext.HistoryConfig(detect_late_publishers=True)))
+        for cell in had - want:
+            self.listeners[cell].discard(aid)
+            if not self.listeners[cell]:
+                del self.listeners[cell]
+                self.sets.pop(cell, None)
+                for sub in self.cell_subs.pop(cell):
+                    sub.undeclare()
+
+    # ---------------------------------------------------------------------------------------- input
+
+    def route(self, items: list[tuple[Tag, Item]]) -> dict[int, list[Input]]:
+        """Each hosted agent's batch: every sample decoded once, taken by each agent it is for."""
+        batches: dict[int, list[Input]] = {aid: [] for aid in self.active}
+        pending, self.pending = self.pending, []
+        for aid, tag, item in pending:
+            self._deliver(tag, item, batches, aid)
+        for tag, item in items:
+            self._deliver(tag, item, batches, None)
+        return batches
+
+    def _deliver(self, tag: Tag, item: Item, batches: dict[int, list[Input]], only: int | None) -> None:
+        key, payload, kind, source, _at = item
+        if tag[0] == "own":
+            link = self.active.get(tag[1])
+            mine = None if link is None else link.decode(key, payload, kind, source)
+            if mine is not None:
+                batches[tag[1]].append(mine)
+            return
+        who = list(self.active) if tag == ALL else [a for a in self.listeners.get(tag[1], ()) if a in self.active]
+        if only is not None:
+            who = [a for a in who if a == only]
+        if not who:
+            return
+        if key.endswith("/obstacles"):
+            who = [a for a in who if self.active[a].admit_bytes(len(payload), source, key)]
+            if not who:
+                return
+        m: Decoded = decode_sample(self.keys, key, payload, kind)
+        if isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known:
+            self.sets.setdefault(tag[1], {})[key] = item  # (for an agent that starts listening here later)
+        for aid in who:
+            got = self.active[aid].take(m, key, source)
+            if got is not None:
+                batches[aid].append(got)
+
+    # ----------------------------------------------------------------------------------------- loop
+
+    def run(self, stop: Stopper) -> int:
+        """Feed the nodes until all exited (the largest exit code) or one asks for a new session (RECONNECT), or
+        a signal stops us (0)."""
+        mark, codes = StartMark(), []
+        poll_s = min(link.node.timing.agent_poll_s for link in self.links.values())
+        while not stop.stopped and self.active:
+            nodes = [link.node for link in self.active.values()]
+            mark(any(n.started for n in nodes))
+            now = time.monotonic()
+            needs = [w for w in (n.awaiting(now) for n in nodes) if w is not None]
+            wakes = [w for w in (n.wake_at_s() for n in nodes) if w is not None]
+            timeout = poll_s if not wakes else min(poll_s, max(0.0, min(wakes) - now))
+            batches = self.route(self.inbox.take(min(needs) if needs else None, timeout))
+            for aid, link in list(self.active.items()):
+                batch = batches[aid]
+                if link.ros2 is not None:
+                    batch += link.ros2.take_invalid()
+                for out in link.node.step(batch, time.monotonic()):
+                    if isinstance(out, Exit):
+                        link.report(final=True)
+                        codes.append(out.code)
+                        del self.active[aid]
+                        if out.code != 0 and self.active:  # it stops; its co-hosted agents go on
+                            self.listen(aid, Cells(link.home or (0, 0), frozenset()))
+                            link.close()
+                        break
+                    if isinstance(out, Reconnect):
+                        return RECONNECT
+                    if isinstance(out, Cells):
+                        self.listen(aid, out)
+                    link.publish(out)
+                else:
+                    link.report()
+        for link in self.active.values():
+            link.report(final=True)
+        return max(codes, default=0)
+
+    def close(self) -> None:
+        for link in self.links.values():
+            link.close()
+        for subs in self.cell_subs.values():
+            for sub in subs:
+                sub.undeclare()
+        for sub in self.subs:
+            sub.undeclare()

@@ -1,0 +1,162 @@
+"""One agent's identity on the wire, inside its process's session (agent/host.py holds the session).
+
+An `AgentLink` is what makes a hosted agent indistinguishable from a lone one: its own publishers (command,
+beacon and obstacle set under its home cell, report `agent-<id>`), its own liveliness token, its own gate
+(admission state and intrusion tally) and rejection count around its AgentNode. It does not subscribe: the
+host's shared subscriptions hand it the samples meant for it (`take` a message decoded once for everyone,
+or `decode` a raw sample for it alone), and it publishes what its node returns.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+import zenoh
+from zenoh import ext
+
+from agent.messages import Input, Invalid, Joined, Left, Output, WorldToken
+from agent.neighbours import Cells
+from agent.node import AgentNode
+from agent.ros2_io import AgentRos2
+from reconswarm.net import wire
+from reconswarm.net.cells import Cell
+from reconswarm.net.gate import Gate
+from reconswarm.net.report import report_to_wire
+from reconswarm.net.session import Member, Rejections
+
+log = logging.getLogger("reconswarm.agent")
+Decoded = Input | None  # what a sample decodes to (None: a key no agent reads)
+
+
+def decode_sample(keys: wire.Keys, key: str, payload: bytes, kind: str) -> Decoded:
+    """A sample as a node input, for any agent (who may take it is `AgentLink.take`'s question); a malformed one
+    becomes Invalid."""
+    try:
+        what, aid, leaf = keys.parse(key)
+        if what == "alive":
+            if leaf == "agent" and aid is not None:
+                return Left(aid) if kind == "DELETE" else Joined(aid)
+            return WorldToken(kind != "DELETE") if leaf == "simworld" else None
+        if what == "clock":
+            return wire.clock_from_wire(payload)
+        if what != "agent" or aid is None:
+            return None
+        if leaf == "state":
+            return wire.state_from_wire(payload, aid)
+        if leaf == "scan":
+            return wire.scan_from_wire(payload, aid)
+        if leaf == "beacon":
+            return wire.beacon_from_wire(payload, aid)
+        if leaf == "obstacles":
+            return wire.obstacles_from_wire(payload, aid)
+        return None
+    except wire.WireError as exc:
+        return Invalid(key, str(exc))
+
+
+class AgentLink(Member):
+    """One agent's publishers, token, gate and counters in a session, around its node.
+
+    own_source: the session's id when co-hosted agents hear each other through it (the host's subscriptions
+    then take local samples too): our own beacon and set come back from it and are not for us. None (a lone
+    agent, whose subscriptions take remote samples only): anything on our own keys comes from another session.
+    """
+
+    def __init__(self, node: AgentNode, keys: wire.Keys, session: zenoh.Session, rej: Rejections, gate: Gate,
+                 ros2_domain_id: int | None = None, own_source: str | None = None,
+                 odometry: Any = None) -> None:
+        self.node, self.keys, self.z, self.rej, self.gate = node, keys, session, rej, gate
+        self.id, self.own_source = node.id, own_source
+        self.home: Cell | None = None  # the cell we publish from (none declared yet)
+        self.pub_beacon: zenoh.Publisher
+        self.pub_obs: ext.AdvancedPublisher
+        l_m = float(node.s.head_offsets[node.s.agent_index(self.id)])
+        # ROS 2 mode: odometry in (to `odometry`, the host's callback for our own samples), cmd_vel out.
+        self.ros2 = None if ros2_domain_id is None else AgentRos2(
+            session, ros2_domain_id, self.id, l_m, node.s.meta.dt_s, odometry or (lambda _sample: None))
+        block = zenoh.CongestionControl.BLOCK
+        self.pub_cmd = None if self.ros2 else session.declare_publisher(keys.cmd(self.id), congestion_control=block)
+        self.pub_report = session.declare_publisher(keys.report(gate.process))
+        self.cells(node.nb.current())
+        self.token: Any = None  # declared by `announce`, once the host listens for us
+
+    def announce(self) -> None:
+        """Declare our liveliness token: it tells the world this agent is ready to receive."""
+        self.token = self.z.liveliness().declare_token(self.keys.alive_agent(self.id))
+
+    def close(self) -> None:
+        if self.ros2 is not None:
+            self.ros2.close()
+        if self.token is not None:
+            super().close()
+
+    def cells(self, c: Cells) -> None:
+        """Publish from c.home (the obstacle set's cache moves with it: the node puts its set again); whom we
+        listen to is the host's (agent/host.py)."""
+        if c.home == self.home:
+            return
+        if self.home is not None:
+            self.pub_beacon.undeclare()
+            self.pub_obs.undeclare()
+        self.home = c.home
+        k, block = self.keys, zenoh.CongestionControl.BLOCK
+        self.pub_beacon = self.z.declare_publisher(k.beacon(c.home, self.id), congestion_control=block)
+        self.pub_obs = ext.declare_advanced_publisher(self.z, k.obstacles(c.home, self.id),
+                                                      cache=ext.CacheConfig(max_samples=1))
+
+    def decode(self, key: str, payload: bytes, kind: str, source: str, _at_s: float = 0.0) -> Input | None:
+        """A raw sample for this agent alone: the node input (None: not for us, or refused by admission, which
+        counts and logs it); a malformed one becomes Invalid (and is counted)."""
+        if self.ros2 is not None and self.ros2.owns(key):
+            odom = self.ros2.decode(key, payload)
+            if isinstance(odom, Invalid):
+                self.rej.reject(key, odom.reason)
+            return odom
+        if key.endswith("/obstacles") and not self.admit_bytes(len(payload), source, key):
+            return None
+        return self.take(decode_sample(self.keys, key, payload, kind), key, source)
+
+    def admit_bytes(self, n_bytes: int, source: str, key: str) -> bool:
+        """An obstacle set's size, before it is decoded (refused: counted by our gate)."""
+        return self.gate.admit_set_bytes(n_bytes, source, key, time.monotonic())
+
+    def take(self, m: Decoded, key: str, source: str) -> Input | None:
+        """A decoded sample, as this agent takes it: ours to act on, counted as invalid, or refused."""
+        if m is None or isinstance(m, Joined | Left | WorldToken):
+            return m
+        if isinstance(m, Invalid):
+            self.rej.reject(key, m.reason)
+            return m
+        if isinstance(m, wire.State | wire.Scan) and m.id != self.id:
+            return None
+        if isinstance(m, wire.Beacon | wire.ObstacleSet) and m.id == self.id:
+            if source == self.own_source:
+                return None  # our own, back through our session's shared subscription
+            what = "a beacon" if isinstance(m, wire.Beacon) else "an obstacle set"
+            bad = Invalid(key, f"{what} on our own key from another session")
+            self.rej.reject(key, bad.reason)
+            return bad
+        return m if self.gate.admit(m, source, key, time.monotonic()) else None
+
+    def publish(self, out: Output) -> None:
+        if isinstance(out, wire.Cmd):
+            if self.ros2 is not None:
+                self.ros2.command(out)
+            elif self.pub_cmd is not None:
+                self.pub_cmd.put(wire.cmd_to_wire(out))
+        elif isinstance(out, wire.Beacon):
+            self.pub_beacon.put(wire.beacon_to_wire(out))
+        elif isinstance(out, wire.ObstacleSet):
+            self.pub_obs.put(wire.obstacles_to_wire(out))
+        elif isinstance(out, Cells):
+            self.cells(out)
+
+    def report(self, final: bool = False) -> None:
+        """Our telemetry to the monitor: counters every `telemetry_s` (our heartbeat) and at once when we first
+        acted on a guess; our intrusion tally when it changed (at most once a second unless final)."""
+        node = self.node
+        r = self.gate.report(time.monotonic(), final, (node.rejected, node.guessed_k), node.timing.telemetry_s)
+        if r is not None:
+            self.pub_report.put(report_to_wire(r))

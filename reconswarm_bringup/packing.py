@@ -1,0 +1,92 @@
+"""How a run's agents are packed into processes (`run_local.sh --agents-per-process K|auto`).
+
+K = 1 (the default) is one process per agent. K > 1 packs up to K agents into one agent host
+(`reconswarm agent --ids 1-5`: one zenoh session, each agent still with its own keys and token), in the
+scenario's order; agents that reach the router differently (`--hosts 2`) are never packed together.
+`auto`: K = ceil(N / C), C the CPUs this launcher may run on, so there is one agent host per CPU. K > N
+is clamped to N.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from reconswarm.errors import BadInput
+from reconswarm.scenario import Scenario
+
+log = logging.getLogger("reconswarm.launch")
+
+AUTO = "auto"
+OPTION = "--agents-per-process"
+
+
+def parse(value: str) -> int | str:
+    """The option's value: a positive integer or `auto` (BadInput otherwise)."""
+    v = value.strip().lower()
+    if v == AUTO:
+        return AUTO
+    if not v.isdigit() or int(v) < 1:
+        raise BadInput(f"{OPTION}: expected a positive integer or auto, got {value!r}")
+    return int(v)
+
+
+def cpus() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def per_process(k: int | str, n_agents: int, n_cpus: int | None = None) -> int:
+    """K for N agents: `auto` is ceil(N / CPUs); any K is clamped to 1..N."""
+    want = math.ceil(n_agents / (n_cpus or cpus())) if k == AUTO else int(k)
+    return max(1, min(want, n_agents))
+
+
+def hosts(ids: Sequence[int], k: int, reach: Callable[[int], object]) -> list[tuple[int, ...]]:
+    """The agents of each process: runs of up to k consecutive agents (in the scenario's order) that reach the
+    router the same way."""
+    out: list[tuple[int, ...]] = []
+    for a in ids:
+        if out and len(out[-1]) < k and reach(out[-1][0]) == reach(a):
+            out[-1] = (*out[-1], a)
+        else:
+            out.append((a,))
+    return out
+
+
+def ids_spec(ids: Sequence[int]) -> str:
+    """`1-5,9`: the ids as `--ids` takes them (runs of consecutive ids as ranges)."""
+    parts: list[str] = []
+    start = prev = ids[0]
+    for a in [*ids[1:], None]:
+        if a is not None and a == prev + 1:
+            prev = a
+            continue
+        parts.append(str(start) if start == prev else f"{start}-{prev}")
+        if a is not None:
+            start = prev = a
+    return ",".join(parts)
+
+
+def agent_args(ids: Sequence[int]) -> list[str]:
+    """The agent command's arguments naming its agents: `--id I` alone (as always), `--ids SPEC` for a host."""
+    return ["--id", str(ids[0])] if len(ids) == 1 else ["--ids", ids_spec(ids)]
+
+
+def start_agents(fleet: Any, s: Scenario, k: int | str, zopt: Callable[[str, str], tuple[list[str], list[str]]],
+                 args: list[str]) -> None:
+    """Start the run's agents, up to K a process (`args`: the agent command's options after its ids)."""
+    ids = [a.id for a in s.agents]
+    per = per_process(k, len(ids))
+    packed = hosts(ids, per, lambda a: zopt("agent", str(a)))
+    if per > 1:
+        log.info("%d agents in %d processes (%s %s: up to %d each)", len(ids), len(packed), OPTION, k, per)
+    for group in packed:
+        prefix, zargs = zopt("agent", str(group[0]))
+        fleet.start("agent", ids_spec(group), ["agent", *agent_args(group), *args, *zargs], prefix,
+                    members=tuple(map(str, group)) if len(group) > 1 else ())
