@@ -39,8 +39,8 @@ def inject(f: Fault, fleet: Fleet, run: str, scenario_path: Path) -> list[Timer]
         log.warning("fault: %s %s is not running", f.target, ident)
         return []
     if f.action == "kill":
-        # A killed agent or router stays dead; a killed monitor is restarted by the launcher's supervision.
-        proc.expected_exit = f.target not in ("monitor", "simworld")  # the world's death ends the run (exit 3)
+        # A killed agent stays dead; a killed monitor or router is restarted by the launcher's supervision.
+        proc.expected_exit = f.target == "agent"  # the world's death ends the run (exit 3)
         fleet.signal(proc, signal.SIGKILL)
         return []
     if f.action == "freeze":

@@ -10,6 +10,7 @@ T is simulated seconds (when the clock reaches T), DURATION wall seconds. Action
     kill:monitor@80          SIGKILL the monitor (run_local.sh restarts it; it appends to run.db)
     freeze:simworld@40+10    SIGSTOP the world, SIGCONT 10 s later (recorded as one world_stalled event)
     kill:simworld@40         SIGKILL the world (the run ends: world_lost recorded and printed, exit 3)
+    kill:router@90           SIGKILL the router (run_local.sh restarts it at once on the same endpoint)
     restart:router@90+2      SIGKILL the router, start it again 2 s later (default 1 s)
     flood@30                 10,000 malformed payloads on every key of the run (flood:N@T for N)
     partition@40+10          cut the link between the two hosts of a two-host run for 10 s

@@ -2,10 +2,10 @@
 
 Starts a zenoh router (unless --router names one), the monitor, one process per agent and simworld,
 each with its log in OUTDIR/logs/ and a line in OUTDIR/processes.tsv (role, id, pid) as it starts;
-follows the clock to show progress and to fire faults at simulated times; restarts the monitor if it
-dies; when the world ends the mission it lets everyone finish, stops what is left, prints the summary
-and returns the documented exit code. SIGINT / SIGTERM stop everything; every child is also bound to
-this process (PR_SET_PDEATHSIG) so none outlives it.
+follows the clock to show progress and to fire faults at simulated times; restarts the monitor or a
+router (on its endpoint) if it dies; when the world ends the mission it lets everyone finish, stops what
+is left, prints the summary and returns the documented exit code. SIGINT / SIGTERM stop everything; every
+child is also bound to this process (PR_SET_PDEATHSIG) so none outlives it.
 """
 
 from __future__ import annotations
@@ -43,6 +43,7 @@ from reconswarm_bringup.network import Net, plan_network
 log = logging.getLogger("reconswarm.launch")
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
 MONITOR_RESTARTS = 5  # a monitor that dies more often than this (restarted after 0.5, 1, 2, 4, 8 s) fails the run
+ROUTER_RESTARTS = 5  # a router that dies more often than this (restarted at once, then after 0.5, 1, 2, 4 s) likewise
 ZENOH_RUNTIME = "(" + ", ".join(f"{pool}: (worker_threads: 1)" for pool in ("app", "acc", "tx", "rx", "net")) + ")"
 
 
@@ -179,6 +180,7 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
     crashed: list[str] = []
     fatal: str | None = None  # the run cannot go on: stop everything, print the summary, exit 3
     restarts = 0
+    router_restarts = 0
     try:
         while not stop_sig and fatal is None:
             watch.poll()
@@ -209,6 +211,19 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
                             restarts += 1
                             log.warning("monitor died (exit %s: %s): restarting it in %.1f s (%d of %d)", rc, why,
                                         delay, restarts, MONITOR_RESTARTS)
+                            timers.append((now + delay, lambda p=p: fleet.restart(p)))
+                    elif p.role == "router" and world.popen.poll() is None:
+                        # The same endpoint again: every client reconnects by itself (the world and the monitor
+                        # judge nobody while their own link is gone: reconswarm/net/uplink.py).
+                        if router_restarts >= ROUTER_RESTARTS:
+                            fatal = f"the router died {router_restarts + 1} times (last: exit {rc}: " \
+                                    f"{_last_line(p.log_path)})"
+                        else:
+                            delay = 0.0 if router_restarts == 0 else min(4.0, 0.5 * 2 ** (router_restarts - 1))
+                            router_restarts += 1
+                            log.warning("router %s died (exit %s) at t = %.2f s: restarting it on the same endpoint "
+                                        "in %.1f s (%d of %d)", p.id, rc, watch.t, delay, router_restarts,
+                                        ROUTER_RESTARTS)
                             timers.append((now + delay, lambda p=p: fleet.restart(p)))
                     elif rc != 0 and watch.end is None:
                         crashed.append(f"{p.role} {p.id} exited {rc}")
