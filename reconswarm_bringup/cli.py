@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import typer
 
-from reconswarm.errors import BadInput, ProcessFailure, ReconswarmError
+from reconswarm.errors import BadInput, ReconswarmError
 from reconswarm_bringup.console import fail, mission_exit_code, print_json, set_debug
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -65,68 +65,6 @@ def sim(
     raise typer.Exit(mission_exit_code(summary))
 
 
-@app.command()
-def sweep(
-    scenarios: Annotated[list[Path], typer.Argument(help="Scenario TOML files.")],
-    out: Annotated[Path, typer.Option("-o", "--out", help="Output directory (results.csv, runs/).")],
-    seeds: Annotated[str | None, typer.Option("--seeds", help="A:B, seeds A..B-1 (default: each file's seed).")] = None,
-    planner: Annotated[str | None, typer.Option("--planner", help="P[,P...] (default: each file's planner).")] = None,
-    jobs: Annotated[int | None, typer.Option("--jobs", "-j", help="Parallel processes (default: cores).")] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print rows and per-planner stats as JSON.")] = False,
-) -> None:
-    """Every scenario x seed x planner with the in-process engine, in parallel; results.csv and a table."""
-    import os
-    from concurrent.futures import ProcessPoolExecutor
-    from concurrent.futures.process import BrokenProcessPool
-    from multiprocessing import get_context
-
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from reconswarm_bringup import sweep as sw
-
-    try:
-        if jobs is not None and jobs < 1:
-            raise BadInput(f"--jobs: must be >= 1, got {jobs}")
-        seed_range = sw.parse_seeds(seeds)
-        kinds = sw.parse_planners(planner)
-        for path in scenarios:
-            if not path.is_file():
-                raise BadInput(f"{path}: no such scenario file")
-        job_list = sw.make_jobs(scenarios, seed_range, kinds, out)
-        out.mkdir(parents=True, exist_ok=True)
-    except (ReconswarmError, OSError) as exc:
-        fail(exc)
-        return
-    workers = max(1, min(jobs or os.cpu_count() or 1, len(job_list)))
-    err = Console(stderr=True)
-    bar = Progress(TextColumn("sweep"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[last]}"),
-                   TimeElapsedColumn(), console=err, transient=True)
-    task = bar.add_task("sweep", total=len(job_list), last="")
-
-    def done(job: sw.Job, row: dict[str, Any]) -> None:
-        mark = "ok" if row["converged"] and not row["collisions"] else "FAILED"
-        bar.update(task, advance=1, last=f"{Path(row['scenario']).name} {row['planner']} seed {row['seed']}: {mark}")
-
-    try:
-        # spawn: the workers start clean (no inherited threads or sessions)
-        with bar, ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
-            rows = sw.run_sweep(job_list, pool, done)
-    except BrokenProcessPool as exc:
-        fail(ProcessFailure(f"sweep: a worker process died ({exc})"))
-        return
-    except (ReconswarmError, OSError) as exc:
-        fail(exc)
-        return
-    sw.write_csv(rows, out / "results.csv")
-    stats = sw.planner_stats(rows)
-    if as_json:
-        print_json({"rows": rows, "planners": stats})
-    else:
-        Console().print(sw.render_stats(stats))
-        typer.echo(f"results: {out / 'results.csv'} ({len(rows)} runs, {workers} processes)")
-
-
 @scenario_app.command("generate")
 def scenario_generate(
     agents: Annotated[int, typer.Option("--agents", "-n", help="Number of agents.", min=1, max=100_000)],
@@ -168,10 +106,11 @@ def _register() -> None:
     from reconswarm_bringup.cli_monitor import monitor_app
 
     app.add_typer(monitor_app, name="monitor")
-    from reconswarm_bringup import cli_launch, cli_nodes
+    from reconswarm_bringup import cli_launch, cli_nodes, cli_sweep
 
     cli_nodes.register(app)
     cli_launch.register(app)
+    cli_sweep.register(app)
 
 
 _register()

@@ -2,19 +2,23 @@
 
 The runs are independent, so the runner is written against `concurrent.futures.Executor` alone:
 `run_one(job) -> row` is a pure, picklable module-level function of a frozen `Job` (the parsed
-scenario travels inside the job, so a worker needs no access to the scenario files), and
-`run_sweep(jobs, executor)` only calls `executor.submit`. A `ProcessPoolExecutor` (the command's
-default), a `ThreadPoolExecutor`, Dask's `distributed.Client(...).get_executor()`, or a few lines
-around Ray (`submit` returning `ray.remote(run_one).remote(job).future()`) all fit (README, "Sweeps").
-Each run writes its record (run.db) under the job's `out_dir`, on the worker's file system.
+scenario travels inside the job, so a worker needs no access to the scenario files), and `stream`
+only calls `executor.submit`. A `ProcessPoolExecutor` (the command's default), a `ThreadPoolExecutor`,
+Dask's `distributed.Client(...).get_executor()` (`--dask`, sweep_exec.py), or a few lines around Ray
+(`submit` returning `ray.remote(run_one).remote(job).future()`) all fit (README, "Sweeps").
+Jobs are generated lazily (`JobPlan`) and only a window of them is in flight, so a sweep's memory does
+not grow with its size; rows go to results.csv as runs finish (`ResultsFile`), the table accumulates
+(`Stats`). Each run writes its record (run.db) under the job's `out_dir`, on the worker's file system.
 """
 
 from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import Executor, Future, as_completed
+import os
+from array import array
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -69,23 +73,42 @@ def parse_planners(text: str | None) -> tuple[str, ...] | None:
     return kinds
 
 
+class JobPlan:
+    """The jobs of a sweep, generated lazily (a sweep of 10^8 seeds holds one job at a time, not 10^8):
+    scenario-major, then planner, then seed. Records go to out_dir/runs/<file stem>/<planner>/seed<S> (a
+    stem repeated across directories gets a suffix). Each file is loaded (and checked) once, up front."""
+
+    def __init__(self, paths: Sequence[Path], seeds: range | None, planners: Sequence[str] | None,
+                 out_dir: Path) -> None:
+        self.out_dir = out_dir
+        self.seeds = seeds
+        self.files: list[tuple[str, str, Scenario]] = []  # (label, stem, scenario)
+        stems: dict[str, int] = {}
+        for path in paths:
+            base = load(path)  # BadInput naming the file and field
+            stem = path.stem
+            stems[stem] = stems.get(stem, 0) + 1
+            if stems[stem] > 1:
+                stem = f"{stem}-{stems[stem]}"
+            self.files.append((str(path), stem, base))
+        self.planners = planners
+
+    def __len__(self) -> int:
+        kinds = len(self.planners) if self.planners else 1
+        return len(self.files) * kinds * (len(self.seeds) if self.seeds is not None else 1)
+
+    def __iter__(self) -> Iterator[Job]:
+        for label, stem, base in self.files:
+            for kind in self.planners or (base.planner.kind,):
+                for seed in self.seeds if self.seeds is not None else (base.meta.seed,):
+                    s = base.with_planner(kind).with_seed(seed)
+                    yield Job(label, s, str(self.out_dir / "runs" / stem / kind / f"seed{seed}"))
+
+
 def make_jobs(paths: Sequence[Path], seeds: range | None, planners: Sequence[str] | None,
               out_dir: Path) -> list[Job]:
-    """The jobs of a sweep, scenario-major, then planner, then seed. Records go to
-    out_dir/runs/<file stem>/<planner>/seed<S> (a stem repeated across directories gets a suffix)."""
-    jobs: list[Job] = []
-    stems: dict[str, int] = {}
-    for path in paths:
-        base = load(path)  # BadInput naming the file and field
-        stem = path.stem
-        stems[stem] = stems.get(stem, 0) + 1
-        if stems[stem] > 1:
-            stem = f"{stem}-{stems[stem]}"
-        for kind in planners or (base.planner.kind,):
-            for seed in seeds if seeds is not None else (base.meta.seed,):
-                s = base.with_planner(kind).with_seed(seed)
-                jobs.append(Job(str(path), s, str(out_dir / "runs" / stem / kind / f"seed{seed}")))
-    return jobs
+    """Every job of a small sweep as a list (JobPlan's order)."""
+    return list(JobPlan(paths, seeds, planners, out_dir))
 
 
 def run_one(job: Job) -> Row:
@@ -98,22 +121,39 @@ def run_one(job: Job) -> Row:
     return row
 
 
+def stream(jobs: Iterable[Job], executor: Executor, window: int) -> Iterator[tuple[int, Job, Row]]:
+    """Submit the jobs with at most `window` in flight; yield (job index, job, row) as each run finishes.
+    A failed run raises its exception here; on any exception (KeyboardInterrupt included) the runs not
+    started are cancelled."""
+    todo = enumerate(jobs)
+    pending: dict[Future[Row], tuple[int, Job]] = {}
+    try:
+        while True:
+            while len(pending) < max(1, window):
+                nxt = next(todo, None)
+                if nxt is None:
+                    break
+                pending[executor.submit(run_one, nxt[1])] = nxt
+            if not pending:
+                return
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                i, job = pending.pop(fut)
+                yield i, job, fut.result()
+    finally:
+        for fut in pending:
+            fut.cancel()
+
+
 def run_sweep(jobs: Sequence[Job], executor: Executor,
               on_done: Callable[[Job, Row], None] | None = None) -> list[Row]:
-    """Submit every job to the executor; return the rows in job order. on_done(job, row) is called in
-    this process as each run finishes (for a progress bar). A failed run raises its exception here."""
-    futures: dict[Future[Row], int] = {executor.submit(run_one, job): i for i, job in enumerate(jobs)}
+    """Run every job; return the rows in job order. on_done(job, row) is called in this process as each
+    run finishes (for a progress bar). A failed run raises its exception here."""
     rows: list[Row | None] = [None] * len(jobs)
-    try:
-        for fut in as_completed(futures):
-            i = futures[fut]
-            rows[i] = fut.result()
-            if on_done is not None:
-                on_done(jobs[i], rows[i])  # type: ignore[arg-type]
-    except BaseException:
-        for fut in futures:
-            fut.cancel()
-        raise
+    for i, job, row in stream(jobs, executor, len(jobs)):
+        rows[i] = row
+        if on_done is not None:
+            on_done(job, row)
     return [r for r in rows if r is not None]
 
 
@@ -122,21 +162,39 @@ def percentile(values: Sequence[float], q: float) -> float | None:
     return float(np.percentile(np.asarray(values, dtype=np.float64), q)) if values else None
 
 
+class Stats:
+    """The per-planner table, accumulated as rows come (the rows themselves need not be kept): runs,
+    converged, median and p90 of the convergence time over the converged runs, contacts (collision
+    episodes summed over the runs); planners in order of first appearance."""
+
+    def __init__(self) -> None:
+        self._by: dict[str, tuple[list[int], array[float]]] = {}  # planner -> ([runs, converged, contacts], times)
+
+    def add(self, row: Row) -> None:
+        counts, times = self._by.setdefault(row["planner"], ([0, 0, 0], array("d")))
+        counts[0] += 1
+        counts[2] += int(row["collisions"])
+        if row["converged"]:
+            counts[1] += 1
+            times.append(float(row["convergence_time_s"]))
+
+    def result(self) -> dict[str, dict[str, Any]]:
+        out: dict[str, dict[str, Any]] = {}
+        for kind, (counts, times) in self._by.items():
+            med, p90 = percentile(times, 50), percentile(times, 90)
+            out[kind] = {"runs": counts[0], "converged": counts[1],
+                         "convergence_median_s": None if med is None else round(med, 3),
+                         "convergence_p90_s": None if p90 is None else round(p90, 3),
+                         "contacts": counts[2]}
+        return out
+
+
 def planner_stats(rows: Iterable[Row]) -> dict[str, dict[str, Any]]:
-    """Per planner (in order of first appearance): runs, converged, median and p90 of the convergence
-    time over the converged runs, contacts (collision episodes summed over the runs)."""
-    by: dict[str, list[Row]] = {}
+    """Stats over the rows (see Stats)."""
+    st = Stats()
     for r in rows:
-        by.setdefault(r["planner"], []).append(r)
-    out: dict[str, dict[str, Any]] = {}
-    for kind, rs in by.items():
-        times = [float(r["convergence_time_s"]) for r in rs if r["converged"]]
-        med, p90 = percentile(times, 50), percentile(times, 90)
-        out[kind] = {"runs": len(rs), "converged": sum(1 for r in rs if r["converged"]),
-                     "convergence_median_s": None if med is None else round(med, 3),
-                     "convergence_p90_s": None if p90 is None else round(p90, 3),
-                     "contacts": sum(int(r["collisions"]) for r in rs)}
-    return out
+        st.add(r)
+    return st.result()
 
 
 def _cell(v: Any) -> Any:
@@ -156,6 +214,48 @@ def write_csv(rows: Iterable[Row], path: Path) -> None:
         w.writerow(COLUMNS)
         for r in rows:
             w.writerow([_cell(r[c]) for c in COLUMNS])
+
+
+class ResultsFile:
+    """results.csv written as the sweep goes: truncated to its header when the sweep starts (a previous
+    sweep's rows never pass for this one's), each run's row appended and flushed as the run finishes (an
+    interrupted sweep keeps a row for every finished run). `finish()`, for a sweep that ran to its end,
+    puts the rows in job order (the order of a sweep does not depend on which worker finished first)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self._f = path.open("w", newline="")
+        self._w = csv.writer(self._f)
+        self._w.writerow(COLUMNS)
+        self._f.flush()
+        self._order = array("q")  # the job index of each row written
+        self.rows = 0
+
+    def add(self, index: int, row: Row) -> None:
+        self._w.writerow([_cell(row[c]) for c in COLUMNS])
+        self._f.flush()
+        self._order.append(index)
+        self.rows += 1
+
+    def close(self) -> None:
+        self._f.close()
+
+    def finish(self) -> None:
+        self.close()
+        order = list(self._order)
+        if order == sorted(order):
+            return
+        with self.path.open(newline="") as f:
+            rd = csv.reader(f)
+            header = next(rd)
+            lines = [line for _, line in sorted(zip(order, rd, strict=True), key=lambda p: p[0])]
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        with tmp.open("w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(header)
+            w.writerows(lines)
+        os.replace(tmp, self.path)
 
 
 def _sec(v: float | None) -> str:
