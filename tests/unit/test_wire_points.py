@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 import zenoh
 
+from agent.link import AgentLink
 from agent.messages import Invalid
 from agent.node import AgentNode
-from agent.process import AgentLink
 from reconswarm.net import wire
 from reconswarm.net.gate import Gate
 from reconswarm.net.session import Rejections, ZenohOptions
