@@ -8,6 +8,8 @@ import math
 import os
 import subprocess
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -120,11 +122,39 @@ def test_unwritable_output_dir(tmp_path, where):
                                      ("No such file or directory)" if where == "proc" else "Not a directory)")]
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only directories")
-def test_read_only_output_dir(tmp_path):
-    ro = tmp_path / "ro"
+@contextmanager
+def read_only_dir(base: Path) -> Iterator[tuple[Path, str]]:
+    """A directory nobody can write in, and why writing fails: mode 555 for a user; for root (CI runs as
+    root, and root writes through permissions) the directory bind-mounted read-only onto itself, which
+    refuses every writer. A root that cannot mount fails here, with the reason, rather than skip."""
+    ro = base / "ro"
     ro.mkdir(mode=0o555)
-    refused(run_local(ro), ro, f"-o {ro}: cannot write there (Permission denied)")
+    if os.geteuid() != 0:
+        yield ro, "Permission denied"
+        return
+    for args in (["--bind", str(ro), str(ro)], ["-o", "remount,bind,ro", str(ro)]):
+        r = subprocess.run(["mount", *args], capture_output=True, text=True, timeout=30)
+        if r.returncode != 0:
+            subprocess.run(["umount", str(ro)], capture_output=True, timeout=30)
+            pytest.fail(f"as root, a read-only bind mount is needed and `mount {' '.join(args)}` failed: "
+                        f"{r.stderr.strip()}")
+    try:
+        yield ro, "Read-only file system"
+    finally:
+        subprocess.run(["umount", str(ro)], check=True, capture_output=True, timeout=30)
+
+
+def test_read_only_output_dir(tmp_path):
+    with read_only_dir(tmp_path) as (ro, why):
+        with pytest.raises(OSError):  # nobody, root included, can write there
+            (ro / "probe").write_text("")
+        refused(run_local(ro), ro, f"-o {ro}: cannot write there ({why})")
+        paper = ROOT / "deploy" / "scenarios" / "paper.toml"
+        r = subprocess.run([sys.executable, "-m", "reconswarm_bringup.cli", "sim", str(paper), "-o", str(ro),
+                            "--json"], capture_output=True, text=True, timeout=120, cwd=ROOT)
+        assert r.returncode == 2 and r.stdout == "" and "Traceback" not in r.stderr
+        assert r.stderr.splitlines() == [f"reconswarm: error: -o {ro}: cannot write there ({why})"]
+        assert list(ro.iterdir()) == []
 
 
 # ------------------------------------------------------------------------------------- pure functions
