@@ -9,7 +9,9 @@ from tests.support import events, faults_log, positions, restart_and_rejoin, run
 
 
 def test_agent_killed(out: Path) -> None:
-    p = run_launcher(out, "--fault", "kill:agent:3@50", "--json")
+    """Killed at t = 40 s, robot 3 stops by the diamond's lower vertex, in the swarm's path: agents 6, 7 and 10
+    stood still in the pocket between it and the diamond, 590 m from their slots (reconswarm/paper/blocked.py)."""
+    p = run_launcher(out, "--fault", "kill:agent:3@40", "--json")
     assert p.returncode == 0, p.stderr[-3000:]
     s = json.loads(p.stdout)
     assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == [3]  # converged: the survivors
