@@ -15,22 +15,30 @@ from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions
 from reconswarm.scenario import Scenario
 from reconswarm_bringup import netns, runid, secure
 from reconswarm_bringup.config import LaunchConfig
+from reconswarm_bringup.endpoints import addresses, host_port
 
 log = logging.getLogger("reconswarm.launch")
 
 
 def _port_free(endpoint: str) -> bool:
-    proto, _, addr = endpoint.partition("/")
-    if proto not in ("tcp", "tls"):
+    """Whether nothing listens on the endpoint: a bind on every address its host resolves to, each in its own
+    address family (an IPv4 socket cannot even bind `::1`, which looked like "in use")."""
+    hp = host_port(endpoint)
+    if hp is None:
         return True
-    host, _, port = addr.rpartition(":")
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            s.bind((host.strip("[]"), int(port)))
-        except OSError:
-            return False
+    for family, sockaddr in addresses(*hp):
+        with socket.socket(family, socket.SOCK_STREAM) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                s.bind(sockaddr)
+            except OSError:
+                return False
     return True
+
+
+def listening(host: str, port: int) -> bool:
+    """Something listens on host:port (found by a bind, without connecting to it)."""
+    return not _port_free(f"tcp/{'[' + host + ']' if ':' in host else host}:{port}")
 
 
 @dataclass

@@ -3,9 +3,10 @@
 Two launches on one machine must never join or disturb each other. Each launch therefore
 - names its run `<scenario name>-<6 hex digits>` (the key prefix `swarm/<run>`), written to OUTDIR/run_id
   before any process starts;
-- takes an exclusive lock on the router endpoint (a file in the temporary directory, `flock`ed for the
-  launcher's lifetime and released by the kernel however it ends): a second launch on the same endpoint
-  is refused (exit 2) with one line naming the endpoint and the run that holds it. The lock settles the
+- takes an exclusive lock on the router endpoint, by the socket addresses its host resolves to (a file per
+  address in the temporary directory, `flock`ed for the launcher's lifetime and released by the kernel
+  however it ends): a second launch on the same endpoint (`tcp/localhost:P` after `tcp/127.0.0.1:P` too) is
+  refused (exit 2) with one line naming the endpoint and the run that holds it. The lock settles the
   race of two launches at the same moment too: exactly one of them gets it;
 - when a router it did not start already listens there, asks it (a short liveliness query) whether the
   world of any run is alive on it (`swarm/*/alive/simworld`, as a run started by hand or from another
@@ -27,6 +28,7 @@ from typing import IO, Any
 
 from reconswarm.errors import BadInput
 from reconswarm.net.session import ZenohOptions
+from reconswarm_bringup.endpoints import socket_names
 
 RUN_ID_FILE = "run_id"
 ALIVE_WORLDS = "swarm/*/alive/simworld"
@@ -48,42 +50,43 @@ def read_run_id(out: Path) -> str:
     return (out / RUN_ID_FILE).read_text().strip()
 
 
-def _host_port(endpoint: str) -> str:
-    addr = endpoint.partition("/")[2].partition("#")[0]
-    return addr or endpoint
-
-
 class EndpointLock:
-    """An exclusive lock on a router endpoint (host:port, whatever the protocol), held while the launch runs."""
+    """An exclusive lock on a router endpoint, held while the launch runs: on every socket address its host
+    resolves to (`tcp/localhost:P` and `tcp/127.0.0.1:P` are one lock; whatever the protocol)."""
 
     def __init__(self, endpoint: str, lock_dir: Path | None = None) -> None:
         self.endpoint = endpoint
-        name = re.sub(r"[^A-Za-z0-9.-]", "_", _host_port(endpoint))
-        self.path = (lock_dir or Path(tempfile.gettempdir())) / f"reconswarm-endpoint-{name}.lock"
-        self._fh: IO[str] | None = None
+        where = lock_dir or Path(tempfile.gettempdir())
+        self.paths = [where / f"reconswarm-endpoint-{re.sub(r'[^A-Za-z0-9.-]', '_', name)}.lock"
+                      for name in socket_names(endpoint)]
+        self.path = self.paths[0]
+        self._fhs: list[IO[str]] = []
 
     def acquire(self, run: str) -> None:
         """Take the lock for `run`, or raise BadInput naming the run that holds it."""
-        fh = self.path.open("a+")
-        try:
-            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            fh.close()
-            holder = self._holder()
-            raise BadInput(f"{self.endpoint}: router in use by run {holder.get('run', '?')} (launch pid "
-                           f"{holder.get('pid', '?')}); runs never share a launch's router: pass another "
-                           f"--router port") from None
-        fh.seek(0)
-        fh.truncate()
-        fh.write(json.dumps({"run": run, "pid": os.getpid()}) + "\n")
-        fh.flush()
-        self._fh = fh
+        for path in self.paths:
+            fh = path.open("a+")
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                fh.close()
+                self.release()
+                holder = self._holder(path)
+                raise BadInput(f"{self.endpoint}: router in use by run {holder.get('run', '?')} (launch pid "
+                               f"{holder.get('pid', '?')}); runs never share a launch's router: pass another "
+                               f"--router port") from None
+            fh.seek(0)
+            fh.truncate()
+            fh.write(json.dumps({"run": run, "pid": os.getpid()}) + "\n")
+            fh.flush()
+            self._fhs.append(fh)
 
-    def _holder(self) -> dict[str, Any]:
+    @staticmethod
+    def _holder(path: Path) -> dict[str, Any]:
         deadline = time.monotonic() + 1.0  # the holder writes its line right after taking the lock
         while True:
             with contextlib.suppress(OSError, ValueError):
-                got = json.loads(self.path.read_text() or "null")
+                got = json.loads(path.read_text() or "null")
                 if isinstance(got, dict):
                     return got
             if time.monotonic() > deadline:
@@ -91,9 +94,9 @@ class EndpointLock:
             time.sleep(0.05)
 
     def release(self) -> None:
-        if self._fh is not None:
-            self._fh.close()  # closing the descriptor releases the flock
-            self._fh = None
+        for fh in self._fhs:
+            fh.close()  # closing the descriptor releases the flock
+        self._fhs = []
 
 
 def live_worlds(endpoint: str, timeout_s: float = 1.5) -> list[str]:
