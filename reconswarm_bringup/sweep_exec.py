@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import socket
+import sys
 from collections.abc import Iterator
 from concurrent.futures import Executor, ProcessPoolExecutor
 from multiprocessing import get_context
@@ -45,17 +47,36 @@ def local(workers: int) -> Iterator[tuple[Executor, int]]:
     pool.shutdown(wait=True)
 
 
+def _scheduler(address: str) -> tuple[str, int]:
+    """`tcp://HOST:PORT` (or `HOST:PORT`) -> (host, port); BadInput otherwise."""
+    scheme, sep, rest = address.partition("://")
+    if not sep:
+        scheme, rest = "tcp", address
+    host, colon, port = rest.rpartition(":")
+    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    if scheme != "tcp" or not colon or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise BadInput(f"--dask: expected a scheduler address tcp://HOST:PORT, got {address!r}")
+    return host, int(port)
+
+
 @contextlib.contextmanager
 def dask(address: str, timeout_s: float = DASK_CONNECT_TIMEOUT_S) -> Iterator[tuple[Executor, int]]:
     """The Dask cluster whose scheduler is at `address` (tcp://host:port); BadInput if the `distributed`
     package is missing or no scheduler answers there within timeout_s."""
+    host, port = _scheduler(address)
     try:
         from distributed import Client
     except ImportError:
         raise BadInput("--dask: needs the 'distributed' package (pip install -e '.[dask]')") from None
+    try:  # a plain connection first: nothing listening is said at once, in our words
+        socket.create_connection((host, port), timeout=timeout_s).close()
+    except OSError as exc:
+        raise BadInput(f"--dask {address}: no Dask scheduler answers there ({exc.strerror or exc})") from None
     try:
         client = Client(address, timeout=timeout_s, set_as_default=False)
-    except (OSError, TimeoutError, ValueError, TypeError) as exc:
+    except Exception as exc:  # something listens there, but it is not a Dask scheduler that answers
+        # (distributed's half-made client then complains from its __del__ as the process exits: not ours to show)
+        sys.unraisablehook = lambda _unraisable: None
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise BadInput(f"--dask {address}: no Dask scheduler answers there ({reason})") from None
     try:
