@@ -259,7 +259,8 @@ class MonitorNode:
         # Lockstep equals the in-process engine unless an agent had to act without all of a tick's data.
         extra["deterministic"] = self.mode == "lockstep" and self.guessed_k < 0
         extra["determinism_lost_at_s"] = round(self.guessed_k * self.s.meta.dt_s, 9) if self.guessed_k >= 0 else None
-        meta: dict[str, Any] = {"extra": extra, "finished": "1" if self.end is not None else "0"}
+        finished = self.end is not None and self.end.reason != "stopped"  # (stopped: the mission was cut short)
+        meta: dict[str, Any] = {"extra": extra, "finished": "1" if finished else "0"}
         start = self.writer.get_meta("mission_start_unix")
         if start is not None:  # from the first clock, whichever monitor incarnation saw it
             meta["wall_time_s"] = f"{now_s + self.unix_offset_s - float(start):.6f}"

@@ -11,18 +11,15 @@ child is also bound to this process (PR_SET_PDEATHSIG) so none outlives it.
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import os
 import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import zenoh
-from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from reconswarm.errors import BadInput
@@ -31,12 +28,9 @@ from reconswarm.net import wire
 from reconswarm.net.admission import Admission
 from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions, open_session, sample_source
 from reconswarm.net.timing import TIMING
-from reconswarm.record.store import RunRecord
-from reconswarm.record.summary import render, summarize
 from reconswarm.scenario import Scenario, load, parse, to_toml, warnings
-from reconswarm_bringup import chaos, netns, packing, runid, validate
+from reconswarm_bringup import chaos, netns, outcome, packing, runid, validate
 from reconswarm_bringup.config import LaunchConfig
-from reconswarm_bringup.console import mission_exit_code
 from reconswarm_bringup.fleet import ROOT, Fleet, Proc
 from reconswarm_bringup.network import Net, plan_network
 
@@ -145,6 +139,8 @@ def run(cfg: LaunchConfig) -> int:
         run_arg = ["--run", run_id]
         routers = [fleet.start("router", ident, args, prefix) for ident, args, prefix in net.routers]
         net.wait_router(lambda: all(r.popen.poll() is None for r in routers))
+        if cfg.ros_domain_id is not None:
+            outcome.ros2_notice(net.watch.connect[0], cfg.ros_domain_id)
         prefix, zargs = net.zopt("monitor")
         live = [] if cfg.foxglove_port is None else ["--foxglove", str(cfg.foxglove_port)]
         mon = fleet.start("monitor", "-", ["monitor", "record", "--scenario", str(scen_path), "--db",
@@ -179,6 +175,8 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
     bar = _Progress(cfg.progress and sys.stderr.isatty() and not cfg.as_json, s.meta.duration_s)
     crashed: list[str] = []
     fatal: str | None = None  # the run cannot go on: stop everything, print the summary, exit 3
+    halt: str | None = None  # the launcher ends the run early: "stopped" (a signal) or "timeout"
+    live = outcome.LiveViewNotice(cfg.foxglove_port)
     restarts = 0
     router_restarts = 0
     try:
@@ -201,7 +199,7 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
                     if p.role == "monitor" and rc == 0:
                         continue  # it saw the end of the mission and closed the record
                     if p.role == "monitor" and world.popen.poll() is None:
-                        why = _last_line(p.log_path)
+                        why = outcome.last_line(p.log_path)
                         if "disk full" in why:
                             fatal = why
                         elif restarts >= MONITOR_RESTARTS:
@@ -217,7 +215,7 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
                         # judge nobody while their own link is gone: reconswarm/net/uplink.py).
                         if router_restarts >= ROUTER_RESTARTS:
                             fatal = f"the router died {router_restarts + 1} times (last: exit {rc}: " \
-                                    f"{_last_line(p.log_path)})"
+                                    f"{outcome.last_line(p.log_path)})"
                         else:
                             delay = 0.0 if router_restarts == 0 else min(4.0, 0.5 * 2 ** (router_restarts - 1))
                             router_restarts += 1
@@ -229,17 +227,21 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
                         crashed.append(f"{p.role} {p.id} exited {rc}")
                         log.warning("%s %s exited with %s", p.role, p.id, rc)
             bar.update(watch.t, watch.alive, len(s.agents))
+            live.poll()
             if world.popen.poll() is not None:
                 break
             if cfg.timeout_s is not None and now - wall0 > cfg.timeout_s:
-                log.error("timeout after %.0f s of wall time", cfg.timeout_s)
-                return 3
+                log.error("timeout after %.0f s of wall time at t = %.2f s: stopping the run", cfg.timeout_s, watch.t)
+                halt = "timeout"
+                break
             time.sleep(0.05)
-        if stop_sig:
-            return 128 + stop_sig[0]
         rc = world.popen.returncode
-        if fatal is None and rc is not None and rc != 0:
-            how = f"killed by {signal.Signals(-rc).name}" if rc < 0 else f"exit {rc}: {_last_line(world.log_path)}"
+        if stop_sig or halt is not None:
+            halt = halt or "stopped"
+            _wind_down(fleet, world)
+        elif fatal is None and rc is not None and rc != 0:
+            why = outcome.last_line(world.log_path)
+            how = f"killed by {signal.Signals(-rc).name}" if rc < 0 else f"exit {rc}: {why}"
             fatal = f"simworld died ({how}) at t = {watch.t:.2f} s: the mission ended without its world"
             log.error("%s; stopping the run", fatal)
             time.sleep(TIMING.world_stall_s + 0.5)  # the monitor notices the stall before the agents leave
@@ -258,41 +260,25 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
                         p.popen.wait(timeout=max(0.1, deadline - time.monotonic()))
     finally:
         bar.close()
-    return _report(cfg, crashed, fatal)
+    return outcome.report(cfg, crashed, fatal, halt)
 
 
-def _last_line(path: Path) -> str:
-    """The last line a process logged (its one-line error when it failed), without the log's time stamp."""
+def _wind_down(fleet: Fleet, world: Proc, monitor_wait_s: float = 8.0) -> None:
+    """A run ended early: the world first (told to stop, it publishes its last clock, `end: stopped`), then
+    the monitor gets the time to record that and close the record itself; the rest are stopped after."""
+    world.expected_exit = True
+    fleet.signal(world, signal.SIGCONT)
+    fleet.signal(world, signal.SIGTERM)
     try:
-        lines = path.read_text(errors="replace").strip().splitlines()
-    except OSError:
-        return ""
-    return lines[-1].split(" ", 2)[-1] if lines and lines[-1][:2].isdigit() else (lines[-1] if lines else "")
-
-
-def _report(cfg: LaunchConfig, crashed: list[str], fatal: str | None = None) -> int:
-    db = cfg.out / "run.db"
-    try:
-        with RunRecord(db) as rec:
-            summary = summarize(rec)
-    except Exception as exc:  # the record itself may be what failed (disk full): say so, do not hide the cause
-        if fatal is None:
-            raise
-        log.error("no summary: the record cannot be read (%s)", exc)
-        log.error("%s", fatal)
-        return 3
-    if cfg.as_json:
-        sys.stdout.write(json.dumps(summary, indent=2) + "\n")
-    else:
-        Console().print(render(summary))
-        print(f"record: {db}\nlogs:   {cfg.out / 'logs'}")
-    if fatal is not None:
-        log.error("%s", fatal)
-        return 3
-    if crashed:
-        log.error("processes failed: %s", "; ".join(crashed))
-        return 3
-    return mission_exit_code(summary)
+        world.popen.wait(timeout=5)
+    except subprocess.TimeoutExpired:
+        fleet.signal(world, signal.SIGKILL)
+        world.popen.wait()
+    mon = fleet.find("monitor")
+    if mon is not None and mon.popen.poll() is None:
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            mon.popen.wait(timeout=monitor_wait_s)
+    fleet.stop_all()
 
 
 class _Progress:

@@ -175,6 +175,27 @@ class RunWriter:
         self.db.close()
 
 
+def note_stop(path: str | Path, reason: str) -> None:
+    """A run ended from outside (the launcher's `stopped` on a signal, `timeout` on its --timeout): the record
+    says why in its end reason and that the mission did not finish (the world, told to stop, only knows it
+    was stopped). A record that does not exist (yet) or cannot be written is left as it is."""
+    try:
+        db = sqlite3.connect(f"{Path(path).resolve().as_uri()}?mode=rw", uri=True, isolation_level=None, timeout=5.0)
+    except sqlite3.Error:
+        return
+    try:
+        row = db.execute("SELECT value FROM meta WHERE key = 'extra'").fetchone()
+        extra = json.loads(row[0]) if row is not None else {}
+        extra = extra if isinstance(extra, dict) else {}
+        extra["end_reason"] = reason
+        db.executemany("INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)",
+                       [("extra", json.dumps(extra)), ("finished", "0")])
+    except (sqlite3.Error, ValueError):
+        pass
+    finally:
+        db.close()
+
+
 def _finite(v: float) -> float | None:
     return float(v) if math.isfinite(v) else None
 

@@ -1,0 +1,90 @@
+"""What a launch tells its user: where to connect while it runs, and the summary when it ends, however it ends.
+
+- `--foxglove`: the live view's URL, once the monitor's server listens (it starts with the monitor, which
+  on a loaded machine can take a minute); `--ros2`: the router and domain to point ROS 2 tools at;
+- at the end, the summary table (or JSON) and where the record and logs are, also for a run stopped by a
+  signal or by `--timeout`, whose record then says so (`end_reason` `stopped` or `timeout`, not finished).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+from pathlib import Path
+
+from rich.console import Console
+
+from reconswarm.record.store import RunRecord, note_stop
+from reconswarm.record.summary import render, summarize
+from reconswarm_bringup.config import LaunchConfig
+from reconswarm_bringup.console import mission_exit_code
+from reconswarm_bringup.network import listening
+
+log = logging.getLogger("reconswarm.launch")
+LIVE_HOST = "127.0.0.1"  # where the monitor's live view listens (monitor/live.py)
+
+
+class LiveViewNotice:
+    """Says the live view's URL once its server listens (polled by the launcher's loop; a bind probe, so no
+    client connects to find out)."""
+
+    def __init__(self, port: int | None) -> None:
+        self.port = port
+        self.said = port is None
+
+    def poll(self) -> None:
+        if not self.said and self.port is not None and listening(LIVE_HOST, self.port):
+            self.said = True
+            log.info("live view: ws://%s:%d (Foxglove app: Open connection > Foxglove WebSocket)", LIVE_HOST,
+                     self.port)
+
+
+def ros2_notice(endpoint: str, domain: int) -> None:
+    """Where ROS 2 tools find the run's topics (rmw_zenoh reads ZENOH_CONFIG_OVERRIDE)."""
+    log.info("ROS 2: topics /robot_<i>/odom and /robot_<i>/cmd_vel in domain %d on the Zenoh router %s", domain,
+             endpoint)
+    log.info("ROS 2 tools: export RMW_IMPLEMENTATION=rmw_zenoh_cpp ROS_DOMAIN_ID=%d "
+             "ZENOH_CONFIG_OVERRIDE='connect/endpoints=[\"%s\"]'; ros2 topic list", domain, endpoint)
+
+
+def last_line(path: Path) -> str:
+    """The last line a process logged (its one-line error when it failed), without the log's time stamp."""
+    try:
+        lines = path.read_text(errors="replace").strip().splitlines()
+    except OSError:
+        return ""
+    return lines[-1].split(" ", 2)[-1] if lines and lines[-1][:2].isdigit() else (lines[-1] if lines else "")
+
+
+def report(cfg: LaunchConfig, crashed: list[str], fatal: str | None = None, halt: str | None = None) -> int:
+    """Print the summary and where the record is; the exit code. `halt`: the launcher ended the run early
+    ("stopped" by a signal, "timeout"), which the record is made to say (the world only knows it was stopped)."""
+    db = cfg.out / "run.db"
+    try:
+        if halt is not None:
+            note_stop(db, halt)
+        with RunRecord(db) as rec:
+            summary = summarize(rec)
+    except Exception as exc:  # the record itself may be what failed (disk full): say so, do not hide the cause
+        if fatal is None and halt is None:
+            raise
+        log.error("no summary: the record cannot be read (%s)", exc)
+        if fatal is not None:
+            log.error("%s", fatal)
+        return 3
+    if cfg.as_json:
+        sys.stdout.write(json.dumps(summary, indent=2) + "\n")
+    else:
+        Console().print(render(summary))
+        print(f"record: {db}\nlogs:   {cfg.out / 'logs'}")
+    sys.stdout.flush()
+    if fatal is not None:
+        log.error("%s", fatal)
+        return 3
+    if halt == "timeout":
+        return 3
+    if crashed:
+        log.error("processes failed: %s", "; ".join(crashed))
+        return 3
+    return mission_exit_code(summary)
