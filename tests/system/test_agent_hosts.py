@@ -1,0 +1,149 @@
+"""Agent hosts (`run_local.sh --agents-per-process K`, `reconswarm agent --ids`): several agents in one process on
+one zenoh session, with real processes on 127.0.0.1. Lockstep still equals the in-process engine bit for bit,
+hosted and lone agents mix in one run, an outside zenoh client sees every hosted agent as its own participant
+(its token, its beacons on its own keys, its report), and a killed host loses all its agents, which the
+survivors avoid."""
+
+from __future__ import annotations
+
+import json
+import queue
+import subprocess
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import pytest
+import zenoh
+
+from reconswarm.net import wire
+from reconswarm.net.session import ZenohOptions, sample_source
+from tests.support import (
+    PAPER,
+    ROOT,
+    events,
+    free_port,
+    launcher_cmd,
+    max_difference,
+    reconswarm,
+    run_launcher,
+    scenario_with,
+    trajectories,
+)
+
+IDS = tuple(range(1, 11))
+
+
+def agent_pids(out: Path) -> dict[int, int]:
+    """processes.tsv's agent lines: agent id -> pid (one line per agent, a host's share its pid)."""
+    rows = [line.split("\t") for line in (out / "processes.tsv").read_text().splitlines()]
+    got = [(int(r[1]), int(r[2])) for r in rows if r[0] == "agent"]
+    assert len(got) == len({a for a, _ in got}), got  # one line per agent
+    return dict(got)
+
+
+@pytest.fixture(scope="module")
+def short(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
+    """The paper's scenario cut to 60 s (the swarm meets the diamond, shares it and splits) and its in-process
+    trajectories."""
+    tmp = tmp_path_factory.mktemp("short")
+    scen = scenario_with(tmp, "short.toml", PAPER.read_text(), **{"duration_s = 300.0": "duration_s = 60.0"})
+    sim = reconswarm("sim", str(scen), "-o", str(tmp / "sim"), "--json")
+    assert sim.returncode == 1, sim.stderr  # not converged in 60 s
+    return scen, trajectories(tmp / "sim" / "run.db")
+
+
+@pytest.mark.parametrize(("k", "hosts"), [(5, [IDS[:5], IDS[5:]]),
+                                          # hosts of 3 and a lone agent (10) in one run
+                                          (3, [IDS[:3], IDS[3:6], IDS[6:9], IDS[9:]])])
+def test_packed_lockstep_equals_inprocess_engine(short: tuple[Path, dict], out: Path, k: int,
+                                                 hosts: list[tuple[int, ...]]) -> None:
+    scen, ref = short
+    p = run_launcher(out, "-s", str(scen), "--agents-per-process", str(k), "--json")
+    assert p.returncode == 1, p.stderr[-2000:]  # not converged in 60 s: the documented "mission failed"
+    s = json.loads(p.stdout)
+    assert s["ticks"] == 1201 and s["collisions"] == 0 and s["agents_lost"] == []
+    assert s["deterministic"] is True and s["determinism_lost_at_s"] is None
+    got = trajectories(out / "run.db")
+    assert len(got) == 1201 * 10 and max_difference(got, ref) == 0.0
+    pids = agent_pids(out)
+    assert sorted(pids) == list(IDS)
+    assert [sorted(a for a in IDS if pids[a] == pids[h[0]]) for h in hosts] == [list(h) for h in hosts]
+    assert len(set(pids.values())) == len(hosts)
+    logs = sorted(f.name for f in (out / "logs").glob("agent-*.log"))
+    assert logs == sorted(f"agent-{h[0]}.log" if len(h) == 1 else f"agent-{h[0]}-{h[-1]}.log" for h in hosts)
+
+
+def _open(ep: str, launcher: subprocess.Popen[str], timeout_s: float = 300.0) -> Any:
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            return zenoh.open(ZenohOptions.build([ep], None, "client", None).config())
+        except Exception:
+            if time.monotonic() > deadline or launcher.poll() is not None:
+                raise
+            time.sleep(0.3)
+
+
+def test_an_outside_client_sees_each_hosted_agent_as_its_own(tmp_path: Path, out: Path) -> None:
+    scen = scenario_with(tmp_path, "s.toml", PAPER.read_text(), **{"duration_s = 300.0": "duration_s = 20.0"})
+    port = free_port()
+    proc = subprocess.Popen(launcher_cmd(out, "-s", str(scen), "--agents-per-process", "5", "--json", port=port),
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    tokens: queue.SimpleQueue[tuple[str, str]] = queue.SimpleQueue()
+    data: queue.SimpleQueue[tuple[str, bytes, str]] = queue.SimpleQueue()
+    z = None
+    try:
+        z = _open(f"tcp/127.0.0.1:{port}", proc)
+        z.liveliness().declare_subscriber("swarm/*/alive/agent/*", lambda smp: tokens.put(
+            (str(smp.key_expr), str(smp.kind))), history=True)
+        for key in ("swarm/*/cell/*/agent/*/beacon", "swarm/*/agent/*/cmd", "swarm/*/report/*"):
+            z.declare_subscriber(key, lambda smp: data.put(
+                (str(smp.key_expr), smp.payload.to_bytes(), sample_source(smp))))
+        stdout, stderr = proc.communicate(timeout=600)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        if z is not None:
+            z.close()
+    assert proc.returncode in (0, 1), stderr[-3000:]
+    assert json.loads(stdout)["deterministic"] is True
+    keys = wire.Keys((out / "run_id").read_text().strip())
+    seen_tokens = set()
+    while not tokens.empty():
+        key, kind = tokens.get()
+        if not kind.endswith("DELETE"):
+            seen_tokens.add(keys.parse(key)[1])
+    assert seen_tokens == set(IDS)  # each hosted agent's own token
+    sources: dict[str, dict[int, set[str]]] = defaultdict(lambda: defaultdict(set))
+    while not data.empty():
+        key, payload, source = data.get()
+        what, aid, leaf = keys.parse(key)
+        assert aid is not None, key
+        if leaf == "beacon":
+            assert wire.beacon_from_wire(payload, aid).id == aid
+        elif leaf == "cmd":
+            assert wire.cmd_from_wire(payload, aid).id == aid
+        elif what == "report":
+            leaf = "report"
+        sources[leaf][aid].add(source)
+    for leaf in ("beacon", "cmd", "report"):  # on its own keys, from its host's one session
+        assert sorted(sources[leaf]) == list(IDS), leaf
+        assert all(len(src) == 1 for src in sources[leaf].values()), (leaf, sources[leaf])
+    one = {a: next(iter(sources["beacon"][a])) for a in IDS}
+    assert len({one[a] for a in IDS[:5]}) == 1 and len({one[a] for a in IDS[5:]}) == 1 and one[1] != one[6]
+    assert all(sources[leaf][a] == {one[a]} for leaf in ("cmd", "report") for a in IDS)
+    pids = agent_pids(out)
+    assert len({pids[a] for a in IDS[:5]}) == 1 and pids[1] != pids[6]
+
+
+def test_killing_a_hosted_agent_kills_its_host_and_the_survivors_avoid_them_all(out: Path) -> None:
+    p = run_launcher(out, "--agents-per-process", "5", "--fault", "kill:agent:3@60", "--json")
+    assert p.returncode == 0, p.stderr[-3000:]
+    s = json.loads(p.stdout)
+    assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == [1, 2, 3, 4, 5], s
+    lost = [e for e in events(out / "run.db") if e["kind"] == "agent_lost"]
+    assert sorted(e["agent"] for e in lost) == [1, 2, 3, 4, 5]
+    assert all(abs(e["t"] - lost[0]["t"]) < 1.0 for e in lost)  # together: one process went

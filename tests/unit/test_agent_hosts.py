@@ -1,0 +1,90 @@
+"""Agent hosts: which agents a process runs (`--id`, `--ids`, run_local.sh's `--agents-per-process`) and that
+the world's and monitor's admission takes several agents from one session while still refusing anyone else
+speaking for them."""
+
+from __future__ import annotations
+
+import pytest
+
+from agent.process import parse_ids
+from reconswarm.errors import BadInput
+from reconswarm.net import wire
+from reconswarm.net.admission import Admission, IntrusionKind
+from reconswarm.scenario import load
+from reconswarm_bringup import packing
+from tests.support import PAPER
+
+S = load(PAPER)
+KEYS = wire.Keys("paper-0a1b2c")
+
+
+def test_ids_and_ranges() -> None:
+    assert parse_ids(None, "1-5,9") == (1, 2, 3, 4, 5, 9)
+    assert parse_ids([3], None) == (3,)  # --id I alone: as always
+    assert parse_ids([3, 1, 3], None) == (3, 1)  # repeatable, in order, once each
+    assert parse_ids([7], "2-3, 7") == (7, 2, 3)
+    assert parse_ids(None, "4-4") == (4,)
+
+
+@pytest.mark.parametrize("spec", ["", "1-", "-3", "a", "5-1", "1,,2", "1-2-3", "1.5"])
+def test_bad_ids_are_one_line_naming_the_option(spec: str) -> None:
+    with pytest.raises(BadInput, match=r"^--ids: ") as e:
+        parse_ids(None, spec)
+    assert "\n" not in str(e.value)
+
+
+def test_no_agent_at_all_is_refused() -> None:
+    with pytest.raises(BadInput, match=r"^--id or --ids: which agent"):
+        parse_ids(None, None)
+
+
+def test_ids_spec_round_trips() -> None:
+    for ids in [(1,), (1, 2, 3, 5, 7, 8), (9, 3, 4), tuple(range(1, 101))]:
+        assert parse_ids(None, packing.ids_spec(ids)) == ids
+    assert packing.ids_spec((1, 2, 3, 5, 7, 8)) == "1-3,5,7-8"
+    assert packing.agent_args((4,)) == ["--id", "4"] and packing.agent_args((4, 5)) == ["--ids", "4-5"]
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "x", "1.5", "", "auto5"])
+def test_agents_per_process_takes_a_positive_integer_or_auto(value: str) -> None:
+    with pytest.raises(BadInput, match=r"^--agents-per-process: expected a positive integer or auto, got "):
+        packing.parse(value)
+    assert packing.parse("5") == 5 and packing.parse("auto") == packing.AUTO and packing.parse(" AUTO ") == "auto"
+
+
+def test_per_process_auto_is_one_host_per_cpu_and_any_k_is_clamped_to_n() -> None:
+    assert packing.per_process("auto", 10, n_cpus=2) == 5
+    assert packing.per_process("auto", 101, n_cpus=2) == 51  # ceil
+    assert packing.per_process("auto", 3, n_cpus=8) == 1
+    assert packing.per_process(20, 10) == 10  # K > N: clamped
+    assert packing.per_process(1, 10) == 1
+
+
+def test_hosts_pack_consecutive_agents_that_reach_the_router_alike() -> None:
+    ids = list(range(1, 11))
+    assert packing.hosts(ids, 3, lambda a: "") == [(1, 2, 3), (4, 5, 6), (7, 8, 9), (10,)]
+    assert packing.hosts(ids, 1, lambda a: "") == [(a,) for a in ids]
+    # Two hosts (network namespaces): agents 6-10 reach another router; never packed with 1-5.
+    assert packing.hosts(ids, 4, lambda a: a > 5) == [(1, 2, 3, 4), (5,), (6, 7, 8, 9), (10,)]
+
+
+def _beacon(aid: int) -> wire.Beacon:
+    x, y = S.starts[S.agent_index(aid)]
+    return wire.Beacon(aid, 0, 0.0, float(x), float(y), float(S.radii[S.agent_index(aid)]))
+
+
+def test_admission_takes_several_agents_from_one_session_and_refuses_others_for_them() -> None:
+    adm = Admission(S)
+    host, lone, intruder = "host-zid", "lone-zid", "intruder-zid"
+    for aid in (1, 2, 3, 4, 5):  # one host's session speaks for agents 1-5
+        assert adm.check_beacon(_beacon(aid), host, KEYS.beacon((0, 0), aid), now=0.0) is None
+        assert adm.check_cmd(wire.Cmd(aid, 0, 0.1, 0.0), host, KEYS.cmd(aid), now=0.0, world_k=0) is None
+        assert adm.check_report(aid, host, KEYS.report(f"agent-{aid}"), now=0.0) is None
+    assert adm.check_beacon(_beacon(6), lone, KEYS.beacon((0, 0), 6), now=0.0) is None  # and a lone agent beside it
+    for aid in (1, 3, 5):  # nobody else speaks for a hosted agent while its host does
+        for src in (intruder, lone):
+            got = adm.check_cmd(wire.Cmd(aid, 0, 0.1, 0.0), src, KEYS.cmd(aid), now=0.5, world_k=0)
+            assert got is not None and got.kind == IntrusionKind.IMPERSONATION
+    # ... nor does the host speak for the lone agent.
+    got = adm.check_beacon(_beacon(6), host, KEYS.beacon((0, 0), 6), now=0.5)
+    assert got is not None and got.kind == IntrusionKind.IMPERSONATION
