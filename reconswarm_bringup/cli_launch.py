@@ -88,9 +88,9 @@ def launch_cmd(
             raise BadInput(f"{'--ros2' if ros2 else '--foxglove'} and --secure cannot be combined (the access rules "
                            "cover neither the ROS 2 keys nor the live view's reading of the obstacle sets)")
         per_process = packing.parse(agents_per_process)
-        if per_process != 1 and (secure or ros2):
-            raise BadInput(f"--agents-per-process {agents_per_process}: {'--secure' if secure else '--ros2'} runs one "
-                           "agent per process (its credentials and ROS 2 node are per agent)")
+        if per_process != 1 and ros2:
+            raise BadInput(f"--agents-per-process {agents_per_process}: --ros2 runs one agent per process (one ROS 2 "
+                           "node per session)")
         if ros_domain_id is not None and not ros2:
             raise BadInput("--ros-domain-id: only with --ros2")
         domain = resolve_domain_id(ros_domain_id, os.environ) if ros2 else None

@@ -83,7 +83,7 @@ def start_agents(fleet: Any, s: Scenario, k: int | str, zopt: Callable[[str, str
     """Start the run's agents, up to K a process (`args`: the agent command's options after its ids)."""
     ids = [a.id for a in s.agents]
     per = per_process(k, len(ids))
-    packed = hosts(ids, per, lambda a: zopt("agent", str(a)))
+    packed = hosts(ids, per, lambda a: zopt("agent", str(a))[0])  # (by where it runs: --hosts 2's namespaces)
     if per > 1:
         log.info("%d agents in %d processes (%s %s: up to %d each)", len(ids), len(packed), OPTION, k, per)
     for group in packed:

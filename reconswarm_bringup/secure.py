@@ -5,9 +5,10 @@
 - `ca.pem`: the run's certificate authority (its private key is never written: nobody can issue more
   credentials for this run once `create()` returns);
 - `<name>-cert.pem`, `<name>-key.pem` for the router (SAN 127.0.0.1, ::1, localhost and the endpoint's
-  host) and for every client: `monitor`, `simworld`, `agent-<id>`, `observer` (the launcher's clock
-  watcher) and `intruder` (a valid certificate the ACL grants nothing: the flood fault uses it);
-  a client certificate's common name is its ACL subject;
+  host) and for every client: `monitor`, `simworld`, `agent-<id>`, `agents-<ids>` for each agent host of
+  the run (`--agents-per-process`: one process, one session, e.g. `agents-1-5`, granted exactly what its
+  agents are), `observer` (the launcher's clock watcher) and `intruder` (a valid certificate the ACL
+  grants nothing: the flood fault uses it); a client certificate's common name is its ACL subject;
 - `router.json5`: listens on `tls/HOST:PORT` only, requires a client certificate signed by the CA, and
   enforces the access control rules below with `default_permission: "deny"`;
 - `<name>.json5`: each client's complete zenoh configuration (mode, router, TLS paths, lease,
@@ -47,6 +48,7 @@ from typing import Any
 from reconswarm.errors import BadInput
 from reconswarm.net.session import LEASE_MS, ZenohOptions
 from reconswarm.scenario import Scenario
+from reconswarm_bringup.packing import ids_spec
 
 ROLES = ("monitor", "simworld", "agent")
 VALID_DAYS = 30
@@ -61,6 +63,7 @@ class Secrets:
     endpoint: str
     run: str
     agent_ids: tuple[int, ...]
+    hosts: tuple[tuple[int, ...], ...] = ()  # agent hosts (two agents or more in one process)
 
     @property
     def router_config(self) -> Path:
@@ -71,7 +74,10 @@ class Secrets:
         return self.dir / "ca.pem"
 
     def config_for(self, role: str, ident: str = "-") -> Path:
-        """The client configuration of a role: `monitor`, `simworld` or `agent` (ident = the agent id)."""
+        """The client configuration of a role: `monitor`, `simworld` or `agent` (ident = the agent id, or an agent
+        host's ids, e.g. `1-5`)."""
+        if role == "agent" and ident in {host_name(h).removeprefix("agents-") for h in self.hosts}:
+            return self.dir / f"agents-{ident}.json5"
         if role == "agent":
             try:
                 aid = int(ident)
@@ -99,10 +105,17 @@ def tls_endpoint(endpoint: str) -> str:
     return f"tls/{addr}"
 
 
-def create(secrets_dir: Path, scenario: Scenario, endpoint: str, run: str | None = None) -> Secrets:
+def host_name(ids: tuple[int, ...]) -> str:
+    """An agent host's certificate name (its ACL subject): `agents-1-5`, `agents-1-3,5`."""
+    return f"agents-{ids_spec(ids)}"
+
+
+def create(secrets_dir: Path, scenario: Scenario, endpoint: str, run: str | None = None,
+           hosts: tuple[tuple[int, ...], ...] = ()) -> Secrets:
     """Create the CA, every credential and configuration of one secure run under secrets_dir.
 
-    run: the run id of the key prefix `swarm/<run>` the access rules name (default: the scenario name)."""
+    run: the run id of the key prefix `swarm/<run>` the access rules name (default: the scenario name);
+    hosts: the agents of each agent host (those of more than one agent get a credential of their own)."""
     ep = tls_endpoint(endpoint)
     host = ep.partition("/")[2].rpartition(":")[0].strip("[]")
     secrets_dir = Path(secrets_dir).resolve()
@@ -111,11 +124,15 @@ def create(secrets_dir: Path, scenario: Scenario, endpoint: str, run: str | None
         if old.is_file() and old.suffix in (".pem", ".json5"):
             old.unlink()
     ids = tuple(a.id for a in scenario.agents)
-    sec = Secrets(secrets_dir, ep, run or scenario.meta.name, ids)
+    many = tuple(h for h in hosts if len(h) > 1)
+    unknown = [a for h in many for a in h if a not in ids]
+    if unknown:
+        raise BadInput(f"secure: no agent {unknown[0]} in the scenario for an agent host")
+    sec = Secrets(secrets_dir, ep, run or scenario.meta.name, ids, many)
 
     ca_key, ca_cert = _make_ca(sec.run)
     _write(sec.ca, _cert_pem(ca_cert))
-    names = ["monitor", "simworld", *(f"agent-{i}" for i in ids), "observer", "intruder"]
+    names = ["monitor", "simworld", *(f"agent-{i}" for i in ids), *map(host_name, many), "observer", "intruder"]
     _issue(secrets_dir, "router", ca_key, ca_cert, server_names=_server_names(host))
     for name in names:
         _issue(secrets_dir, name, ca_key, ca_cert)
@@ -160,12 +177,13 @@ def router_config(sec: Secrets) -> dict[str, Any]:
             "listen_certificate": str(d / "router-cert.pem"),
         }),
         "listen": {"endpoints": [sec.endpoint]},
-        "access_control": access_control(sec.run, sec.agent_ids),
+        "access_control": access_control(sec.run, sec.agent_ids, sec.hosts),
     }
 
 
-def access_control(run: str, agent_ids: tuple[int, ...]) -> dict[str, Any]:
-    """Default deny; every subject (a certificate common name) gets exactly what its process uses."""
+def access_control(run: str, agent_ids: tuple[int, ...], hosts: tuple[tuple[int, ...], ...] = ()) -> dict[str, Any]:
+    """Default deny; every subject (a certificate common name) gets exactly what its process uses (an agent
+    host: what each of its agents uses)."""
     r = f"swarm/{run}"
     rules: list[dict[str, Any]] = []
     subjects: list[dict[str, Any]] = []
@@ -207,9 +225,10 @@ def access_control(run: str, agent_ids: tuple[int, ...]) -> dict[str, Any]:
         rule("agents-history-reply", ["reply"], ("egress",), [obstacles]),
         rule("agents-history-live", ["declare_liveliness_subscriber"], ("ingress",), [f"{obstacles}/@adv/pub/**"]),
     ]
+    per_agent: dict[int, list[str]] = {}
     for i in agent_ids:
         a, own = f"{r}/agent/{i}", f"{r}/cell/*/agent/{i}"
-        grant(f"agent-{i}", [
+        per_agent[i] = [
             *agents_common,
             *publish(f"agent-{i}-pub", [f"{a}/cmd", f"{own}/beacon", f"{own}/obstacles", f"{r}/report/agent-{i}"],
                      [f"{r}/agent/*/cmd", beacons, obstacles, f"{r}/report/*"]),
@@ -218,7 +237,10 @@ def access_control(run: str, agent_ids: tuple[int, ...]) -> dict[str, Any]:
             # its advanced publisher's cache: a queryable under its own key, replies with its own set only
             rule(f"agent-{i}-cache", ["declare_queryable"], ("ingress",), [f"{own}/obstacles/@adv/pub/**"]),
             rule(f"agent-{i}-cache-reply", ["reply"], ("ingress",), [f"{own}/obstacles"]),
-        ])
+        ]
+        grant(f"agent-{i}", per_agent[i])
+    for h in hosts:
+        grant(host_name(h), list(dict.fromkeys(rid for i in h for rid in per_agent[i])))
     grant("simworld", [
         *publish("simworld-pub", [f"{r}/clock", f"{r}/truth", f"{r}/agent/*/state", f"{r}/report/simworld"],
                  [f"{r}/report/*"]),

@@ -147,3 +147,25 @@ def test_killing_a_hosted_agent_kills_its_host_and_the_survivors_avoid_them_all(
     lost = [e for e in events(out / "run.db") if e["kind"] == "agent_lost"]
     assert sorted(e["agent"] for e in lost) == [1, 2, 3, 4, 5]
     assert all(abs(e["t"] - lost[0]["t"]) < 1.0 for e in lost)  # together: one process went
+
+
+def test_secure_mode_runs_agent_hosts_on_their_own_credentials(tmp_path: Path, out: Path) -> None:
+    scen = scenario_with(tmp_path, "s.toml", PAPER.read_text(), **{"duration_s = 300.0": "duration_s = 20.0"})
+    p = run_launcher(out, "-s", str(scen), "--secure", "--agents-per-process", "5", "--json")
+    assert p.returncode == 1, p.stderr[-3000:]  # (not converged in 20 s)
+    s = json.loads(p.stdout)
+    # Every agent spoke (the access rules deny by default: a host granted less than its agents would stall them).
+    assert s["ticks"] == 401 and s["deterministic"] is True and s["agents_lost"] == [] and s["intrusions"] == 0
+    assert {f.name for f in (out / "secrets").glob("agents-*.json5")} == {"agents-1-5.json5", "agents-6-10.json5"}
+
+
+@pytest.mark.parametrize(("args", "line"), [
+    (["--agents-per-process", "0"], "--agents-per-process: expected a positive integer or auto, got '0'"),
+    (["--agents-per-process", "many"], "--agents-per-process: expected a positive integer or auto, got 'many'"),
+    (["--agents-per-process", "2", "--ros2"], "--agents-per-process 2: --ros2 runs one agent per process"),
+])
+def test_bad_agents_per_process_is_one_line_exit_2(out: Path, args: list[str], line: str) -> None:
+    p = run_launcher(out, *args, timeout=60)
+    assert p.returncode == 2 and p.stdout == ""
+    (last,) = p.stderr.strip().splitlines()
+    assert line in last, last

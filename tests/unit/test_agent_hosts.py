@@ -4,6 +4,9 @@ speaking for them."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import pytest
 
 from agent.process import parse_ids
@@ -11,7 +14,7 @@ from reconswarm.errors import BadInput
 from reconswarm.net import wire
 from reconswarm.net.admission import Admission, IntrusionKind
 from reconswarm.scenario import load
-from reconswarm_bringup import packing
+from reconswarm_bringup import packing, secure
 from tests.support import PAPER
 
 S = load(PAPER)
@@ -88,3 +91,26 @@ def test_admission_takes_several_agents_from_one_session_and_refuses_others_for_
     # ... nor does the host speak for the lone agent.
     got = adm.check_beacon(_beacon(6), host, KEYS.beacon((0, 0), 6), now=0.5)
     assert got is not None and got.kind == IntrusionKind.IMPERSONATION
+
+
+def test_secure_mode_gives_an_agent_host_one_credential_granted_exactly_its_agents(tmp_path: Path) -> None:
+    sec = secure.create(tmp_path / "secrets", S, "tcp/127.0.0.1:7447", "paper-0a1b2c", hosts=((1, 2, 3, 4, 5), (6,)))
+    assert sec.config_for("agent", "1-5").name == "agents-1-5.json5"  # a host of one is a lone agent: agent-6
+    assert sec.config_for("agent", "6").name == "agent-6.json5" and sec.config_for("agent", "3").name == "agent-3.json5"
+    client = json.loads(sec.config_for("agent", "1-5").read_text())
+    assert client["transport"]["link"]["tls"]["connect_certificate"] == str(sec.dir / "agents-1-5-cert.pem")
+    acl = json.loads(sec.router_config.read_text())["access_control"]
+    rules = {r["id"]: r for r in acl["rules"]}
+
+    def sent(subject: str) -> set[str]:
+        (pol,) = [p for p in acl["policies"] if p["subjects"] == [subject]]
+        return {k for rid in pol["rules"] for k in rules[rid]["key_exprs"] if "ingress" in rules[rid]["flows"]
+                and set(rules[rid]["messages"]) & {"put", "reply", "liveliness_token"}}
+
+    r = "swarm/paper-0a1b2c"
+    assert sent("agents-1-5") == {k for i in (1, 2, 3, 4, 5) for k in (
+        f"{r}/agent/{i}/cmd", f"{r}/cell/*/agent/{i}/beacon", f"{r}/cell/*/agent/{i}/obstacles",
+        f"{r}/report/agent-{i}", f"{r}/alive/agent/{i}")} == set().union(*(sent(f"agent-{i}") for i in range(1, 6)))
+    assert not any(f"/{i}/" in k or k.endswith(f"/{i}") or k.endswith(f"-{i}") for k in sent("agents-1-5")
+                   for i in range(6, 11))
+    assert "agents-6" not in {c for sub in acl["subjects"] for c in sub["cert_common_names"]}
