@@ -76,6 +76,10 @@ def plan_network(cfg: LaunchConfig, s: Scenario, run: str, lock: runid.EndpointL
     endpoint = cfg.router or DEFAULT_ROUTER
     if cfg.secure and cfg.hosts > 1:
         raise BadInput("--secure with --hosts 2 is not supported")
+    hp = host_port(endpoint)
+    if cfg.secure and hp is not None and ":" in hp[0]:  # zenoh 1.10.2 says "invalid dns name" for tls/[::1]:P
+        raise BadInput(f"--router {endpoint} with --secure: zenoh's TLS link cannot check a router's name at an "
+                       f"IPv6 address; pass tcp/127.0.0.1:PORT or a host name")
     if lock is not None and cfg.hosts == 1:
         lock.acquire(run)
     if cfg.secure:
