@@ -14,7 +14,7 @@ from typing import Annotated
 import typer
 
 from reconswarm.errors import BadInput, ReconswarmError
-from reconswarm_bringup.console import fail, mission_exit_code, print_json, set_debug
+from reconswarm_bringup.console import fail, is_debug, mission_exit_code, print_json, set_debug
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Multi-agent path planning with reconfigurable topology, over Eclipse Zenoh.")
@@ -75,6 +75,7 @@ def scenario_generate(
     """Print a valid random scenario (TOML)."""
     from reconswarm.generate import generate
     from reconswarm.scenario import to_toml
+    from reconswarm_bringup import validate
 
     try:
         text = to_toml(generate(agents, obstacles, seed))
@@ -83,8 +84,14 @@ def scenario_generate(
         return
     if out is None:
         sys.stdout.write(text)
-    else:
+        return
+    try:
+        validate.writable_file("-o", out)  # (its directory is made if missing)
         out.write_text(text)
+    except OSError as exc:
+        fail(BadInput(f"-o {out}: cannot write there ({exc.strerror or exc})"))
+    except ReconswarmError as exc:
+        fail(exc)
 
 
 @scenario_app.command("check")
@@ -119,7 +126,13 @@ _register()
 def main() -> None:
     from reconswarm_bringup.cli_launch import optional_values
 
-    app(args=optional_values(sys.argv[1:]))
+    try:
+        app(args=optional_values(sys.argv[1:]))
+    except OSError as exc:  # a path no command checked for: still one line naming it (--debug: the traceback)
+        if is_debug() or exc.filename is None:
+            raise
+        sys.stderr.write(f"reconswarm: error: {exc.filename}: {exc.strerror or exc}\n")
+        sys.exit(BadInput.exit_code)
 
 
 if __name__ == "__main__":

@@ -232,6 +232,7 @@ def record_cmd(
 
         if foxglove is not None and not 0 <= foxglove <= 65535:
             raise BadInput(f"--foxglove: port must be in 0..65535, got {foxglove}")
+        validate.writable_file("--db", db)
         code = run(MonitorConfig(scenario, db, ZenohOptions.build(connect, listen, mode, zenoh_config), run_id,
                                  live if live is not None else sys.stderr.isatty(), foxglove))
     except ReconswarmError as exc:

@@ -19,6 +19,10 @@ def set_debug(on: bool) -> None:
     _debug = on
 
 
+def is_debug() -> bool:
+    return _debug
+
+
 def fail(exc: BaseException, prog: str = "reconswarm") -> None:
     """Print one line and exit with the error's code."""
     if _debug:

@@ -101,6 +101,11 @@ def _mb(v: float) -> str:
     return f"{v / 1024:,.1f} GB" if v >= 1024 else f"{v:,.0f} MB"
 
 
+def _why(exc: OSError) -> str:
+    # (mkdir -p through a path where a file stands says "File exists")
+    return "a file stands where a directory should be" if isinstance(exc, FileExistsError) else exc.strerror or str(exc)
+
+
 def _probe(directory: Path) -> None:
     directory.mkdir(parents=True, exist_ok=True)
     fd, probe = tempfile.mkstemp(prefix=".write-probe-", dir=directory)
@@ -113,7 +118,7 @@ def writable_dir(option: str, path: Path) -> None:
     try:
         _probe(path)
     except OSError as exc:
-        raise BadInput(f"{option} {path}: cannot write there ({exc.strerror or exc})") from None
+        raise BadInput(f"{option} {path}: cannot write there ({_why(exc)})") from None
 
 
 def writable_file(option: str, path: Path) -> None:
@@ -123,7 +128,7 @@ def writable_file(option: str, path: Path) -> None:
     try:
         _probe(path.parent)
     except OSError as exc:
-        raise BadInput(f"{option} {path}: cannot write there ({exc.strerror or exc})") from None
+        raise BadInput(f"{option} {path}: cannot write there ({_why(exc)})") from None
 
 
 def launch(*, agents: int | None, scenario: Path | None, out: Path, timeout_s: float | None, speed: float,
