@@ -32,7 +32,7 @@ from reconswarm.scenario import Scenario, load, parse, to_toml, warnings
 from reconswarm_bringup import chaos, netns, outcome, packing, runid, validate
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.fleet import ROOT, Fleet, Proc
-from reconswarm_bringup.network import Net, plan_network
+from reconswarm_bringup.network import Net, check_live_port, plan_network
 
 log = logging.getLogger("reconswarm.launch")
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
@@ -103,6 +103,7 @@ def run(cfg: LaunchConfig) -> int:
         raise BadInput(f"--clock: expected lockstep or realtime, got {cfg.clock!r}")
     if any(f.action == "partition" for f in cfg.faults) and cfg.hosts != 2:
         raise BadInput("--fault partition@...: needs --hosts 2 (two hosts to cut apart)")
+    check_live_port(cfg)
     s = prepare_scenario(cfg)  # refused before anything of a previous run in OUTDIR is touched
     for stale in ("processes.tsv", "faults.tsv", "run.db", "run.db-wal", "run.db-shm", runid.RUN_ID_FILE):
         (cfg.out / stale).unlink(missing_ok=True)
@@ -200,7 +201,7 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
                         continue  # it saw the end of the mission and closed the record
                     if p.role == "monitor" and world.popen.poll() is None:
                         why = outcome.last_line(p.log_path)
-                        if "disk full" in why:
+                        if "disk full" in why or rc == 2:  # (2: bad input, which a restart does not mend)
                             fatal = why
                         elif restarts >= MONITOR_RESTARTS:
                             fatal = f"the monitor died {restarts + 1} times (last: exit {rc}: {why})"

@@ -41,6 +41,20 @@ def listening(host: str, port: int) -> bool:
     return not _port_free(f"tcp/{'[' + host + ']' if ':' in host else host}:{port}")
 
 
+def check_live_port(cfg: LaunchConfig) -> None:
+    """--foxglove PORT: not the router's port and free on 127.0.0.1, refused before anything starts (a monitor
+    that cannot serve there was started six times, then the run failed with exit 3)."""
+    port = cfg.foxglove_port
+    if port is None:
+        return
+    endpoint = cfg.router or DEFAULT_ROUTER
+    hp = host_port(endpoint)
+    if hp is not None and hp[1] == port:
+        raise BadInput(f"--foxglove {port}: that is the router's port ({endpoint}); pass another port")
+    if listening("127.0.0.1", port):
+        raise BadInput(f"--foxglove {port}: 127.0.0.1:{port} is already in use; pass another port")
+
+
 @dataclass
 class Net:
     """Where the routers run and how each process reaches one."""

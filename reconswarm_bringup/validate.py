@@ -147,4 +147,6 @@ def launch(*, agents: int | None, scenario: Path | None, out: Path, timeout_s: f
         if proto not in ("tcp", "tls"):
             raise BadInput(f"--router: the launcher starts and checks routers on tcp/ or tls/ endpoints, "
                            f"got {router!r}")
+        if "?" in router or "#" in router:  # (the router is started on, locked and probed by PROTO/HOST:PORT)
+            raise BadInput(f"--router: PROTO/HOST:PORT without ?metadata or #config, got {router!r}")
     writable_dir("-o", out)

@@ -144,7 +144,7 @@ def resolve_domain_id(option: int | None, environ: Mapping[str, str]) -> int:
         source, raw = "ROS_DOMAIN_ID", environ["ROS_DOMAIN_ID"].strip()
     else:
         return 0
-    if not raw.isdigit() or int(raw) > MAX_DOMAIN_ID:
+    if not (raw.isascii() and raw.isdigit()) or int(raw) > MAX_DOMAIN_ID:  # ("²".isdigit(), but int() refuses it)
         raise BadInput(f"{source}: must be an integer in 0..{MAX_DOMAIN_ID}, got {raw!r}")
     return int(raw)
 
