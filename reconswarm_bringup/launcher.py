@@ -173,7 +173,8 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
     pending = sorted(cfg.faults, key=lambda f: f.at_s)
     timers: list[tuple[float, Any]] = []  # (wall time, action)
     wall0 = time.monotonic()
-    bar = _Progress(cfg.progress and sys.stderr.isatty() and not cfg.as_json, s.meta.duration_s)
+    bar = _Progress(cfg.progress and sys.stderr.isatty() and not cfg.as_json, s.meta.duration_s,
+                    log_lines=cfg.progress)  # --no-progress: no bar, and no `t = ...` lines either
     crashed: list[str] = []
     fatal: str | None = None  # the run cannot go on: stop everything, print the summary, exit 3
     halt: str | None = None  # the launcher ends the run early: "stopped" (a signal) or "timeout"
@@ -283,8 +284,9 @@ def _wind_down(fleet: Fleet, world: Proc, monitor_wait_s: float = 8.0) -> None:
 
 
 class _Progress:
-    def __init__(self, enabled: bool, total_s: float) -> None:
+    def __init__(self, enabled: bool, total_s: float, log_lines: bool = True) -> None:
         self.enabled = enabled
+        self.log_lines = log_lines  # without a bar, a `t = ...` line every 5 s
         self.last = 0.0
         self.wall0 = time.monotonic()
         self.bar: Any = None
@@ -299,7 +301,7 @@ class _Progress:
         info = f"{alive}/{n} agents, {t / wall:.1f}x real time" if wall > 0 and t > 0 else "starting"
         if self.bar is not None:
             self.bar.update(self.task, completed=t, info=info)
-        elif time.monotonic() - self.last > 5.0:
+        elif self.log_lines and time.monotonic() - self.last > 5.0:
             self.last = time.monotonic()
             log.info("t = %.1f s (%s)", t, info)
 
