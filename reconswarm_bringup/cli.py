@@ -14,12 +14,16 @@ from typing import Annotated
 import typer
 
 from reconswarm.errors import BadInput, ReconswarmError
+from reconswarm_bringup import help_style
 from reconswarm_bringup.console import fail, is_debug, mission_exit_code, print_json, set_debug
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Multi-agent path planning with reconfigurable topology, over Eclipse Zenoh.")
 scenario_app = typer.Typer(no_args_is_help=True, help="Generate and validate scenario files.")
 app.add_typer(scenario_app, name="scenario")
+
+
+help_style.install()
 
 
 @app.callback()

@@ -11,12 +11,15 @@ from typing import Annotated
 import typer
 
 from reconswarm.errors import BadInput, ReconswarmError
+from reconswarm_bringup import help_style
 from reconswarm_bringup.console import fail, set_debug
 from reconswarm_bringup.fleet import ROOT
 
+help_style.install()
+
 PROG = "run_local"
 FOXGLOVE_PORT = 8765  # `--foxglove` without a value
-ROS2_SPEED = 1.0  # --ros2's default: the robots' interface in real time, as a robot base runs
+REALTIME_SPEED = 1.0  # --clock realtime (and --ros2) by default: real time, as a robot base runs
 
 
 def optional_values(argv: list[str]) -> list[str]:
@@ -38,7 +41,7 @@ def launch_cmd(
     out: Annotated[Path, typer.Option("-o", "--out", help="Output directory.")] = ROOT / "runs" / "latest",
     clock: Annotated[str | None, typer.Option("--clock", help="lockstep (default) | realtime")] = None,
     speed: Annotated[float | None, typer.Option("--speed",
-        help="Realtime: simulated seconds per wall second (default 10; 1 with --ros2).")] = None,
+        help="Realtime: simulated seconds per wall second (default 1, real time).")] = None,
     planner: Annotated[str | None, typer.Option("--planner", help="reconfigurable | virtual-leader")] = None,
     router: Annotated[str | None, typer.Option("--router", metavar="EP",
         help="Router endpoint (default tcp/127.0.0.1:7447); one is started there unless one listens.")] = None,
@@ -74,7 +77,7 @@ def launch_cmd(
     set_debug(debug)
     logging.basicConfig(level=logging.DEBUG if debug else logging.INFO, format=f"{PROG}: %(message)s")
     try:
-        speed = speed if speed is not None else ROS2_SPEED if ros2 else 10.0
+        speed = speed if speed is not None else REALTIME_SPEED
         if ros2 and clock == "lockstep":
             raise BadInput("--ros2: runs on the realtime clock only (ROS 2 topics carry no tick), not --clock lockstep")
         clock = clock or ("realtime" if ros2 else "lockstep")

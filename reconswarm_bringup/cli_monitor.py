@@ -17,7 +17,7 @@ from reconswarm_bringup.console import fail, print_json
 
 monitor_app = typer.Typer(no_args_is_help=True, help="Record runs and read run records (run.db).")
 
-DbArg = Annotated[Path, typer.Argument(help="A run record (run.db).")]
+DbArg = Annotated[Path, typer.Argument(metavar="RUN.DB", help="A run record (run.db).")]
 
 
 def _open(db: Path) -> Any:
@@ -27,8 +27,8 @@ def _open(db: Path) -> Any:
 
 
 @monitor_app.command("summary")
-def summary_cmd(db: DbArg, as_json: Annotated[bool, typer.Option("--json")] = False) -> None:
-    """The run summary (INTERFACES.md fields)."""
+def summary_cmd(db: DbArg, as_json: Annotated[bool, typer.Option("--json", help="Print it as JSON.")] = False) -> None:
+    """The run summary: outcome, convergence, safety, topology, timing and membership of the run."""
     try:
         from reconswarm.record.summary import render, summarize
 
@@ -47,7 +47,7 @@ def summary_cmd(db: DbArg, as_json: Annotated[bool, typer.Option("--json")] = Fa
 
 
 @monitor_app.command("events")
-def events_cmd(db: DbArg, as_json: Annotated[bool, typer.Option("--json")] = False) -> None:
+def events_cmd(db: DbArg, as_json: Annotated[bool, typer.Option("--json", help="Print them as JSON.")] = False) -> None:
     """Topology (split, merge) and membership (agent_lost, agent_joined) events in time order."""
     try:
         rec = _open(db)
@@ -222,7 +222,8 @@ def record_cmd(
     foxglove: Annotated[int | None, typer.Option("--foxglove", metavar="PORT",
         help="Also serve the run to the Foxglove app on ws://127.0.0.1:PORT (0: any free port).")] = None,
 ) -> None:
-    """The monitor process: records states, beacons and topology events of a distributed run."""
+    """The monitor process of a distributed run: records the world's truth and clock, the agents' reports,
+    membership changes and the topology events (it does not hear the agents' beacons)."""
     try:
         from monitor.process import MonitorConfig, run
         from reconswarm.net.session import ZenohOptions, bind_to_parent, setup_logging

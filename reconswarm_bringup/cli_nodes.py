@@ -88,7 +88,7 @@ def simworld_cmd(
     scenario: Annotated[Path, typer.Option("--scenario", help="Scenario TOML file.")],
     clock: Annotated[ClockMode | None, typer.Option("--clock",
         help="How the world advances (default lockstep; realtime with --ros2).")] = None,
-    speed: Annotated[float, typer.Option("--speed", help="Realtime: simulated seconds per wall second.")] = 10.0,
+    speed: Annotated[float, typer.Option("--speed", help="Realtime: simulated seconds per wall second.")] = 1.0,
     start_timeout: Annotated[float, typer.Option("--start-timeout", help="Seconds to wait for everyone.")] = 60.0,
     connect: Connect = None, listen: Listen = None, mode: Mode = "client", zenoh_config: ZConfig = None,
     run_id: RunId = None, ros2: Ros2 = False, ros_domain_id: RosDomain = None,

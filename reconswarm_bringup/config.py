@@ -14,7 +14,7 @@ class LaunchConfig:
     scenario: Path | None = None
     agents: int | None = None
     clock: str = "lockstep"
-    speed: float = 10.0
+    speed: float = 1.0  # realtime: simulated seconds per wall second (real time unless asked otherwise)
     planner: str | None = None
     router: str | None = None
     secure: bool = False

@@ -39,7 +39,7 @@ class SimworldConfig:
     scenario: Path
     zenoh: ZenohOptions
     clock: ClockMode = ClockMode.LOCKSTEP
-    speed: float = 10.0
+    speed: float = 1.0
     run_id: str | None = None
     start_timeout_s: float = TIMING.start_timeout_s
     ros2_domain_id: int | None = None  # ROS 2 mode: odom out, cmd_vel in (simworld/ros2_io.py) in this domain

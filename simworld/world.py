@@ -68,7 +68,7 @@ class Step:
 
 
 class WorldNode:
-    def __init__(self, s: Scenario, clock: ClockMode = ClockMode.LOCKSTEP, speed: float = 10.0,
+    def __init__(self, s: Scenario, clock: ClockMode = ClockMode.LOCKSTEP, speed: float = 1.0,
                  timing: Timing = TIMING) -> None:
         self.s, self.clock, self.speed, self.timing = s, clock, speed, timing
         self.ids = [a.id for a in s.agents]
