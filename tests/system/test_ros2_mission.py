@@ -62,8 +62,10 @@ def _yaw(q: Any) -> float:
 def test_ros2_paper_mission_seen_from_outside(tmp_path: Path, out: Path) -> None:
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
+    # Agent 3 killed at t = 40 s: its robot stops by the diamond's lower vertex, in the swarm's path (before:
+    # the survivors were caught between it and the diamond, 590 m from their slots, or collided).
     cmd = launcher_cmd(out, "-s", str(PAPER), "--ros2", "--ros-domain-id", str(DOMAIN), "--speed", str(SPEED),
-                       "--json", port=port)
+                       "--fault", "kill:agent:3@40", "--json", port=port)
     wall0 = time.time()
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     samples: queue.SimpleQueue[tuple[str, bytes, bytes | None]] = queue.SimpleQueue()
@@ -197,5 +199,6 @@ def test_ros2_paper_mission_seen_from_outside(tmp_path: Path, out: Path) -> None
           f"cmd_vel {n['cmd_vel']}; odometries = record {checked}, arcs checked {arcs}; tokens {len(seen)}; "
           f"scans {leaves['scan']}")
     assert run["mode"] == "realtime" and run["converged"] and run["collisions"] == 0, run
+    assert run["agents_lost"] == [3] and run["safety_violations"] == 0, run
     assert proc.returncode == 0
     assert summary(out / "run.db")["converged"]
