@@ -14,6 +14,8 @@ they are recorded. Message times are the mission's wall-clock start plus simulat
 from __future__ import annotations
 
 import logging
+import math
+import threading
 import time
 from typing import Any
 
@@ -46,6 +48,9 @@ HOST = "127.0.0.1"
 DEFAULT_PORT = 8765
 TOPIC_KNOWLEDGE = "/knowledge"
 MAX_RATE_HZ = 20.0  # scenes per wall second at most
+CLOSE_TIMEOUT_S = 2.0  # the server's stop waits for every client's queued messages: at most this long
+SDK_LOG_LINES = 10  # the Foxglove SDK's log lines let through per SDK_LOG_WINDOW_S (the rest counted)
+SDK_LOG_WINDOW_S = 60.0
 KNOWLEDGE_Z_M = 0.2  # hull outlines just above the true obstacles
 
 
@@ -65,6 +70,44 @@ def knowledge_update(sets: dict[int, dict[str, NDArray[np.float64]]], group: dic
                        entities=ents)
 
 
+class SdkLogBudget(logging.Filter):
+    """At most `lines` log lines per `window_s` from the Foxglove SDK's loggers (`foxglove.*`: one per
+    connection that fails its handshake, so one garbage client reconnecting wrote 6,470 lines); the next line
+    let through says how many were not logged."""
+
+    def __init__(self, lines: int = SDK_LOG_LINES, window_s: float = SDK_LOG_WINDOW_S) -> None:
+        super().__init__()
+        self.lines, self.window_s = lines, window_s
+        self.window_start, self.used, self.dropped = -math.inf, 0, 0
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if not record.name.startswith("foxglove"):
+            return True
+        now = time.monotonic()
+        if now - self.window_start >= self.window_s:
+            self.window_start, self.used = now, 0
+        if self.used >= self.lines:
+            self.dropped += 1
+            return False
+        self.used += 1
+        if self.dropped:
+            record.msg, record.args = f"{record.getMessage()} ({self.dropped} more lines of the live view's server " \
+                                      f"not logged)", None
+            self.dropped = 0
+        return True
+
+
+SDK_LOG_BUDGET = SdkLogBudget()
+
+
+def budget_sdk_logs() -> None:
+    """Put the SDK's log lines on a budget at every handler of the root logger (the SDK logs through Python's
+    logging under `foxglove.*`; a filter on a parent logger would not apply to its children's records)."""
+    for handler in logging.getLogger().handlers:
+        if SDK_LOG_BUDGET not in handler.filters:
+            handler.addFilter(SDK_LOG_BUDGET)
+
+
 class LiveView:
     """The WebSocket server and its channels; feed it ticks, obstacle sets and events in time order."""
 
@@ -74,6 +117,7 @@ class LiveView:
         self.index = {int(a): i for i, a in enumerate(self.ids)}
         self.period_s = 1.0 / max_rate_hz
         self.ctx = foxglove.Context()
+        budget_sdk_logs()
         try:
             self.server = foxglove.start_server(name=name, host=HOST, port=port, context=self.ctx)
         except Exception as exc:  # the SDK's own error type: the port is taken or not allowed
@@ -124,8 +168,16 @@ class LiveView:
     def event(self, ev: Event) -> None:
         self.channels.event(ev.to_dict(), self._ns(ev.t))
 
-    def close(self) -> None:
-        self.server.stop()
+    def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
+        """Stop the server, waiting at most timeout_s: its stop waits until every client has taken what is
+        queued for it, and clients that do not read (a full TCP window) held the monitor's shutdown until the
+        launcher killed it. A stop still running then is left behind (a daemon thread: the process exits)."""
+        stopper = threading.Thread(target=self.server.stop, name="live-view-stop", daemon=True)
+        stopper.start()
+        stopper.join(timeout_s)
+        if stopper.is_alive():
+            log.warning("live view: the server did not stop within %.0f s (clients not reading): left behind",
+                        timeout_s)
 
 
 class LiveFeed:
