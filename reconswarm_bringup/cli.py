@@ -25,6 +25,8 @@ app.add_typer(scenario_app, name="scenario")
 
 help_style.install()
 
+DEFAULT_SIM_ROOT = Path("runs") / "sim"
+
 
 @app.callback()
 def _root(debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False) -> None:
@@ -33,7 +35,8 @@ def _root(debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks."
 @app.command()
 def sim(
     scenario: Annotated[Path, typer.Argument(help="Scenario TOML file.")],
-    out: Annotated[Path, typer.Option("-o", "--out", help="Output directory for run.db.")] = Path("runs/sim"),
+    out: Annotated[Path | None, typer.Option("-o", "--out", metavar="DIR", help="Output directory for run.db "
+                   "(default: runs/sim/SCENARIO-PLANNER, with -seedS if --seed is given).")] = None,
     planner: Annotated[str | None, typer.Option("--planner", help="reconfigurable | virtual-leader")] = None,
     seed: Annotated[int | None, typer.Option("--seed", help="Override the scenario's seed.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
@@ -52,6 +55,9 @@ def sim(
             s = s.with_seed(seed)
         for w in warnings(s):
             typer.echo(f"warning: {w}", err=True)
+        if out is None:  # one directory per scenario and planner: the quick start's two runs keep both records
+            name = f"{scenario.stem}-{s.planner.kind.value}" + ("" if seed is None else f"-seed{seed}")
+            out = DEFAULT_SIM_ROOT / name
         validate.writable_dir("-o", out)
         summary = engine.run(engine.SimConfig(s, out, progress=not as_json))
     except (ReconswarmError, OSError) as exc:

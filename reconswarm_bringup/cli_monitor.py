@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -94,7 +93,7 @@ def export_cmd(
             from monitor.mcap_export import export_mcap
 
             rec = _open(db)
-            with _progress_bar("export") as progress:
+            with _progress_bar(f"exporting {db}") as progress:
                 stats = export_mcap(rec, out, period_s, progress)
             rec.close()
             every = "every tick" if stats.period_s is None else f"every {stats.period_s:g} s"
@@ -104,27 +103,22 @@ def export_cmd(
         if out is not None:
             outdir.not_the_input("-o", out, db)
             validate.writable_file("-o", out)
+        from monitor.csv_export import export_csv
+
         rec = _open(db)
-        tk = rec.ticks()
-        ids = rec.ids
-        rec.close()
         stream = sys.stdout if out is None else _open_out(out)
     except ReconswarmError as exc:
         fail(exc)
         return
     try:
-        w = csv.writer(stream, lineterminator="\n")
-        w.writerow(["t_s", "agent", "px_m", "py_m", "theta_rad"])
-        for row in range(tk.t.size):
-            t = f"{tk.t[row]:.6f}"
-            for col, aid in enumerate(ids):
-                if not np_isfinite(tk.px[row, col]):
-                    continue
-                w.writerow([t, int(aid), repr(float(tk.px[row, col])), repr(float(tk.py[row, col])),
-                            repr(float(tk.theta[row, col]))])
+        with _progress_bar(f"exporting {db}") as progress:
+            rows = export_csv(rec, stream, progress)
     finally:
+        rec.close()
         if out is not None:
             stream.close()
+    if out is not None:
+        typer.echo(f"wrote {out}: {rows} rows")
 
 
 def _open_out(out: Path) -> Any:
@@ -135,16 +129,26 @@ def _open_out(out: Path) -> Any:
 
 
 @contextmanager
-def _progress_bar(label: str) -> Iterator[Callable[[int, int], None] | None]:
-    """A rich progress bar on a terminal (stderr), else nothing: yields progress(done, total) or None."""
+def _progress_bar(label: str, counted: bool = True) -> Iterator[Callable[[int, int], None] | None]:
+    """A rich progress bar on a terminal (stderr), else nothing: yields progress(done, total) or None.
+    Not counted: the bar pulses with the elapsed time (a step with no parts to count, as drawing a figure)."""
     if not sys.stderr.isatty():
         yield None
         return
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        ProgressColumn,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
-    bar = Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                   console=Console(stderr=True), transient=True)
+    cols: list[ProgressColumn] = [TextColumn(label), BarColumn()]
+    cols += [MofNCompleteColumn(), TimeRemainingColumn()] if counted else [TimeElapsedColumn()]
+    bar = Progress(*cols, console=Console(stderr=True), transient=True)
     task = bar.add_task(label, total=None)
     with bar:
         yield lambda done, total: bar.update(task, completed=done, total=total)
@@ -172,7 +176,7 @@ def animate_cmd(
             raise BadInput(f"{out}: --at writes one frame as a PNG (-o FILE.png)")
         validate.writable_file("-o", out)
         rec = _open(db)
-        with _progress_bar("animate") as progress:
+        with _progress_bar(f"animating {db}") as progress:
             stats = animate_run(rec, out, fps, speed, dpi, progress, still_at_s=at_s)
         rec.close()
     except ReconswarmError as exc:
@@ -182,10 +186,6 @@ def animate_cmd(
         typer.echo(f"wrote {out}: {stats.frames} frames at {fps:g} fps ({speed:g}x), {stats.bytes / 1e6:.2f} MB")
     else:
         typer.echo(f"wrote {out}")
-
-
-def np_isfinite(v: float) -> bool:
-    return v == v and v not in (float("inf"), float("-inf"))
 
 
 @monitor_app.command("plot")
@@ -201,7 +201,8 @@ def plot_cmd(
         outdir.not_the_input("-o", out, db)
         validate.writable_file("-o", out)
         rec = _open(db)
-        plot_run(rec, out)
+        with _progress_bar(f"plotting {db}", counted=False):  # (nothing to count: it pulses while drawing)
+            plot_run(rec, out)
         rec.close()
     except ReconswarmError as exc:
         fail(exc)

@@ -12,6 +12,9 @@ FIELDS = ("scenario", "planner", "mode", "agents", "duration_s", "converged", "c
           "final_max_error_m", "min_agent_gap_m", "min_obstacle_gap_m", "collisions", "safety_violations",
           "splits", "merges", "agents_lost", "messages_rejected", "intrusions", "path_length_m", "wall_time_s")
 
+# The world's statistics that are counts (the clock carries every statistic as a float)
+COUNTS = ("world_overruns", "latency_samples", "missed_deadlines", "deadlines", "stalls")
+
 
 def _r(v: float | None, nd: int = 3) -> float | None:
     if v is None or not np.isfinite(v):
@@ -93,6 +96,10 @@ def summarize(rec: RunRecord) -> dict[str, Any]:
     extra = rec.meta_json("extra", {})
     if isinstance(extra, dict):
         out.update(extra)
+    for key in COUNTS:  # (the world's statistics travel as numbers of one kind: a count is whole)
+        v = out.get(key)
+        if isinstance(v, float) and v.is_integer():
+            out[key] = int(v)
     return out
 
 
@@ -115,7 +122,11 @@ def render(summary: dict[str, Any]) -> Any:
                     val = f"min {min(nums):.1f}, mean {sum(nums) / len(nums):.1f}, max {max(nums):.1f} m"
             elif not val:
                 continue
+        if key == "deterministic" and summary.get("mode") == "realtime":
+            val = "not claimed (realtime runs on wall time)"  # realtime is not deterministic, by design
+        elif key == "determinism_lost_at_s" and val is None:
+            continue  # nothing was lost (or, in realtime, nothing was claimed)
         if isinstance(val, bool):
             val = "[green]yes[/green]" if val else "[red]no[/red]"
-        table.add_row(key, str(val))
+        table.add_row(key, "-" if val is None else str(val))
     return table
