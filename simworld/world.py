@@ -94,6 +94,9 @@ class WorldNode:
         self.pub_time: dict[int, float] = {}
         self.latency_ms: list[float] = []
         self.missed = self.expected = self.overruns = 0
+        # Lockstep: the first tick stepped with a robot lacking that tick's command (held or stopped: an agent
+        # frozen, lost or timed out), where the run leaves the in-process engine's; -1: none.
+        self.uncommanded_k = -1
         self.phase = Phase.READY
         self.k = 0
         self.n_ticks = round(s.meta.duration_s / s.meta.dt_s)
@@ -326,6 +329,8 @@ class WorldNode:
                 self._hold(kk, late)
         if got:
             self._hold(k, got)
+        if self.clock == ClockMode.LOCKSTEP and self.uncommanded_k < 0 and len(got) < len(self.ids):
+            self.uncommanded_k = k
         if self.clock == ClockMode.REALTIME:
             live = [self.index[a] for a in self.alive]
             self.expected += len(live)
@@ -358,6 +363,8 @@ class WorldNode:
             lat = np.array(self.latency_ms)
             out.update(latency_p50_ms=round(float(np.percentile(lat, 50)), 3),
                        latency_p99_ms=round(float(np.percentile(lat, 99)), 3), latency_samples=float(lat.size))
+        if self.uncommanded_k >= 0:
+            out.update(uncommanded_from_s=round(self.uncommanded_k * self.s.meta.dt_s, 9))
         if self.clock == ClockMode.REALTIME:
             out.update(missed_deadlines=float(self.missed), deadlines=float(self.expected),
                        missed_deadline_ratio=round(self.missed / self.expected, 5) if self.expected else 0.0)
