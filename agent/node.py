@@ -26,7 +26,7 @@ import numpy as np
 from agent.brain import AgentBrain, Peer
 from agent.messages import Exit, Input, Invalid, Joined, Left, Output, Reconnect, WorldToken
 from agent.neighbours import Neighbourhood
-from agent.sets import PeerSets, scan_sets
+from agent.sets import PeerSets, own_set, scan_sets
 from reconswarm.net import wire
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.scenario import Scenario
@@ -87,8 +87,8 @@ class AgentNode:
         return out
 
     def reconnected(self, now_s: float) -> None:
-        """The adapter opened a new session: give it `resubscribe_s` to bring the commands back, and put our
-        obstacle set in the new session's cache (for peers that join later) at the next step."""
+        """The adapter opened a new session: give it `resubscribe_s` to bring the commands back; put our obstacle
+        set in the new session's cache (for peers that join later) at the next step."""
         self.last_act = now_s
         self._announce_set = self.brain.rev > 0
 
@@ -198,23 +198,19 @@ class AgentNode:
         return self.alive if clock is None else set(clock.alive) - self.gone
 
     def _peers(self, k: int) -> tuple[list[Peer], list[Peer]]:
-        """Whom tick k plans with, (live peers, lost peers). Live: every beacon of k, and for the peers it
-        waited for but lacks (a guess), the latest beacon. Lost (not `_living`: the world's clock is not
-        fooled by a forged token): where their robots stopped, by the latest beacon or the world's scan.
-        An alive peer that may not matter at k is left out: it contributes nothing, and its last position
-        would be stale (realtime: one not heard lately)."""
+        """Whom tick k plans with, (live, lost). Live: every beacon of k; the latest beacon of a peer it
+        waited for but lacks (a guess); not an alive peer that may not matter at k (it adds nothing, and its
+        position would be stale; realtime: not heard lately). Lost (not `_living`: the world's clock is not
+        fooled by a forged token): where their robots stopped, by the latest beacon or the world's scan."""
         fresh, st = self.beacons.get(k, {}), self.states[k]
         clock = self.clocks.get(k) or self.clocks.get(max(self.clocks, default=-1))  # (realtime: the newest)
         rt, p, living = self.mode == "realtime", (st.px, st.py), self._living(clock)
         wanted = self._expected(k, None) if not rt else self._lately()
-        live: list[Peer] = []
-        lost: list[Peer] = []
+        live, lost = [], []
         for a, b in self.last_seen.items():
             b = fresh.get(a, b)
-            if a in fresh or (a in living and a in wanted and (not rt or self.nb.audible(p, b))):
-                live.append(Peer(b.id, b.px, b.py, b.radius))
-            elif a not in living:
-                lost.append(Peer(b.id, b.px, b.py, b.radius))
+            if a in fresh or a not in living or (a in wanted and (not rt or self.nb.audible(p, b))):
+                (live if a in fresh or a in living else lost).append(Peer(b.id, b.px, b.py, b.radius))
         return live, lost
 
     def _lately(self) -> set[int]:
@@ -346,9 +342,7 @@ class AgentNode:
         return f"tick {k}: waiting for {', '.join(missing) or 'nothing'}"
 
     def _obstacle_set(self, k: int) -> wire.ObstacleSet:
-        sets = {oid: tuple((float(x), float(y)) for x, y in h.tolist())
-                for oid, h in self.brain.obstacle_sets().items()}
-        return wire.ObstacleSet(self.id, k, self.brain.rev, sets)
+        return own_set(self.id, k, self.brain.rev, self.brain.obstacle_sets())
 
     def _prune(self, k: int) -> None:
         for store in (self.states, self.clocks, self.beacons, self.scans, self.state_at):

@@ -56,3 +56,9 @@ def scan_sets(scans: dict[int, wire.Scan], k_from: int, k_to: int) -> ObstacleSe
             for x, y, oid in sc.points:
                 pts.setdefault(oid, []).append((x, y))
     return {oid: np.array(v, dtype=np.float64) for oid, v in pts.items()}
+
+
+def own_set(agent_id: int, k: int, rev: int, hulls: ObstacleSets) -> wire.ObstacleSet:
+    """An agent's own obstacle set (obstacle id -> hull (V, 2)) as the message it announces at tick k."""
+    return wire.ObstacleSet(agent_id, k, rev, {oid: tuple((float(x), float(y)) for x, y in h.tolist())
+                                               for oid, h in hulls.items()})
