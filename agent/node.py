@@ -206,7 +206,7 @@ class AgentNode:
         clock = self.clocks.get(k) or self.clocks.get(max(self.clocks, default=-1))  # (realtime: the newest)
         rt, p, living = self.mode == "realtime", (st.px, st.py), self._living(clock)
         wanted = self._expected(k, None) if not rt else self._lately()
-        live, lost = [], []
+        live, lost = list[Peer](), list[Peer]()
         for a, b in self.last_seen.items():
             b = fresh.get(a, b)
             if a in fresh or a not in living or (a in wanted and (not rt or self.nb.audible(p, b))):
