@@ -83,9 +83,14 @@ def record_mode(db: Path) -> str | None:
 class RecordClaim:
     """The engine's exclusive hold on OUTDIR while it writes OUTDIR/run.db (see the module's docstring)."""
 
-    def __init__(self, out: Path, option: str = "-o") -> None:
+    def __init__(self, out: Path, option: str = "-o", replaces: tuple[str, ...] | None = (ENGINE_MODE,),
+                 what: str = "reconswarm sim") -> None:
+        """replaces: the record modes this writer may replace (None: any run record; the launcher's choice,
+        which still may not take a directory a live run holds)."""
         self.out = out
         self.option = option
+        self.replaces = replaces
+        self.what = what
         self._fh: IO[str] | None = None
 
     def acquire(self) -> None:
@@ -111,9 +116,9 @@ class RecordClaim:
             db = out / "run.db"
             if db.exists():
                 mode = record_mode(db)
-                if mode != ENGINE_MODE:
+                if mode is None or (self.replaces is not None and mode not in self.replaces):
                     what = "not a run record" if mode is None else f"the record of a launched run (mode {mode})"
-                    raise BadInput(f"{opt} {out}: {db.name} there is {what}, which reconswarm sim does not "
+                    raise BadInput(f"{opt} {out}: {db.name} there is {what}, which {self.what} does not "
                                    f"replace; choose another directory")
         except BaseException:
             fh.close()
