@@ -75,7 +75,11 @@ def test_realtime_defaults_to_real_time(tmp_path: Path, tiny: Path, monkeypatch:
     from reconswarm_bringup import launcher
 
     seen: list[Any] = []
-    monkeypatch.setattr(launcher, "run", lambda cfg: seen.append(cfg) or 0)
+    def fake_run(cfg: Any) -> int:
+        seen.append(cfg)
+        return 0
+
+    monkeypatch.setattr(launcher, "run", fake_run)
     r = CliRunner().invoke(app, ["launch", "-s", str(tiny), "-o", str(tmp_path / "out"), *args])
     assert r.exit_code == 0, r.output
     (cfg,) = seen
@@ -86,7 +90,11 @@ def test_simworld_command_defaults_to_real_time(tiny: Path, monkeypatch: pytest.
     import simworld.process
 
     seen: list[Any] = []
-    monkeypatch.setattr(simworld.process, "run", lambda cfg: seen.append(cfg) or 0)
+    def fake_run(cfg: Any) -> int:
+        seen.append(cfg)
+        return 0
+
+    monkeypatch.setattr(simworld.process, "run", fake_run)
     r = CliRunner().invoke(app, ["simworld", "--scenario", str(tiny), "--clock", "realtime",
                                  "--connect", "tcp/127.0.0.1:9"])
     assert r.exit_code == 0, r.output
