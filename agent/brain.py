@@ -2,7 +2,7 @@
 
 It calls the same pure functions as the in-process engine (reconswarm.paper: planner, knowledge, deadlock,
 leader) with N = 1 and its neighbours, in the engine's order, so a lockstep run
-reproduces `reconswarm sim` (see reconswarm/engine.py for the tick order).
+reproduces `reconswarm sim` (see reconswarm_bringup/engine.py for the tick order).
 """
 
 from __future__ import annotations

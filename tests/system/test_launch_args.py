@@ -1,4 +1,4 @@
-"""run_local.sh's arguments (reconswarm/validate.py, called by the launcher): what the issue found
+"""run_local.sh's arguments (reconswarm_bringup/validate.py, called by the launcher): what the issue found
 accepted or crashing is refused with one line and exit 2 before any process starts; unwritable output
 directories (run_local.sh and sim) likewise."""
 

@@ -1,4 +1,4 @@
-"""Remark 1's stall detection and perturbation (agent/deadlock.py) and the benchmark's virtual leader."""
+"""Remark 1's stall detection and perturbation (reconswarm/paper/deadlock.py) and the benchmark's virtual leader."""
 
 from __future__ import annotations
 

@@ -1,8 +1,8 @@
-"""The control law of agent/planner.py against the paper's potentials (eqs. 8-11), written out here.
+"""The control law of reconswarm/paper/planner.py against the paper's potentials (eqs. 8-11), written out here.
 
 The oracles below are the paper's *potentials* U_att (eq. 8, R_i* = R_c) and U_rep (eq. 10), not its
 gradients: the planner's output must equal -∇U by central finite differences (sign convention of
-PAPER_NOTES: u = -(∇U_att + ∇U_rep^a + ∇U_rep^o), Ψ < 0).
+docs/paper.md: u = -(∇U_att + ∇U_rep^a + ∇U_rep^o), Ψ < 0).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Sensing (simworld/sensing.py) and obstacle knowledge with its sharing rule (agent/knowledge.py)."""
+"""Sensing (reconswarm/sim/sensing.py) and obstacle knowledge with its sharing rule (reconswarm/paper/knowledge.py)."""
 
 from __future__ import annotations
 

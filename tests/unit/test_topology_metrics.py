@@ -1,5 +1,5 @@
-"""The swarm graph, its split / merge events (monitor/topology.py) and the safety metrics (monitor/metrics.py)
-on constructed cases."""
+"""The swarm graph, its split / merge events (reconswarm/paper/topology.py) and the safety metrics
+(reconswarm/record/safety.py) on constructed cases."""
 
 from __future__ import annotations
 
