@@ -106,11 +106,13 @@ def sweep_cmd(
         except BaseException as exc:  # Ctrl-C or SIGTERM, a run that failed, a worker that died, no scheduler
             problem = exc
     if problem is not None:
+        interrupted = isinstance(problem, KeyboardInterrupt)
         if results is not None:
             results.close()
+        if results is not None and (interrupted or results.rows):
             typer.echo(f"sweep: stopped after {results.rows} of {total} runs; {out / 'results.csv'} holds "
                        f"their {results.rows} rows", err=True)
-        if isinstance(problem, KeyboardInterrupt):
+        if interrupted:
             raise typer.Exit(128 + (signals[0] if signals else signal.SIGINT))
         if isinstance(problem, BrokenProcessPool):
             problem = ProcessFailure(f"sweep: a worker process died ({problem})")

@@ -84,7 +84,7 @@ class RecordClaim:
     """The engine's exclusive hold on OUTDIR while it writes OUTDIR/run.db (see the module's docstring)."""
 
     def __init__(self, out: Path, option: str = "-o", replaces: tuple[str, ...] | None = (ENGINE_MODE,),
-                 what: str = "reconswarm sim") -> None:
+                 what: str = "the in-process engine (reconswarm sim, sweep)") -> None:
         """replaces: the record modes this writer may replace (None: any run record; the launcher's choice,
         which still may not take a directory a live run holds)."""
         self.out = out
