@@ -34,7 +34,7 @@ from agent.link import AgentLink, Decoded, decode_sample
 from agent.messages import Exit, Input, Reconnect
 from agent.neighbours import Cells
 from reconswarm.net import wire
-from reconswarm.net.cells import Cell
+from reconswarm.net.cells import Cell, chunk_cell
 from reconswarm.net.session import Inbox, Item, StartMark, Stopper, to_item
 
 log = logging.getLogger("reconswarm.agent")
@@ -93,10 +93,11 @@ class AgentHost:
         self.z, self.keys, self.links, self.inbox = session, keys, links, inbox
         self.active = dict(links)  # the agents still running (one that exited leaves this)
         self.locality = zenoh.Locality.REMOTE if len(links) == 1 else zenoh.Locality.ANY
-        self.listeners: dict[Cell | None, set[int]] = {}  # cell -> hosted agents listening to it
-        self.cell_subs: dict[Cell | None, tuple[Any, Any]] = {}
-        self.sets: dict[Cell | None, dict[str, Item]] = {}  # cell -> key -> newest obstacle set heard there
-        self.pending: list[tuple[int, Tag, Item]] = []  # (agent, tag, item) for that agent alone (replayed sets)
+        self.listening: dict[int, frozenset[Cell] | None] = {}  # agent -> the cells it listens to (None: all)
+        self.cell_subs: dict[Cell | None, tuple[Any, Any]] = {}  # the host's subscriptions (None: every cell)
+        self.sets: dict[int, Item] = {}  # agent -> the newest obstacle set heard from it (with its cell in its key)
+        self.pending: list[tuple[int, Item]] = []  # (agent, obstacle set) for that agent alone (replayed)
+        self._cells: dict[str, Cell | None] = {}  # key -> the cell in it (None: not a cell key)
         self.known = {a.id for a in next(iter(links.values())).node.s.agents}
         self.max_set_bytes = next(iter(links.values())).gate.adm.max_set_bytes
         z, k = session, keys
@@ -118,15 +119,16 @@ class AgentHost:
 
     def listen(self, aid: int, c: Cells) -> None:
         """Agent aid listens to c.listen from now on: cells new to the host are declared before the ones nobody
-        listens to any more go; a cell the host already hears replays its newest sets to aid."""
-        want: set[Cell | None] = {None} if c.listen is None else set(c.listen)
-        had = {cell for cell, who in self.listeners.items() if aid in who}
-        for cell in want - had:
-            who = self.listeners.setdefault(cell, set())
-            who.add(aid)
-            if cell in self.cell_subs:
-                self.pending += [(aid, ("cell", cell), item) for item in self.sets.get(cell, {}).values()]
-                continue
+        listens to any more go; the newest set of each agent publishing in the cells it did not hear yet is
+        replayed to it (what its own advanced subscriber's history would have brought)."""
+        old = self.listening.get(aid, frozenset())
+        if aid in self.listening and old == c.listen:
+            return
+        self.listening[aid] = c.listen
+        self.pending += [(aid, item) for item in self.sets.values()
+                         if self._hears(c.listen, self._cell(item[0])) and not self._hears(old, self._cell(item[0]))]
+        want: set[Cell | None] = set().union(*({None} if ls is None else ls for ls in self.listening.values()))
+        for cell in want - self.cell_subs.keys():
             tag, k = ("cell", cell), self.keys
             self.cell_subs[cell] = (
                 self.z.declare_subscriber(k.cell_agents(cell, "beacon"), self.inbox.handler(tag),
@@ -134,23 +136,44 @@ class AgentHost:
                 ext.declare_advanced_subscriber(self.z, k.cell_agents(cell, "obstacles"), self.inbox.handler(tag),
                                                 allowed_origin=self.locality,
                                                 history=ext.HistoryConfig(detect_late_publishers=True)))
-        for cell in had - want:
-            self.listeners[cell].discard(aid)
-            if not self.listeners[cell]:
-                del self.listeners[cell]
-                self.sets.pop(cell, None)
-                for sub in self.cell_subs.pop(cell):
-                    sub.undeclare()
+        for cell in self.cell_subs.keys() - want:
+            for sub in self.cell_subs.pop(cell):
+                sub.undeclare()
+
+    @staticmethod
+    def _hears(listen: frozenset[Cell] | None, cell: Cell | None) -> bool:
+        return listen is None or cell in listen
+
+    def _cell(self, key: str) -> Cell | None:
+        """The cell a beacon or obstacle set was published in (None: a key without a valid one)."""
+        if key not in self._cells:
+            parts = key[len(self.keys.prefix) + 1:].split("/")
+            try:
+                got = chunk_cell(parts[1]) if len(parts) == 5 and parts[0] == "cell" else None
+            except ValueError:
+                got = None
+            if len(self._cells) >= 100_000:
+                self._cells.clear()
+            self._cells[key] = got
+        return self._cells[key]
 
     # ---------------------------------------------------------------------------------------- input
 
     def route(self, items: list[tuple[Tag, Item]]) -> dict[int, list[Input]]:
-        """Each hosted agent's batch: every sample decoded once, taken by each agent it is for."""
+        """Each hosted agent's batch: every sample decoded once, taken by each agent it is for. A beacon or set is
+        for the agents that listen to the cell it was published in, whichever of the host's subscriptions it
+        came through (one just replaced, or every cell's), once."""
         batches: dict[int, list[Input]] = {aid: [] for aid in self.active}
         pending, self.pending = self.pending, []
-        for aid, tag, item in pending:
-            self._deliver(tag, item, batches, aid)
+        for aid, item in pending:
+            self._deliver(("cell", None), item, batches, aid)
+        seen: set[tuple[str, bytes, str]] = set()
         for tag, item in items:
+            if tag[0] == "cell":
+                once = (item[0], item[1], item[3])
+                if once in seen:
+                    continue
+                seen.add(once)
             self._deliver(tag, item, batches, None)
         return batches
 
@@ -162,7 +185,12 @@ class AgentHost:
             if mine is not None:
                 batches[tag[1]].append(mine)
             return
-        who = list(self.active) if tag == ALL else [a for a in self.listeners.get(tag[1], ()) if a in self.active]
+        if tag == ALL:
+            who = list(self.active)
+        else:  # (a key with no valid cell: those the subscription it came through was for, to count it)
+            cell = self._cell(key)
+            who = [a for a in self.active if self._hears(self.listening.get(a, frozenset()), tag[1] if cell is None
+                                                         else cell)]
         if only is not None:
             who = [a for a in who if a == only]
         if not who:
@@ -172,8 +200,8 @@ class AgentHost:
             if not who:
                 return
         m: Decoded = decode_sample(self.keys, key, payload, kind)
-        if isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known:
-            self.sets.setdefault(tag[1], {})[key] = item  # (for an agent that starts listening here later)
+        if isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known and self._cell(key) is not None:
+            self.sets[m.id] = item  # (for an agent that starts listening to its cell later)
         for aid in who:
             got = self.active[aid].take(m, key, source)
             if got is not None:
@@ -205,6 +233,7 @@ class AgentHost:
                         del self.active[aid]
                         if out.code != 0 and self.active:  # it stops; its co-hosted agents go on
                             self.listen(aid, Cells(link.home or (0, 0), frozenset()))
+                            self.listening.pop(aid)
                             link.close()
                         break
                     if isinstance(out, Reconnect):
