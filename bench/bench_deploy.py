@@ -11,11 +11,15 @@
    stays below 1 %, trying N in increasing order;
 4. lockstep = in-process (--equal-agents N): the grid of N agents in lockstep against `reconswarm sim` on
    the same scenario, the largest difference of any head point or heading at any tick, optionally with
-   --equal-load busy processes running meanwhile (other work on the machine).
+   --equal-load busy processes running meanwhile (other work on the machine); --equal-paper: the paper
+   mission likewise, until it converges.
+`--agents-per-process K ...` (default 1) measures each row with K agents per process (agent hosts; `auto`
+too), side by side; an agent host's CPU, messages and wake-ups count a K-th to each of its agents.
 `--checkout DIR` (repeatable) measures another checkout (a git worktree of an older commit with its own
 .venv) in the same run, row by row beside this one.
 
     .venv/bin/python bench/bench_deploy.py --paper
+    .venv/bin/python bench/bench_deploy.py --paper --equal-paper --agents-per-process 1 5 10 --grid-agents
     .venv/bin/python bench/bench_deploy.py --quick
 """
 
@@ -37,6 +41,7 @@ from _common import command_line, machine, median
 from floor import PATTERNS, floor_run
 from grid import grid_scenario
 
+from agent.process import parse_ids
 from reconswarm.record.store import RunRecord
 from reconswarm.scenario import to_toml
 
@@ -62,12 +67,17 @@ def launch(out: Path, scen: Path, port: int, *extra: str, timeout: float = 1800,
 
 
 def role_usage(out: Path) -> dict[str, list[dict[str, float]]]:
-    """Each process's exit line `usage: {...}` (CPU seconds, peak RSS, and messages in where logged), by role."""
+    """Each process's exit line `usage: {...}` (CPU seconds, peak RSS, and messages in where logged), by role;
+    an agent host's (logs/agent-1-5.log) as a K-th of it for each of its K agents (peak RSS: the host's)."""
     roles: dict[str, list[dict[str, float]]] = {}
     for log in (out / "logs").glob("*.log"):
         m = re.findall(r"usage: (\{.*\})", log.read_text(errors="replace"))
         if m:
-            roles.setdefault(log.stem.split("-")[0], []).append(ast.literal_eval(m[-1]))
+            role, _, ids = log.stem.partition("-")
+            use = ast.literal_eval(m[-1])
+            k = len(parse_ids(None, ids)) if role == "agent" else 1
+            share = {key: (v if key == "max_rss_mb" else v / k) for key, v in use.items()}
+            roles.setdefault(role, []).extend([share] * k)
     return roles
 
 
@@ -81,20 +91,21 @@ def launcher_cmd(checkout: Path | None) -> tuple[list[str], Path]:
     return [py, "-m", "reconswarm_bringup.cli_launch" if new else "reconswarm.launcher"], checkout
 
 
-def grid_run(tmp: Path, n: int, sim_s: float, checkout: Path | None) -> tuple[int, float, dict[str, list[dict]]]:
+def grid_run(tmp: Path, n: int, sim_s: float, checkout: Path | None,
+             extra: tuple[str, ...] = ()) -> tuple[int, float, dict[str, list[dict]]]:
     """One lockstep grid run: (ticks, sim/wall, each process's exit line by role)."""
     scen = tmp / f"grid{n}-{sim_s:g}.toml"
     scen.write_text(to_toml(grid_scenario(n, sim_s)))
-    out = tmp / f"grid{n}-{sim_s:g}-{'old' if checkout else 'new'}-{len(str(checkout))}"
-    s = launch(out, scen, free_port(), launcher=launcher_cmd(checkout))
+    out = tmp / f"grid{n}-{sim_s:g}-{'old' if checkout else 'new'}-{len(str(checkout))}-{'-'.join(extra)}"
+    s = launch(out, scen, free_port(), *extra, launcher=launcher_cmd(checkout))
     return round(s["duration_s"] / 0.05) + 1, s["duration_s"] / s["wall_time_s"], role_usage(out)
 
 
-def grid_row(tmp: Path, n: int, sim_s: float, checkout: Path | None) -> dict[str, float]:
+def grid_row(tmp: Path, n: int, sim_s: float, checkout: Path | None, extra: tuple[str, ...] = ()) -> dict[str, float]:
     """Per-tick figures as the difference of a run of sim_s and one of sim_s / 3: start-up (imports, sessions,
     the start barrier) cancels out, whatever the version logs."""
-    t_short, _, short = grid_run(tmp, n, sim_s / 3, checkout)
-    ticks_long, sim_wall, long = grid_run(tmp, n, sim_s, checkout)
+    t_short, _, short = grid_run(tmp, n, sim_s / 3, checkout, extra)
+    ticks_long, sim_wall, long = grid_run(tmp, n, sim_s, checkout, extra)
     ticks = ticks_long - t_short
 
     def per_tick(role: str, key: str, agg: str = "sum") -> float:
@@ -129,27 +140,39 @@ def poses(db: Path) -> tuple[list[int], list[int], np.ndarray]:
         return tk.k.tolist(), list(rec.ids), np.stack([tk.px, tk.py, tk.theta], axis=-1)
 
 
-def equal_run(tmp: Path, n: int, sim_s: float, load: int) -> str:
-    """The grid of n agents in lockstep and in process, with `load` busy processes meanwhile: one line."""
-    scen = tmp / f"equal{n}.toml"
-    scen.write_text(to_toml(grid_scenario(n, sim_s)))
+def equal_run(tmp: Path, n: int | None, sim_s: float, load: int, extra: tuple[str, ...] = ()) -> str:
+    """The grid of n agents (None: the paper mission) in lockstep and in process, with `load` busy processes
+    meanwhile: one line."""
+    name = f"equal{n or 'paper'}"
+    if n is None:
+        scen = PAPER
+    else:
+        scen = tmp / f"{name}.toml"
+        scen.write_text(to_toml(grid_scenario(n, sim_s)))
     busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(load)]
+    out = tmp / f"{name}-{'-'.join(extra)}"
     try:
-        s = launch(tmp / f"equal{n}", scen, free_port())
+        s = launch(out, scen, free_port(), *extra)
     finally:
         for b in busy:
             b.kill()
             b.wait()
-    sim = cli("sim", str(scen), "-o", str(tmp / f"equal{n}-sim"), "--json")
-    if sim.returncode not in (0, 1):
-        raise RuntimeError(f"sim failed: {sim.stderr[-500:]}")
-    (k, ids, got), (k_ref, ids_ref, ref) = poses(tmp / f"equal{n}" / "run.db"), poses(tmp / f"equal{n}-sim" / "run.db")
+    if not (tmp / f"{name}-sim" / "run.db").exists():
+        sim = cli("sim", str(scen), "-o", str(tmp / f"{name}-sim"), "--json")
+        if sim.returncode not in (0, 1):
+            raise RuntimeError(f"sim failed: {sim.stderr[-500:]}")
+        (tmp / f"{name}-sim" / "summary.json").write_text(sim.stdout)
+    ref_s = json.loads((tmp / f"{name}-sim" / "summary.json").read_text())
+    (k, ids, got), (k_ref, ids_ref, ref) = poses(out / "run.db"), poses(tmp / f"{name}-sim" / "run.db")
+    who = f"N = {n}" if n is not None else "paper"
     if (k, ids) != (k_ref, ids_ref):
-        return f"N = {n}: different ticks or agents ({got.shape} against {ref.shape})"
+        return f"{who} {' '.join(extra)}: different ticks or agents ({got.shape} against {ref.shape})"
     diff = float(np.abs(got - ref).max())
     rate = s["duration_s"] / s["wall_time_s"]
-    return (f"N = {n}, {s['ticks']} ticks, {load} busy processes meanwhile: deterministic {s['deterministic']}, "
-            f"largest difference {diff:g} m (or rad) over {got.shape[0] * got.shape[1]} poses, sim/wall {rate:.2f}")
+    return (f"{who} {' '.join(extra) or '(1 agent per process)'}, {s['ticks']} ticks, {load} busy processes "
+            f"meanwhile: deterministic {s['deterministic']}, converged at {s['convergence_time_s']} s (sim: "
+            f"{ref_s['convergence_time_s']} s), largest difference {diff:g} m (or rad) over "
+            f"{got.shape[0] * got.shape[1]} poses, sim/wall {rate:.2f}")
 
 
 def main() -> int:
@@ -165,7 +188,10 @@ def main() -> int:
     ap.add_argument("--realtime-sim-s", type=float, default=20.0, help="simulated (= wall) seconds per run")
     ap.add_argument("--equal-agents", type=int, nargs="*", default=[], help="lockstep = in-process on the grid")
     ap.add_argument("--equal-sim-s", type=float, default=10.0)
+    ap.add_argument("--equal-paper", action="store_true", help="lockstep = in-process on the paper mission")
     ap.add_argument("--equal-load", type=int, default=0, help="busy processes running meanwhile")
+    ap.add_argument("--agents-per-process", nargs="*", default=["1"], metavar="K",
+                    help="each row with K agents per process (agent hosts), side by side: 1 5 auto ...")
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args()
     if args.quick:
@@ -173,7 +199,10 @@ def main() -> int:
     print("# bench_deploy: real processes (router, simworld, monitor, N agents) on 127.0.0.1")
     print(f"# {machine()}")
     print(f"# reproduce: {command_line()}")
-    versions: list[tuple[str, Path | None]] = [("this", None), *((str(c), c) for c in args.checkout)]
+    # (name, checkout, launcher options): this checkout at each K, then other checkouts (one process per agent)
+    versions: list[tuple[str, Path | None, tuple[str, ...]]] = [
+        ("this" if k == "1" else f"this K={k}", None, () if k == "1" else ("--agents-per-process", k))
+        for k in args.agents_per_process] + [(str(c), c, ()) for c in args.checkout]
     with tempfile.TemporaryDirectory(prefix="bench_deploy_") as t:
         tmp = Path(t)
         if args.grid_agents:
@@ -183,8 +212,8 @@ def main() -> int:
             print(f"{'version':>12s} {'N':>4s} {'sim/wall':>8s} {'agent':>7s} {'agents':>8s} {'world':>7s} "
                   f"{'monitor':>7s} {'router':>7s} {'msgs in':>7s} {'wakeups':>7s}")
         for n in args.grid_agents:
-            for name, co in versions:
-                r = grid_row(tmp, n, args.grid_sim_s, co)
+            for name, co, extra in versions:
+                r = grid_row(tmp, n, args.grid_sim_s, co, extra)
                 print(f"{name[-12:]:>12s} {n:4d} {r['sim_wall']:8.2f} {r['agent_ms']:7.2f} {r['agents_ms']:8.1f} "
                       f"{r['world_ms']:7.1f} {r['monitor_ms']:7.1f} {r['router_ms']:7.1f} {r['msgs_in']:7.1f} "
                       f"{r['wakeups']:7.1f}",
@@ -197,19 +226,19 @@ def main() -> int:
             print(f"# after N = {n}: {machine()}", flush=True)
         if args.paper:
             print("\n## the paper mission in lockstep (until it converges)")
-            for name, co in versions:
-                s = launch(tmp / f"paper-{len(name)}", PAPER, free_port(), launcher=launcher_cmd(co))
+            for i, (name, co, extra) in enumerate(versions):
+                s = launch(tmp / f"paper-{i}", PAPER, free_port(), *extra, launcher=launcher_cmd(co))
                 print(f"{name[-12:]:>12s} converged {s['converged']} at {s['convergence_time_s']} s in "
                       f"{s['wall_time_s']:.1f} s wall: sim/wall {s['duration_s'] / s['wall_time_s']:.2f}", flush=True)
         if args.realtime_agents:
             print(f"\n## realtime at --speed 1 (20 Hz) on the grid, {args.realtime_sim_s:g} s per run")
             print(f"{'version':>12s} {'N':>4s} {'missed':>7s} {'ratio':>7s} {'lat p50 ms':>10s} {'lat p99 ms':>10s}")
-            for name, co in versions:
+            for i, (name, co, extra) in enumerate(versions):
                 best = 0
                 for n in args.realtime_agents:
                     scen = tmp / f"rt{n}.toml"
                     scen.write_text(to_toml(grid_scenario(n, args.realtime_sim_s)))
-                    s = launch(tmp / f"rt{n}-{len(name)}", scen, free_port(), "--clock", "realtime", "--speed", "1",
+                    s = launch(tmp / f"rt{n}-{i}", scen, free_port(), "--clock", "realtime", "--speed", "1", *extra,
                                launcher=launcher_cmd(co))
                     ratio = s.get("missed_deadline_ratio", float("nan"))
                     print(f"{name[-12:]:>12s} {n:4d} {int(s.get('missed_deadlines', -1)):7d} {ratio:7.2%} "
@@ -218,10 +247,12 @@ def main() -> int:
                         break
                     best = n
                 print(f"{name[-12:]:>12s}: largest N at 20 Hz with < 1 % missed: {best or 'none of those tried'}")
-        if args.equal_agents:
-            print(f"\n## lockstep = in-process on the grid, {args.equal_sim_s:g} s simulated")
-            for n in args.equal_agents:
-                print(equal_run(tmp, n, args.equal_sim_s, args.equal_load), flush=True)
+        if args.equal_agents or args.equal_paper:
+            print(f"\n## lockstep = in-process (reconswarm sim): the grid, {args.equal_sim_s:g} s simulated; the paper")
+            for n in [*args.equal_agents, *([None] if args.equal_paper else [])]:
+                for _name, co, extra in versions:
+                    if co is None:
+                        print(equal_run(tmp, n, args.equal_sim_s, args.equal_load, extra), flush=True)
     return 0
 
 
