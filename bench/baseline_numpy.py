@@ -1,4 +1,4 @@
-"""A plain numpy implementation of the paper's law (PAPER_NOTES eqs. 7-11): the yardstick the engine's speed
+"""A plain numpy implementation of the paper's law (docs/paper.md, eqs. 7-11): the yardstick the engine's speed
 is measured against (bench/bench_engine.py). Written from the equations, independent of reconswarm.
 
 Every tick: all pairs (N x N), the nearest point of every *true* obstacle for every agent (obstacle knowledge

@@ -233,7 +233,7 @@ def _groups(gs: Any) -> str:
 
 
 def event_log(ev: dict[str, Any], ns: int) -> Log:
-    """A recorded event (INTERFACES.md: t, kind, before, after[, agent, cause]) as a foxglove.Log."""
+    """A recorded event (docs/wire.md: t, kind, before, after[, agent, cause]) as a foxglove.Log."""
     kind = str(ev.get("kind", "?"))
     text = f"{kind} at t = {float(ev.get('t', 0.0)):.2f} s"
     if "agent" in ev:

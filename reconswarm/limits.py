@@ -12,7 +12,7 @@ Refusals (the loader raises them as `FILE: field.path: what is wrong`, exit 2), 
   tables, the stall detector's history).
 - **Discrete-time stability** of the control law, where a violation makes positions grow without bound.
 
-Warnings (`physics_warnings`): conditions derived from the control law (PAPER_NOTES eqs. 9 and 11) that
+Warnings (`physics_warnings`): conditions derived from the control law (docs/paper.md, eqs. 9 and 11) that
 a collision-free run needs. The run goes on without them, but contacts are to be expected.
 """
 

@@ -1,6 +1,6 @@
 """`reconswarm`: the command line. Each command parses its options and calls a module's run(config).
 
-Exit codes (INTERFACES.md): 0 success, 1 mission failed (not converged, or a collision), 2 bad input,
+Exit codes (README.md): 0 success, 1 mission failed (not converged, or a collision), 2 bad input,
 3 a process of the run died or could not start. Errors are one line on stderr; `--debug` shows the
 traceback.
 """

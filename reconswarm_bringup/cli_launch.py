@@ -48,7 +48,7 @@ def launch_cmd(
     secure: Annotated[bool, typer.Option("--secure",
         help="Mutual TLS, per-process credentials and access control.")] = False,
     fault: Annotated[list[str] | None, typer.Option("--fault", metavar="SPEC",
-        help="Inject a fault (repeatable), e.g. kill:agent:3@60; see the README.")] = None,
+        help="Inject a fault (repeatable), e.g. kill:agent:3@60; see docs/faults.md.")] = None,
     hosts: Annotated[int, typer.Option("--hosts",
         help="2: two hosts as network namespaces, each with its own router (needs root).")] = 1,
     timeout: Annotated[float | None, typer.Option("--timeout",

@@ -1,7 +1,7 @@
 """The distributed commands: `reconswarm agent`, `reconswarm simworld`, `reconswarm router`.
 
 Each parses its options into a frozen config and calls its module's run(config); all share the zenoh
-options of INTERFACES.md (`--connect`, `--listen`, `--mode`, `--zenoh-config`).
+options of README.md (`--connect`, `--listen`, `--mode`, `--zenoh-config`).
 """
 
 from __future__ import annotations

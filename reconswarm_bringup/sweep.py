@@ -5,7 +5,7 @@ The runs are independent, so the runner is written against `concurrent.futures.E
 scenario travels inside the job, so a worker needs no access to the scenario files), and `stream`
 only calls `executor.submit`. A `ProcessPoolExecutor` (the command's default), a `ThreadPoolExecutor`,
 Dask's `distributed.Client(...).get_executor()` (`--dask`, sweep_exec.py), or a few lines around Ray
-(`submit` returning `ray.remote(run_one).remote(job).future()`) all fit (README, "Sweeps").
+(`submit` returning `ray.remote(run_one).remote(job).future()`) all fit (docs/sweeps.md).
 Jobs are generated lazily (`JobPlan`) and only a window of them is in flight, so a sweep's memory does
 not grow with its size; rows go to results.csv as runs finish (`ResultsFile`), the table accumulates
 (`Stats`). Each run writes its record (run.db) under the job's `out_dir`, on the worker's file system.

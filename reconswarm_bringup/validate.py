@@ -15,7 +15,7 @@ from pathlib import Path
 from reconswarm.errors import BadInput
 from reconswarm_bringup.faults import Fault
 
-# Peak RSS per process of a local run, in MB: README "Results and benchmarks" (bench/bench_deploy.py, medians
+# Peak RSS per process of a local run, in MB: docs/benchmarks.md (bench/bench_deploy.py, medians
 # at 10-50 agents); the launcher's own (a zenoh session, numpy, rich) measured at 54 MB (VmHWM, paper mission).
 PEAK_RSS_MB = {"agent": 64, "monitor": 86, "simworld": 62, "router": 50, "launcher": 60}
 # Endpoints the launcher can check and start a router on: PROTO/HOST:PORT.

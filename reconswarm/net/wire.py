@@ -1,4 +1,4 @@
-"""The wire protocol: msgpack schemas (INTERFACES.md); the key expressions are in reconswarm.net.keys.
+"""The wire protocol: msgpack schemas (docs/wire.md); the key expressions are in reconswarm.net.keys.
 
 Every message is a frozen dataclass with a paired `<name>_to_wire` / `<name>_from_wire`. Decoding
 validates everything a hostile or broken peer could get wrong (size, msgpack, schema version, types,

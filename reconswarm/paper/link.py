@@ -1,4 +1,4 @@
-"""The link rule, the one definition of "linked" (PAPER_NOTES, INTERFACES.md): two agents are linked when
+"""The link rule, the one definition of "linked" (docs/paper.md): two agents are linked when
 their head points are within the link range. Pure.
 
 Knowledge sharing uses the rule as it stands: an agent merges the sets of the agents linked to it at this

@@ -1,6 +1,6 @@
 """The paper's control law (eqs. 7-11), pure and batched over agents. No zenoh, no I/O.
 
-Sign convention (PAPER_NOTES): u_i = -(∇U_att + ∇U_rep^a + ∇U_rep^o) with Ψ < 0, so attraction pulls
+Sign convention (docs/paper.md): u_i = -(∇U_att + ∇U_rep^a + ∇U_rep^o) with Ψ < 0, so attraction pulls
 toward the slot p* + Δ_i and repulsion pushes apart.
 
 Every function takes arrays whose first axis is "the agents being computed" (N): the in-process engine

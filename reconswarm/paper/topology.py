@@ -1,4 +1,4 @@
-"""The swarm graph and its split / merge events (INTERFACES.md). Pure; used live by the in-process
+"""The swarm graph and its split / merge events (docs/paper.md). Pure; used live by the in-process
 engine and by the monitor process.
 
 Edge i–j: the pair is linked (reconswarm.paper.link, with hysteresis): it forms when ‖p_i - p_j‖ <= link_range

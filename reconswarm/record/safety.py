@@ -1,6 +1,6 @@
 """Safety metrics from ground truth: surface gaps and contact episodes. Pure.
 
-Gaps are surface gaps (INTERFACES.md): ‖p_i - p_j‖ - r_i - r_j between robots and
+Gaps are surface gaps (docs/wire.md): ‖p_i - p_j‖ - r_i - r_j between robots and
 dist(p_i, obstacle) - r_i to obstacles, over every body in the world (a stopped robot is still a body).
 An episode is a maximal stretch of ticks during which one pair stays below the threshold: below 0 a
 collision, below d_safe a safety violation.

@@ -1,4 +1,4 @@
-"""The run summary of INTERFACES.md, computed from a run record alone."""
+"""The run summary (its fields: docs/wire.md), computed from a run record alone."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """No traceback for a bad path in any command (issue 21, friction 1): a file where a directory should be,
 a directory where a file should be, a directory that cannot be made, a missing input. Each is one line
-naming the option or file, exit 2. `scenario generate -o DIR/FILE` makes a missing DIR, as the README's
+naming the option or file, exit 2. `scenario generate -o DIR/FILE` makes a missing DIR, as docs/sweeps.md's
 sweep recipe expects."""
 
 from __future__ import annotations

@@ -50,7 +50,7 @@ def test_paper_scenario_reconfigurable(paper_run):
     assert s["agents"] == 10
     assert s["converged"] is True
     assert s["convergence_time_s"] is not None and s["convergence_time_s"] <= 240.0
-    # PAPER_NOTES: a faithful implementation converges in roughly 220-225 s (the paper: 200 s).
+    # docs/paper.md: a faithful implementation converges in roughly 220-225 s (the paper: 200 s).
     assert 190.0 <= s["convergence_time_s"] <= 240.0
     assert s["final_max_error_m"] <= 0.5
     assert s["collisions"] == 0 and s["safety_violations"] == 0

@@ -1,6 +1,6 @@
 """Issue 12: every event the monitor records is published on `swarm/<run>/event`, exactly once, as recorded.
 
-An outside subscriber (a plain zenoh-python session in its own process: the README's example, nothing of
+An outside subscriber (a plain zenoh-python session in its own process: docs/wire.md's example, nothing of
 reconswarm imported) follows a whole paper mission through the run's router and writes what it heard;
 that list must equal `reconswarm monitor events --json` (same events, same order, same fields)."""
 

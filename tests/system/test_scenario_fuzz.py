@@ -3,7 +3,7 @@
 `FILE: field.path: what is wrong` naming the mutated field (or the one it is checked against), or runs the
 mission (`sim`'s engine, the first SIM_S simulated seconds) without an exception and with finite positions.
 Which it must be is decided by the documented rules (`expected`): a value they forbid must be refused, the
-file's own value accepted. Whether a run must be contact-free is decided from the equations (README's three
+file's own value accepted. Whether a run must be contact-free is decided from the equations (docs/scenario.md's three
 conditions and whether a world limit can bind, `contacts_likely`), not by the code's physics_warnings: a
 run they call safe must have no collision, and one they do not must be warned of; a collision nobody
 warned of fails too.
@@ -81,7 +81,7 @@ CASES = [(f, v, mutate(f, v)) for f in FIELDS for v in VALUES] + [
 ]
 
 
-# What the documented rules (README "Scenario files", INTERFACES.md) say of a value, decided here from the
+# What the documented rules (docs/scenario.md) say of a value, decided here from the
 # rules themselves and not by the code under test: REFUSE, ACCEPT (the file's own value again), or None
 # (the rules do not decide: either a refusal naming the field or a run).
 REFUSE, ACCEPT = "refuse", "accept"
@@ -153,7 +153,7 @@ def test_every_case_changes_exactly_the_field_it_names_to_its_value():
 
 
 def contacts_likely(s) -> bool:  # type: ignore[no-untyped-def]
-    """README (Scenario files), from eqs. 9 and 11: with v = R_c k_att + perturbation and the band w = d_max -
+    """docs/scenario.md (Warnings), from eqs. 9 and 11: with v = R_c k_att + perturbation and the band w = d_max -
     d_safe, contacts are likely unless two agents closing 2 v dt per step stay within half the band, |Ψ| >=
     2 v, and R_v >= hypot(r + d_max + v dt, 0.5 m) for every radius r; or when a world limit can hold a robot
     back from its commands (below the largest |u| of eq. 7, attraction plus every term's contact push, or

@@ -172,3 +172,18 @@ def test_every_repository_path_named_in_the_code_exists():
     missing = [f"{where}:{line}: {token}" for where, line, token in named
                if token not in NOT_IN_REPO and not (ROOT / token).exists()]
     assert missing == [], "paths named in the code that do not exist:\n" + "\n".join(missing)
+
+
+def test_the_code_sends_no_reader_outside_the_repository():
+    """Docstrings, comments and help texts point at the project's own docs, not at files a clone lacks."""
+    outside = re.compile(r"shared/spec|\.\./shared|INTERFACES\.md|PAPER_NOTES")
+    found = []
+    for top in SCANNED:
+        for f in sorted((ROOT / top).rglob("*")):
+            if f.suffix not in (".py", ".sh", ".toml") or ".venv" in f.parts or f == Path(__file__).resolve():
+                continue
+            found += [f"{f.relative_to(ROOT)}:{n}" for n, line in enumerate(f.read_text().splitlines(), 1)
+                      if outside.search(line)]
+    found += [f"pyproject.toml:{n}" for n, line in enumerate((ROOT / "pyproject.toml").read_text().splitlines(), 1)
+              if outside.search(line)]
+    assert found == []

@@ -1,6 +1,6 @@
 """`monitor export --format mcap` and `monitor animate` on a short in-process paper run, read back with
 independent readers: the `mcap` package's reader with its protobuf decoder (the schemas the file carries),
-and Pillow for the GIF. Expected values come from the run record and the scenario (INTERFACES.md), not
+and Pillow for the GIF. Expected values come from the run record and the scenario (docs/foxglove.md), not
 from the exporter."""
 
 from __future__ import annotations

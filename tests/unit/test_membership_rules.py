@@ -1,7 +1,7 @@
 """Two rules of who speaks and who is there, at their exact thresholds: an agent's session pin moves to
 another session only after the pinned one has been silent repin_after_s (measured from the last message,
 not from the first); the monitor records a network split as soon as two agents (the fewest that make "several
-agents lost together", README) are lost in one burst while others stay."""
+agents lost together", docs/paper.md) are lost in one burst while others stay."""
 
 from __future__ import annotations
 

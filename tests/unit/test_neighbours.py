@@ -1,6 +1,6 @@
 """Cells and lockstep wait sets (agent/neighbours.py, and the agent node that uses them), no processes.
 
-The rule under test (ISSUE 8, README "Wire protocol"): a peer can contribute to tick k only within reach
+The rule under test (ISSUE 8, docs/wire.md "Cells"): a peer can contribute to tick k only within reach
 of p_i(k); both move at most V dt a tick, so the peers whose beacon of k-1 lay within reach + 2 V dt of
 p_i(k-1) are all tick k can need; the agent listens to the cells within reach + 3 V dt of it, adding the
 new ones before its command and dropping the old ones after it."""
