@@ -22,7 +22,7 @@ def _launch(out: Path, router: str, *args: str) -> list[str]:
 
 
 def test_localhost_is_refused_while_127_0_0_1_runs(tmp_path: Path) -> None:
-    if "127.0.0.1" not in {sa[0] for *_, sa in socket.getaddrinfo("localhost", 1, socket.AF_INET)}:
+    if "127.0.0.1" not in {str(sa[0]) for *_, sa in socket.getaddrinfo("localhost", 1, socket.AF_INET)}:
         pytest.skip("localhost is not 127.0.0.1 here")
     port = free_port()
     a = subprocess.Popen(_launch(tmp_path / "a", f"tcp/127.0.0.1:{port}", "--clock", "realtime", "--speed", "1"),

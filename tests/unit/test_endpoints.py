@@ -15,7 +15,7 @@ from reconswarm_bringup.network import _port_free, listening
 
 
 def _v4_loopback_names() -> set[str]:
-    return {sa[0] for *_, sa in socket.getaddrinfo("localhost", 1, socket.AF_INET, socket.SOCK_STREAM)}
+    return {str(sa[0]) for *_, sa in socket.getaddrinfo("localhost", 1, socket.AF_INET, socket.SOCK_STREAM)}
 
 
 def test_names_are_the_resolved_socket_addresses() -> None:
