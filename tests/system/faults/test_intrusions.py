@@ -4,6 +4,11 @@ radius 1e6 and a phantom with agent 4's id 60 m ahead, a 10 x 10,000 m hull and 
 a clock ending the mission ("converged") and one switching to realtime, a second liveliness token for agent
 3 (then agent 3 killed). The run must stay contact-free, record agent 3's loss, finish by itself, and count
 every refused message as an intrusion with the attacker's session as the source.
+
+What the attacker's session got refused is counted against what it sent, per receiving process and kind of
+message: the world alone hears commands, so it must refuse every forged command; the monitor and every
+agent hear every clock, so each must refuse every forged clock. One forgery let through is one missing
+from its receiver's count (a takeover of agent 2's pin, say, lets the world take some commands).
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ import zenoh
 from reconswarm.net import wire
 from reconswarm.net.cells import CellGrid
 from reconswarm.net.session import ZenohOptions
+from reconswarm.record.store import RunRecord
 from reconswarm.scenario import load
 from reconswarm.sim.unicycle import inputs
 from tests.support import PAPER, ROOT, assert_all_gone, events, free_port, launcher_cmd, read_run_id, tick_count
@@ -147,4 +153,28 @@ def test_outside_client_cannot_steer_phantom_end_or_hide_a_death(tmp_path: Path)
     for kind in ("impersonation", "unknown_agent", "not_from_world", "radius", "hull", "oversize"):
         assert by_kind.get(kind, 0) > 0, by_kind
     assert zid in s["intrusion_sources"]
-    assert s["intrusions"] >= sent["cmd"]  # every forged command refused by the world (and counted)
+    refused = refused_from(out / "run.db", zid)
+    print("refused from the attacker's session, per process and kind:", refused)
+    # Every forged command refused by the world, the only process that hears commands: as impersonation
+    # (agent 2's session is pinned) or, for a tick not yet published, as a command (checked after the pin).
+    world = refused.get("simworld", {})
+    assert sum(world.values()) == sent["cmd"], (world, sent)
+    assert set(world) <= {"impersonation", "command"}, world
+    # Every forged clock refused by every process that hears the clock and ran throughout: the monitor and
+    # the agents but agent 3 (killed meanwhile; its last tally may not have been reported).
+    hearers = ["monitor"] + [f"agent-{a.id}" for a in load(PAPER).agents if a.id != 3]
+    for process in hearers:
+        got = refused.get(process, {})
+        assert got.get("not_from_world", 0) == sent["clock"], (process, got, sent)
+
+
+def refused_from(db: Path, source: str) -> dict[str, dict[str, int]]:
+    """process -> kind -> how many of `source`'s messages it refused, from the run's record."""
+    out: dict[str, dict[str, int]] = {}
+    with RunRecord(db) as rec:
+        rows = rec.intrusions()
+    for row in rows:
+        if row["source"] == source:
+            kinds = out.setdefault(row["process"], {})
+            kinds[row["kind"]] = kinds.get(row["kind"], 0) + int(row["count"])
+    return out
