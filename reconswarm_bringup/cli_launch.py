@@ -63,7 +63,8 @@ def launch_cmd(
     agents_per_process: Annotated[str, typer.Option("--agents-per-process", metavar="K|auto",
         help="Agents per process (one zenoh session each; default 1); auto: ceil(N / CPUs).")] = "1",
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
-    no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress bar.")] = False,
+    no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress bar, nor the lines logged instead.")
+                           ] = False,
     debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False,
 ) -> None:
     """Run the mission as separate processes over Zenoh on this machine (router, simworld, monitor, agents)."""
