@@ -1,0 +1,156 @@
+"""Mutation testing of the core modules with mutmut 3 (`pip install -e '.[mutation]'`): each module is mutated
+alone, in a copy of the work tree (the tree itself is never touched), against the unit tests that cover it;
+prints per module how many mutants the tests killed and how many survived, and the survivors' names (with
+--diff, each survivor's change). Slow (minutes to tens of minutes per module on two cores): not part of CI.
+
+    python bench/mutation.py                                   # every core module
+    python bench/mutation.py reconswarm/sim/unicycle.py --jobs 2 --diff
+    python bench/mutation.py --list                            # the modules and their tests
+
+A survivor is a change of the code that none of the module's tests notices: either a test to write, or an
+equivalent change (the same behaviour, e.g. `<` for `<=` where equality cannot happen) to accept and record.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections import Counter
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("reconswarm", "agent", "simworld", "monitor", "reconswarm_bringup")
+
+# The core modules and the unit tests that hold them (unit tests only: no processes, seconds each).
+CORE: dict[str, tuple[str, ...]] = {
+    "reconswarm/paper/planner.py": ("test_planner.py", "test_admission.py", "test_engine.py"),
+    "reconswarm/sim/unicycle.py": ("test_unicycle.py", "test_unicycle_vw.py", "test_unicycle_limits.py"),
+    "reconswarm/paper/topology.py": ("test_topology_metrics.py", "test_summary_counts.py"),
+    "reconswarm/net/wire.py": ("test_wire.py", "test_wire_points.py"),
+    "reconswarm/net/admission.py": ("test_admission.py", "test_membership_rules.py"),
+    "reconswarm/record/summary.py": ("test_summary_counts.py", "test_monitor_node.py", "test_run_store.py"),
+    "reconswarm/record/safety.py": ("test_safety_episodes.py", "test_summary_counts.py", "test_topology_metrics.py"),
+    "agent/node.py": ("test_agent_node.py",),
+    "simworld/world.py": ("test_world_node.py",),
+    "monitor/node.py": ("test_monitor_node.py", "test_membership_rules.py"),
+}
+
+# mutmut's exit codes (mutmut.stats.status_by_exit_code): 1 and 3 killed, 0 survived, the rest neither.
+KILLED, SURVIVED = {1, 3}, {0}
+
+
+def copy_tree(dest: Path) -> None:
+    """The work tree as it stands (tracked and new files, not ignored ones) into dest."""
+    files = subprocess.run(["git", "ls-files", "-co", "--exclude-standard", "-z"], cwd=ROOT, check=True,
+                           capture_output=True).stdout.decode().split("\0")
+    for name in filter(None, files):
+        src = ROOT / name
+        if src.is_file():
+            (dest / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(src, dest / name)
+
+
+def configure(tree: Path, module: str, tests: tuple[str, ...]) -> None:
+    """mutmut's settings in the copy's pyproject.toml: mutate `module` only, run `tests`."""
+    cfg = "\n".join([
+        "", "[tool.mutmut]",
+        f"source_paths = {json.dumps(list(PACKAGES))}",
+        f"only_mutate = {json.dumps([module])}",
+        'also_copy = ["deploy"]',  # the scenarios the tests load
+        f"pytest_add_cli_args_test_selection = {json.dumps([f'tests/unit/{t}' for t in tests])}",
+        'pytest_add_cli_args = ["-p", "no:cacheprovider", "-q", "-x"]',
+        "use_git_change_detection = false",
+        "",
+    ])
+    with (tree / "pyproject.toml").open("a") as fh:
+        fh.write(cfg)
+
+
+def outcomes(tree: Path, module: str) -> dict[str, int | None]:
+    """mutant name -> exit code, from mutmut's record of the module."""
+    meta = tree / "mutants" / (module + ".meta")
+    return dict(json.loads(meta.read_text())["exit_code_by_key"]) if meta.exists() else {}
+
+
+def run_module(module: str, tests: tuple[str, ...], jobs: int, diff: bool, keep: bool) -> dict[str, object]:
+    tree = Path(tempfile.mkdtemp(prefix="mutation-"))
+    try:
+        copy_tree(tree)
+        configure(tree, module, tests)
+        env = {**os.environ, "PYTHONDONTWRITEBYTECODE": "1"}
+        t0 = time.monotonic()
+        p = subprocess.run([sys.executable, "-m", "mutmut", "run", "--max-children", str(jobs)], cwd=tree, env=env,
+                           capture_output=True, text=True)
+        took = time.monotonic() - t0
+        codes = outcomes(tree, module)
+        if not codes or all(c is None for c in codes.values()):  # (mutmut's clean run of the tests failed)
+            tail = (p.stdout + p.stderr)[-3000:]
+            raise SystemExit(f"mutation: mutmut checked no mutant of {module} (exit {p.returncode}):\n{tail}")
+        killed = sorted(k for k, c in codes.items() if c in KILLED)
+        survived = sorted(k for k, c in codes.items() if c in SURVIVED)
+        other = Counter(str(c) for k, c in codes.items() if c not in KILLED | SURVIVED)
+        diffs = {}
+        if diff:
+            for name in survived:
+                d = subprocess.run([sys.executable, "-m", "mutmut", "show", name], cwd=tree, capture_output=True,
+                                   text=True)
+                diffs[name] = d.stdout
+        return {"module": module, "tests": list(tests), "mutants": len(codes), "killed": len(killed),
+                "survived": survived, "other": dict(other), "seconds": round(took, 1), "diffs": diffs,
+                "tree": str(tree) if keep else None}
+    finally:
+        if not keep:
+            shutil.rmtree(tree, ignore_errors=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("modules", nargs="*", help="paths of core modules (default: all of them)")
+    ap.add_argument("--jobs", type=int, default=2, help="mutants tested at once (default 2)")
+    ap.add_argument("--diff", action="store_true", help="print each survivor's change")
+    ap.add_argument("--json", type=Path, help="also write the figures to this file")
+    ap.add_argument("--keep", action="store_true", help="keep the mutated copies (mutmut browse there)")
+    ap.add_argument("--list", action="store_true", help="list the core modules and their tests")
+    a = ap.parse_args(argv)
+    if a.list:
+        for m, t in CORE.items():
+            print(f"{m}: {', '.join(t)}")
+        return 0
+    unknown = [m for m in a.modules if m not in CORE]
+    if unknown:
+        print(f"mutation: error: not a core module: {', '.join(unknown)} (see --list)", file=sys.stderr)
+        return 2
+    if a.jobs < 1:
+        print("mutation: error: --jobs: must be at least 1", file=sys.stderr)
+        return 2
+    try:
+        import mutmut  # noqa: F401
+    except ImportError:
+        print("mutation: error: mutmut is not installed (pip install -e '.[mutation]')", file=sys.stderr)
+        return 2
+    rows = []
+    for m in a.modules or list(CORE):
+        r = run_module(m, CORE[m], a.jobs, a.diff, a.keep)
+        rows.append(r)
+        print(f"{m}: {r['mutants']} mutants, {r['killed']} killed, {len(r['survived'])} survived"  # type: ignore[arg-type]
+              f"{', other ' + json.dumps(r['other']) if r['other'] else ''} ({r['seconds']} s)", flush=True)
+        for name in r["survived"]:  # type: ignore[attr-defined]
+            print(f"  survived: {name}")
+            if a.diff:
+                print("    " + r["diffs"][name].replace("\n", "\n    "))  # type: ignore[index]
+    print(f"{'module':<34} {'mutants':>7} {'killed':>7} {'survived':>8}")
+    for r in rows:
+        print(f"{r['module']:<34} {r['mutants']:>7} {r['killed']:>7} {len(r['survived']):>8}")  # type: ignore[arg-type]
+    if a.json:
+        a.json.write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
