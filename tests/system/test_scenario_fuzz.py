@@ -23,7 +23,7 @@ import pytest
 from reconswarm.errors import BadInput
 from reconswarm.limits import physics_warnings
 from reconswarm.record.store import RunRecord
-from reconswarm.scenario import parse, warnings
+from reconswarm.scenario import Scenario, parse, warnings
 from reconswarm_bringup import engine
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -152,7 +152,7 @@ def test_every_case_changes_exactly_the_field_it_names_to_its_value():
     assert refused > 0 and any(expected(f, v) == ACCEPT for f, v, _ in CASES)
 
 
-def contacts_likely(s) -> bool:  # type: ignore[no-untyped-def]
+def contacts_likely(s: Scenario) -> bool:
     """docs/scenario.md (Warnings), from eqs. 9 and 11: with v = R_c k_att + perturbation and the band w = d_max -
     d_safe, contacts are likely unless two agents closing 2 v dt per step stay within half the band, |Ψ| >=
     2 v, and R_v >= hypot(r + d_max + v dt, 0.5 m) for every radius r; or when a world limit can hold a robot
@@ -161,7 +161,7 @@ def contacts_likely(s) -> bool:  # type: ignore[no-untyped-def]
     return not _paper_conditions(s) or limits_bind(s)
 
 
-def _paper_conditions(s) -> bool:  # type: ignore[no-untyped-def]
+def _paper_conditions(s: Scenario) -> bool:
     p = s.planner
     v = p.target_radius_m * p.k_att + p.perturbation_mps
     w, dt = p.d_max_m - p.d_safe_m, s.meta.dt_s
@@ -169,7 +169,7 @@ def _paper_conditions(s) -> bool:  # type: ignore[no-untyped-def]
     return 2 * v * dt <= w / 2 and abs(p.psi_mps) >= 2 * v and p.sensing_range_m >= see
 
 
-def limits_bind(s) -> bool:  # type: ignore[no-untyped-def]
+def limits_bind(s: Scenario) -> bool:
     p, world = s.planner, s.world
     u_max = (p.k_att * (p.target_radius_m + max(math.hypot(*o) for o in s.offsets)) + p.perturbation_mps
              + abs(p.psi_mps) * p.d_max_m / (p.d_max_m - p.d_safe_m) * (len(s.agents) - 1 + len(s.obstacles)))
