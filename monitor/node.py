@@ -256,9 +256,13 @@ class MonitorNode:
             extra["end_reason"] = "world lost"
             if self.deferred:
                 log.info("not judged (the world was lost): tokens of agents %s", sorted(self.deferred))
-        # Lockstep equals the in-process engine unless an agent had to act without all of a tick's data.
-        extra["deterministic"] = self.mode == "lockstep" and self.guessed_k < 0
-        extra["determinism_lost_at_s"] = round(self.guessed_k * self.s.meta.dt_s, 9) if self.guessed_k >= 0 else None
+        # Lockstep equals the in-process engine unless an agent had to act without all of a tick's data, or the
+        # world stepped a robot without that tick's command (its end statistics say the first such tick).
+        uncommanded = extra.pop("uncommanded_from_s", None)
+        lost = [t for t in (self.guessed_k * self.s.meta.dt_s if self.guessed_k >= 0 else None, uncommanded)
+                if t is not None]
+        extra["deterministic"] = self.mode == "lockstep" and not lost
+        extra["determinism_lost_at_s"] = round(min(lost), 9) if lost else None
         finished = self.end is not None and self.end.reason != "stopped"  # (stopped: the mission was cut short)
         meta: dict[str, Any] = {"extra": extra, "finished": "1" if finished else "0"}
         start = self.writer.get_meta("mission_start_unix")

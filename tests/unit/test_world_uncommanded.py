@@ -5,7 +5,15 @@ before any agent acts on a guess. The world says it in its end statistics; the m
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import pytest
+
+from reconswarm.net import wire
+from reconswarm.record.store import RunRecord
+from reconswarm.record.summary import summarize
 from simworld.world import WorldNode
+from tests.unit.test_monitor_node import DT, node_for, tick
 from tests.unit.test_world_node import IDS, S, T, advance, command_all, started
 
 
@@ -40,3 +48,22 @@ def test_the_first_tick_stepped_without_a_robots_command_is_said() -> None:
         assert node.k == k + 1
     assert node.uncommanded_k == 3
     assert node.stats()["uncommanded_from_s"] == round(3 * S.meta.dt_s, 9)
+
+
+@pytest.mark.parametrize(("guessed_k", "uncommanded_k", "lost_k"), [(-1, -1, None), (8, -1, 8), (-1, 3, 3), (8, 3, 3),
+                                                                    (2, 3, 2)])
+def test_determinism_lost_at_is_the_earliest_of_the_agents_guess_and_the_worlds_uncommanded_tick(
+        tmp_path: Path, guessed_k: int, uncommanded_k: int, lost_k: int | None) -> None:
+    node = node_for(tmp_path)
+    for k in range(10):
+        tick(node, k, 0.01 * k)
+        if 0 <= guessed_k <= k:
+            node.telemetry(IDS[0], 0, guessed_k)
+    stats = {} if uncommanded_k < 0 else {"uncommanded_from_s": round(uncommanded_k * DT, 9)}
+    node.clock(wire.Clock(10, 10 * DT, tuple(IDS), wire.ClockMode.LOCKSTEP, 0.0, True, "duration", 0, stats), 0.11)
+    node.finish(0.2, 0)
+    with RunRecord(tmp_path / "run.db") as rec:
+        s = summarize(rec)
+    assert (s["deterministic"], s["determinism_lost_at_s"]) == ((True, None) if lost_k is None
+                                                                else (False, round(lost_k * DT, 9)))
+    assert "uncommanded_from_s" not in s  # one name for it: determinism_lost_at_s
