@@ -27,7 +27,7 @@ from reconswarm.net.uplink import LinkChange, Uplink
 from reconswarm.net.wire import ClockMode
 from reconswarm.scenario import load
 from simworld.ros2_io import Ros2World, WorldRos2
-from simworld.world import TickOut, WorldNode
+from simworld.world import Phase, TickOut, WorldNode
 
 log = logging.getLogger("reconswarm.simworld")
 
@@ -73,12 +73,14 @@ class WorldAdapter(Member):
                                                 for a in node.ids}
         self.pub_scan = {} if not self.ros2 else {a: z.declare_publisher(k.scan(a), congestion_control=block)
                                                    for a in node.ids}
-        # Admission: commands only from each agent's own session, bounded, for ticks we published; an agent is
-        # alive while its token is there AND its commands keep coming (a token alone can be forged). In ROS 2
-        # mode commands come as cmd_vel, without our ids: membership by the tokens alone (never `start`ed).
-        # Our own session losing its router is no agent's loss (Uplink, Membership.link).
+        # Admission: commands (in ROS 2 mode cmd_vel) only from each agent's own session, bounded, for ticks we
+        # published, one per agent and tick; an agent is alive while its token is there AND its commands keep
+        # coming (a token alone can be forged), and a token without commands does not hold a lockstep tick up
+        # beyond a grace longer than an agent's own wait for its peers (Membership.awaited). Our own session
+        # losing its router is no agent's loss (Uplink, Membership.link).
         self.gate = Gate(node.s, "simworld")
-        self.members = Membership(confirm_s=node.timing.token_confirm_s)
+        self.members = Membership(confirm_s=node.timing.token_confirm_s,
+                                  await_grace_s=node.timing.agent_wait_timeout_s + 1.0)
         self.uplink = Uplink(session, "simworld")
         self.told: dict[int, bool] = {}
         self.pub_report = z.declare_publisher(k.report("simworld"))
@@ -88,14 +90,21 @@ class WorldAdapter(Member):
 
     def handle(self, key: str, payload: bytes, kind: str, source: str, at_s: float) -> None:
         """A sample, as of the time it arrived (commands are taken in batches: their latency counts from then)."""
+        now, sim = at_s, self.node.k * self.node.s.meta.dt_s
         if self.ros2 is not None and self.ros2.owns(key):
             try:
-                self.ros2.command(key, payload, at_s)
+                c = self.ros2.decode(key, payload)
             except (ros2.Ros2Error, wire.WireError) as exc:
                 self.rej.reject(key, str(exc))
                 self.node.rejected = self.rej.count
+                return
+            self.gate.world_k = self.node.k
+            if self.gate.admit_twist(c, source, key, now):  # bounded, from agent i's own session
+                self.members.data(c.id, now, sim)
+                if not self.told.get(c.id) and self.members.alive(c.id, now, sim):
+                    self.sync(now)
+                self.ros2.command(c, now)
             return
-        now, sim = at_s, self.node.k * self.node.s.meta.dt_s
         try:
             what, aid, leaf = self.keys.parse(key)
             if what == "alive":
@@ -117,11 +126,14 @@ class WorldAdapter(Member):
             self.node.rejected = self.rej.count
 
     def sync(self, now: float) -> None:
-        """Tell the node who is alive by the membership rule (token AND own commands; in ROS 2 mode the token
-        alone), as it changes."""
-        sim = self.node.k * self.node.s.meta.dt_s
-        if self.node.started and self.ros2 is None:
+        """Tell the node who is alive by the membership rule (token AND own commands or cmd_vel), as it changes."""
+        node = self.node
+        sim = node.k * node.s.meta.dt_s
+        if node.started:
             self.members.start(now, sim)
+        if node.phase is Phase.WAIT_COMMANDS and node.deadline_s is not None:  # (since the tick went out)
+            for aid in node.missing():
+                self.members.awaited(aid, node.deadline_s - node.timing.step_timeout_s, now)
         for aid in self.node.ids:
             up = self.members.alive(aid, now, sim)
             if self.told.get(aid, False) != up:

@@ -70,10 +70,15 @@ class WorldRos2:
     def owns(self, key: str) -> bool:
         return key in self.agent_of
 
-    def command(self, key: str, payload: bytes, now_s: float) -> None:
-        """A cmd_vel sample into the world (Ros2Error / WireError when it must be dropped)."""
+    def decode(self, key: str, payload: bytes) -> wire.Cmd:
+        """A cmd_vel sample as robot i's command for the tick in progress (Ros2Error when it must be dropped);
+        the adapter admits it (bounded, from agent i's session) before `command` applies it."""
         v, om = ros2.twist_from_ros(payload)
-        self.world.twist(self.agent_of[key], v, om, now_s)
+        return wire.Cmd(self.agent_of[key], self.world.k, v, om)
+
+    def command(self, c: wire.Cmd, now_s: float) -> None:
+        """An admitted cmd_vel into the world."""
+        self.world.twist(c.id, c.v_mps, c.omega_radps, now_s)
         self.cmd_in += 1
 
     def publish(self, states: list[wire.State]) -> None:

@@ -41,6 +41,7 @@ import numpy as np
 
 from reconswarm.geometry import Edges, sample_boundary, signed_distance
 from reconswarm.net import wire
+from reconswarm.net.membership import Membership as Membership  # (its home before; re-exported)
 from reconswarm.paper.planner import max_repulsion_speed
 from reconswarm.scenario import Scenario
 from reconswarm.sim.sensing import SAMPLE_SPACING_M
@@ -66,6 +67,8 @@ class IntrusionKind(Enum):
     CLOCK = "clock"  # the world's clock changing mode or speed, or t != k dt
     IMPERSONATION = "impersonation"  # an agent's message from a session other than that agent's
     OVERSIZE = "oversize"  # an obstacle set larger than the scenario's full set (refused before decoding)
+    CONFLICT = "conflicting_command"  # a second, different command for an agent's tick (someone else speaks for it)
+    END = "end"  # an end of the mission that the world did not decide (later clocks, or the truth, contradict it)
 
 
 @dataclass(frozen=True)
@@ -143,6 +146,8 @@ class Admission:
         self.hi = allp.max(axis=0) + grow
         self.clock_mode: tuple[str, float] | None = None
         self.last_beacon: dict[int, tuple[float, float, float]] = {}  # id -> (t, px, py)
+        self.last_odom: dict[int, tuple[float, float, float]] = {}  # id -> (t, x, y) of its robot's odometry
+        self.cmds: dict[tuple[int, int], tuple[float, float]] = {}  # (id, k) -> (v, ω) admitted, recent ticks
 
     # -- helpers -------------------------------------------------------------------------------------
 
@@ -185,14 +190,45 @@ class Admission:
             self.last_beacon[b.id] = (b.t, b.px, b.py)
         return who
 
-    def check_cmd(self, c: wire.Cmd, source: str, key: str, now: float, world_k: int) -> Intrusion | None:
-        """A command as the world receives it; world_k: the newest tick it has published."""
+    def check_cmd(self, c: wire.Cmd, source: str, key: str, now: float, world_k: int,
+                  ticked: bool = True) -> Intrusion | None:
+        """A command as the world receives it; world_k: the newest tick it has published. ticked: the command
+        names its tick (the project's own; a ROS 2 cmd_vel does not), and an agent has one command a tick: a
+        different one for a tick already commanded is a conflict (whoever sent it: the world cannot tell
+        which of two sessions stamped with the agent's id is the agent, but the record must say)."""
         u = math.hypot(c.v_mps, self.head_offset.get(c.id, 0.0) * c.omega_radps)  # |u| = |M(θ) [v, ω]|
-        if u > self.u_max * (1.0 + COMMAND_TOL):
+        if not u <= self.u_max * (1.0 + COMMAND_TOL):
             return Intrusion(IntrusionKind.COMMAND, source, key, f"|u| = {u:.6g} m/s above the bound {self.u_max:.6g}")
         if c.k > world_k:
             return Intrusion(IntrusionKind.COMMAND, source, key, f"command for tick {c.k}, newest tick is {world_k}")
-        return self._agent(c.id, source, key, now)
+        who = self._agent(c.id, source, key, now)
+        if who is not None or not ticked:
+            return who
+        had = self.cmds.setdefault((c.id, c.k), (c.v_mps, c.omega_radps))
+        if had != (c.v_mps, c.omega_radps):
+            return Intrusion(IntrusionKind.CONFLICT, source, key, f"agent {c.id} tick {c.k}: ({c.v_mps:.6g}, "
+                             f"{c.omega_radps:.6g}) after ({had[0]:.6g}, {had[1]:.6g})")
+        if len(self.cmds) > 64 * len(self.radius):  # only recent ticks matter: forget the older half
+            for ck in [ck for ck in self.cmds if ck[1] < world_k - 32]:
+                del self.cmds[ck]
+        return None
+
+    def check_odometry(self, st: wire.State, source: str, key: str) -> Intrusion | None:
+        """A robot's odometry (ROS 2 mode) as its agent receives it: the plant's (the world's session, as a
+        state), a pose the robot can have reached, and within reach of the last admitted one."""
+        bad = self.check_world_source(source, key)
+        if bad is not None:
+            return bad
+        where = self._position(st.x, st.y, st.t)
+        if where is None and st.id in self.last_odom:
+            t0, x0, y0 = self.last_odom[st.id]
+            jump = math.hypot(st.x - x0, st.y - y0)
+            if not jump <= self.reach_m(abs(st.t - t0)):
+                where = f"odometry moved {jump:.6g} m in {abs(st.t - t0):.6g} s"
+        if where is not None:
+            return Intrusion(IntrusionKind.POSITION, source, key, where)
+        self.last_odom[st.id] = (st.t, st.x, st.y)
+        return None
 
     def check_set_size(self, n_bytes: int, source: str, key: str) -> Intrusion | None:
         """Before decoding an obstacle set: no larger than the run's largest (decoding 4,000 ids ten times a
@@ -268,98 +304,6 @@ class Admission:
                              f"mode {c.mode} x{c.speed:g}, the run's is {self.clock_mode[0]} x{self.clock_mode[1]:g}")
         self.clock_mode = (c.mode, c.speed)
         return None
-
-
-@dataclass
-class Membership:
-    """Who is alive: a liveliness token AND that agent's own data (beacons or commands) still coming.
-
-    Before `start`, a token alone counts (nobody sends data before the first tick). Afterwards an agent
-    with a token counts until it has been silent both `fresh_s` of wall time and `fresh_sim_s` of
-    simulated time (so neither a stalled world, during which nobody sends, nor a fast realtime clock makes
-    a live agent look dead); an agent not heard since its token appeared (or since the start) gets
-    `grace_s` / `grace_sim_s` likewise. A token that goes counts as gone `confirm_s` later (unless it is
-    back by then); after the caller itself stalled (`settle`), a token that goes is kept for a while; while
-    the caller's own session has no router (`link`), nobody is judged: every token goes at once then, and
-    nobody's data can come. Times: `wall` (the caller's monotonic seconds), `sim` (the newest simulated
-    time it knows).
-    """
-
-    fresh_s: float = 2.0
-    fresh_sim_s: float = 2.0
-    grace_s: float = 10.0
-    grace_sim_s: float = 5.0
-    started: tuple[float, float] | None = None
-    tokens: dict[int, tuple[float, float]] = field(default_factory=dict)  # id -> (wall, sim) it appeared
-    heard: dict[int, tuple[float, float]] = field(default_factory=dict)  # id -> (wall, sim) of its last data
-    # A token that goes is gone this long later, unless it came back: a router that dies takes every token
-    # with it a moment before the caller's session finds its own link gone (measured: the deletions come
-    # first, with the router still listed, in 1 of 5 trials), so `link(False)` still comes in time.
-    confirm_s: float = 0.0
-    settle_until: float = -math.inf  # wall: a token that goes before then is kept (see settle)
-    going: dict[int, float] = field(default_factory=dict)  # tokens that went, not yet judged: id -> wall it went
-    unlinked: bool = False  # the caller's own session has no router (see link)
-
-    def start(self, wall: float, sim: float) -> None:
-        if self.started is None:
-            self.started = (wall, sim)
-
-    def settle(self, until_wall: float) -> None:
-        """The caller itself did not run for a while (SIGSTOP, a starved machine): its session may have lapsed,
-        and every token it hears may go and come back within a moment. Until `until_wall` a token that goes
-        is kept (a list of the living that is suddenly empty broke lockstep's determinism); it is let go
-        then, if it has not come back."""
-        self.settle_until = until_wall
-
-    def link(self, up: bool, wall: float, sim: float, settle_s: float) -> None:
-        """The caller's own session lost its router (up=False: a router that died or froze takes every token
-        with it, and nobody's data can reach us) or has one again (up=True, also when it is a new router).
-        While it has none nobody is judged; once back, tokens that went have `settle_s` to come back, and
-        everyone's data is awaited afresh (the grace, as after the start)."""
-        self.unlinked = not up
-        if up:
-            self.settle_until = max(self.settle_until, wall + settle_s)
-            if self.started is not None:
-                self.started = (wall, sim)
-                self.heard.clear()
-
-    def token(self, agent_id: int, present: bool, wall: float, sim: float) -> None:
-        if present:
-            self.going.pop(agent_id, None)
-            self.tokens.setdefault(agent_id, (wall, sim))
-        elif agent_id in self.tokens:
-            self.going.setdefault(agent_id, wall)
-            self._judge(wall)
-
-    def _judge(self, wall: float) -> None:
-        """Tokens that went: gone once confirmed and settled, unless the caller has no router."""
-        if self.unlinked:
-            return
-        for a, went in list(self.going.items()):
-            if wall >= max(went + self.confirm_s, self.settle_until):
-                self.tokens.pop(a, None)
-                del self.going[a]
-
-    def data(self, agent_id: int, wall: float, sim: float) -> None:
-        self.heard[agent_id] = (wall, sim)
-
-    def alive(self, agent_id: int, wall: float, sim: float) -> bool:
-        if self.going:
-            self._judge(wall)
-        since = self.tokens.get(agent_id)
-        if since is None:
-            return False
-        if self.started is None or self.unlinked:
-            return True
-        last = self.heard.get(agent_id)
-        if last is not None and last[0] >= since[0]:
-            return wall - last[0] <= self.fresh_s or sim - last[1] <= self.fresh_sim_s
-        ref = (max(since[0], self.started[0]), max(since[1], self.started[1]))
-        return wall - ref[0] <= self.grace_s or sim - ref[1] <= self.grace_sim_s
-
-    def alive_ids(self, wall: float, sim: float) -> list[int]:
-        self._judge(wall)
-        return sorted(a for a in list(self.tokens) if self.alive(a, wall, sim))
 
 
 @dataclass

@@ -68,8 +68,8 @@ class CellGrid:
 
     def may_matter(self, own: tuple[float, float], peer: tuple[float, float]) -> bool:
         """Can a peer at `peer` at tick k-1 be within reach of us at tick k (we at `own` at k-1)?"""
-        limit = self.reach_m + 2.0 * self.step_m
-        return (own[0] - peer[0]) ** 2 + (own[1] - peer[1]) ** 2 <= limit * limit
+        # (hypot: a distance beyond the float range is inf, not an OverflowError as a square of 1e308 is)
+        return math.hypot(own[0] - peer[0], own[1] - peer[1]) <= self.reach_m + 2.0 * self.step_m
 
 
 def cell_chunk(c: Cell) -> str:

@@ -61,6 +61,22 @@ class Gate:
         self.refuse(got, now_s)
         return False
 
+    def admit_odometry(self, st: wire.State, source: str, key: str, now_s: float) -> bool:
+        """A robot's odometry (ROS 2 mode), decoded as its state: True to deliver it."""
+        got = self.adm.check_odometry(st, source, key)
+        if got is None:
+            return True
+        self.refuse(got, now_s)
+        return False
+
+    def admit_twist(self, c: wire.Cmd, source: str, key: str, now_s: float) -> bool:
+        """A ROS 2 cmd_vel as the command of the tick in progress (no tick of its own): True to apply it."""
+        got = self.adm.check_cmd(c, source, key, now_s, self.world_k, ticked=False)
+        if got is None:
+            return True
+        self.refuse(got, now_s)
+        return False
+
     def admit_set_bytes(self, n_bytes: int, source: str, key: str, now_s: float) -> bool:
         """An obstacle set's payload, before it is decoded: False if larger than any the run can send."""
         got = self.adm.check_set_size(n_bytes, source, key)

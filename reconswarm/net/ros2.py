@@ -36,6 +36,9 @@ MAX_PAYLOAD_BYTES = 1 << 16  # an Odometry is ~700 bytes; anything this large is
 MAX_DOMAIN_ID = 232  # the largest ROS_DOMAIN_ID ROS 2 allows
 ATTACHMENT_BYTES = 33
 GID_BYTES = 16
+# No robot's pose (m), speed (m/s) or turn rate (rad/s) comes near this: a larger value is refused at decode,
+# so nothing downstream squares or sums numbers near the float range (1.7e308 m/s overflowed an agent).
+MAX_MAGNITUDE = 1e9
 
 
 
@@ -237,6 +240,8 @@ def odom_from_ros(data: bytes | memoryview, agent_id: int | None = None) -> Odom
     values = (p.x, p.y, p.z, q.x, q.y, q.z, q.w, lin.x, ang.z)
     if not all(math.isfinite(v) for v in values):
         raise Ros2Error("odometry: non-finite value")
+    if max(abs(v) for v in values) > MAX_MAGNITUDE:
+        raise Ros2Error(f"odometry: a value beyond {MAX_MAGNITUDE:g} (m, m/s, rad/s)")
     if abs(q.x) > _PLANAR_TOL or abs(q.y) > _PLANAR_TOL or abs(math.hypot(q.z, q.w) - 1.0) > _PLANAR_TOL:
         raise Ros2Error(f"odometry: orientation ({q.x}, {q.y}, {q.z}, {q.w}) is not a unit yaw rotation")
     return Odom(
@@ -263,6 +268,8 @@ def twist_from_ros(data: bytes | memoryview) -> tuple[float, float]:
     v, omega = msg.linear.x, msg.angular.z
     if not (math.isfinite(v) and math.isfinite(omega)):
         raise Ros2Error(f"twist: non-finite command ({v}, {omega})")
+    if abs(v) > MAX_MAGNITUDE or abs(omega) > MAX_MAGNITUDE:
+        raise Ros2Error(f"twist: a command beyond {MAX_MAGNITUDE:g} ({v:.6g} m/s, {omega:.6g} rad/s)")
     return v, omega
 
 

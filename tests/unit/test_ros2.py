@@ -289,9 +289,16 @@ def test_odometry_round_trip(aid, t, x, y, theta, v, omega):
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.floats(allow_nan=False, allow_infinity=False), st.floats(allow_nan=False, allow_infinity=False))
+@given(st.floats(-ros2.MAX_MAGNITUDE, ros2.MAX_MAGNITUDE), st.floats(-ros2.MAX_MAGNITUDE, ros2.MAX_MAGNITUDE))
 def test_twist_round_trip(v, omega):
     assert ros2.twist_from_ros(ros2.twist_to_ros(v, omega)) == (v, omega)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.floats(allow_nan=False, allow_infinity=False).filter(lambda x: abs(x) > ros2.MAX_MAGNITUDE), st.booleans())
+def test_twists_beyond_any_robot_are_refused(big, turn):
+    with pytest.raises(ros2.Ros2Error, match="beyond"):
+        ros2.twist_from_ros(ros2.twist_to_ros(0.0, big) if turn else ros2.twist_to_ros(big, 0.0))
 
 
 @settings(max_examples=300, deadline=None)

@@ -1,0 +1,194 @@
+"""ROS 2 mode attacked from an outside zenoh session with no credentials (issue 20): robot 3's odometry
+replayed shifted by 40 m, a forged cmd_vel driving robot 3 onto robot 5 (rosbags CDR, a hand-packed 33-byte
+attachment), cmd_vel at v = 1.7e308 m/s for robot 7, and a liveliness token held for agent 3 while agent 3
+is killed. Each is one short run of the paper mission (cut to DURATION_S, real time) on a router at
+127.0.0.1: the run keeps its robots apart, no process dies, and every refused forgery is counted with the
+attacker's session as its source; the dead agent is dropped by the world although a token stands for it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+import subprocess
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+import zenoh
+
+from reconswarm.net import ros2, wire
+from reconswarm.net.session import ZenohOptions
+from tests.support import PAPER, ROOT, assert_all_gone, free_port, launcher_cmd, paper_with, read_run_id, tick_count
+from tests.system.faults.test_intrusions import refused_from
+
+DOMAIN = 11
+DURATION_S = 36.0
+ATTACK_FROM_S = 4.0  # simulated: the attack starts once the mission has run this long
+ATTACK_WALL_S = 20.0
+KILL_AT_S = 8.0
+
+
+class Outsider:
+    """A plain client on the run's router: follows the truth and the clock, publishes ROS 2 samples with a
+    hand-packed attachment under its own random gid."""
+
+    def __init__(self, endpoint: str, run: str) -> None:
+        self.z: Any = zenoh.open(ZenohOptions.build([endpoint], None, "client", None).config())
+        self.zid = str(self.z.zid())
+        self.keys = wire.Keys(run)
+        self.gid, self.seq = bytes(range(16)), 0
+        self.lock = threading.Lock()
+        self.truth: wire.Truth | None = None
+        self.clocks: list[wire.Clock] = []
+        self.subs = [self.z.declare_subscriber(self.keys.truth, self._on_truth),
+                     self.z.declare_subscriber(self.keys.clock, self._on_clock)]
+        self.sent = 0
+
+    def _on_truth(self, s: Any) -> None:
+        with self.lock:
+            self.truth = wire.truth_from_wire(s.payload.to_bytes())
+
+    def _on_clock(self, s: Any) -> None:
+        c = wire.clock_from_wire(s.payload.to_bytes())
+        with self.lock:
+            self.clocks.append(c)
+
+    def now(self) -> wire.Truth:
+        while True:
+            with self.lock:
+                if self.truth is not None:
+                    return self.truth
+            time.sleep(0.02)
+
+    def put_ros2(self, key: str, payload: bytes) -> None:
+        self.seq += 1
+        self.z.put(key, payload, attachment=struct.pack("<qqB16s", self.seq, time.time_ns(), 16, self.gid))
+        self.sent += 1
+
+    def close(self) -> None:
+        self.z.close()
+
+
+def _forge_odometry(o: Outsider, until: float) -> None:
+    """Robot 3's odometry, overheard and replayed 40 m to the east, as fast as it comes."""
+    key = ros2.odom_key(DOMAIN, 3)
+    heard: list[bytes] = []
+    sub = o.z.declare_subscriber(key, lambda s: heard.append(s.payload.to_bytes()),  # (not our own forgeries)
+                                 allowed_origin=zenoh.Locality.REMOTE)
+    while time.monotonic() < until:
+        while heard:
+            real = ros2.odom_from_ros(heard.pop(0), 3)
+            fake = ros2.Odom(3, real.t_s, real.x_m + 40.0, real.y_m, real.theta_rad, real.v_mps, real.omega_radps)
+            o.put_ros2(key, ros2.odom_to_ros(fake))
+        time.sleep(0.005)
+    sub.undeclare()
+
+
+def _forge_cmd_vel(o: Outsider, until: float) -> None:
+    """robot 3 steered onto robot 5 at 30 m/s, 100 cmd_vel a second (4 in each 50 ms tick)."""
+    key = ros2.cmd_vel_key(DOMAIN, 3)
+    while time.monotonic() < until:
+        tr = o.now()
+        i3, i5 = tr.ids.index(3), tr.ids.index(5)
+        bearing = math.atan2(tr.py[i5] - tr.py[i3], tr.px[i5] - tr.px[i3])
+        turn = math.remainder(bearing - tr.theta[i3], 2 * math.pi)
+        o.put_ros2(key, ros2.twist_to_ros(30.0, 4.0 * turn))
+        time.sleep(0.01)
+
+
+def _absurd_cmd_vel(o: Outsider, until: float) -> None:
+    """40 cmd_vel at v = 1.7e308 m/s for robot 7 (rosbags' CDR, as any ROS 2 tool packs it)."""
+    store = ros2._store()
+    vec = store.types["geometry_msgs/msg/Vector3"]
+    raw = bytes(store.serialize_cdr(store.types[ros2.TWIST](linear=vec(1.7e308, 0.0, 0.0), angular=vec(0.0, 0.0, 0.0)),
+                                    ros2.TWIST, little_endian=True))
+    for _ in range(40):
+        o.put_ros2(ros2.cmd_vel_key(DOMAIN, 7), raw)
+        time.sleep(0.01)
+
+
+def _token_for_dead_agent(o: Outsider, until: float) -> None:
+    """A second liveliness token for agent 3 (which the launcher kills at KILL_AT_S), held to the end."""
+    token = o.z.liveliness().declare_token(o.keys.alive_agent(3))
+    while time.monotonic() < until:
+        time.sleep(0.1)
+    token.undeclare()
+
+
+ATTACKS = {"odometry": _forge_odometry, "cmd_vel": _forge_cmd_vel, "absurd": _absurd_cmd_vel,
+           "token": _token_for_dead_agent}
+
+
+def _run(tmp_path: Path, attack: str) -> tuple[dict[str, Any], Outsider, int]:
+    out = tmp_path / "run"
+    port = free_port()
+    scenario = paper_with(tmp_path, **{"duration_s = 300.0": f"duration_s = {DURATION_S}"})
+    extra = ["--fault", f"kill:agent:3@{KILL_AT_S:g}"] if attack == "token" else []
+    err = tmp_path / "launcher.err"
+    with err.open("wb") as fh:
+        proc = subprocess.Popen(launcher_cmd(out, "-s", str(scenario), "--ros2", "--ros-domain-id", str(DOMAIN),
+                                             "--json", *extra, port=port), cwd=ROOT, stdout=subprocess.PIPE, stderr=fh)
+    o: Outsider | None = None
+    try:
+        deadline = time.monotonic() + 120
+        while tick_count(out / "run.db") < round(ATTACK_FROM_S / 0.05):
+            assert proc.poll() is None and time.monotonic() < deadline, err.read_text()[-2000:]
+            time.sleep(0.2)
+        o = Outsider(f"tcp/127.0.0.1:{port}", read_run_id(out))
+        ATTACKS[attack](o, time.monotonic() + ATTACK_WALL_S)
+        stdout, _ = proc.communicate(timeout=180)
+    finally:
+        if o is not None:
+            o.close()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        assert_all_gone(out)
+    assert proc.returncode in (0, 1) and stdout.strip(), err.read_text()[-3000:]  # (1: not converged in 36 s)
+    s = json.loads(stdout)
+    print(attack, "sent:", o.sent, "summary:", {k: s.get(k) for k in (
+        "duration_s", "end_reason", "converged", "collisions", "min_agent_gap_m", "agents_lost", "intrusions",
+        "intrusions_by_kind", "messages_rejected_by_process")})
+    assert s["duration_s"] >= DURATION_S - 0.1 and s["end_reason"] == "duration", s  # the mission ran its course
+    return s, o, proc.returncode
+
+
+def test_forged_odometry_cannot_move_an_agents_idea_of_its_robot(tmp_path: Path) -> None:
+    s, o, _ = _run(tmp_path, "odometry")
+    assert o.sent > 100
+    assert s["collisions"] == 0 and s["min_agent_gap_m"] > 0 and s["agents_lost"] == []
+    refused = refused_from(tmp_path / "run" / "run.db", o.zid)
+    assert refused.get("agent-3", {}).get("not_from_world", 0) == o.sent, refused  # each one, at its addressee
+
+
+def test_forged_cmd_vel_cannot_move_a_robot(tmp_path: Path) -> None:
+    s, o, _ = _run(tmp_path, "cmd_vel")
+    assert o.sent > 100
+    assert s["collisions"] == 0 and s["min_agent_gap_m"] > 0 and s["agents_lost"] == []
+    refused = refused_from(tmp_path / "run" / "run.db", o.zid)
+    assert refused.get("simworld", {}).get("impersonation", 0) == o.sent, refused
+    assert o.zid in s["intrusion_sources"]
+
+
+def test_an_absurd_cmd_vel_crashes_nothing(tmp_path: Path) -> None:
+    s, o, _ = _run(tmp_path, "absurd")
+    assert s["agents_lost"] == [] and s["collisions"] == 0
+    assert s["messages_rejected_by_process"].get("simworld", 0) >= o.sent == 40  # refused at decode, counted
+    log = (tmp_path / "run" / "logs" / "agent-7.log").read_text()
+    assert "OverflowError" not in log and "Traceback" not in log
+
+
+def test_a_forged_token_cannot_hide_a_dead_agent(tmp_path: Path) -> None:
+    s, o, _ = _run(tmp_path, "token")
+    assert s["agents_lost"] == [3] and s["collisions"] == 0, s
+    late = [c for c in o.clocks if c.t >= KILL_AT_S + 6.0]  # the world drops it within its grace of silence
+    assert late and all(3 not in c.alive for c in late), [c.alive for c in late[:3]]
+
+
+@pytest.fixture(autouse=True)
+def _paper_exists() -> None:
+    assert PAPER.exists()
