@@ -57,8 +57,12 @@ class MonitorNode:
         self.committed_t = self.t
         self.alive = np.zeros(n, dtype=bool)
         self.seen = np.zeros(n, dtype=bool)
-        self.end: wire.Clock | None = None
+        self.end: wire.Clock | None = None  # the end claimed by an admitted clock, until refused (see poll)
         self.end_at = 0.0
+        self.end_source = ""
+        self.world_gone_at: float | None = None  # the world's token went (after a claimed end: the world's own)
+        self.refused_ends: list[tuple[str, str]] = []  # (source, why) of ends refused, for the adapter to count
+        self.conflict_t: float | None = None  # first conflicting command a process reported (simulated s)
         self.mode: str | None = None
         self.guessed_k = -1  # the first tick an agent acted on without all its data (lockstep; -1: none)
         self.wall0: float | None = None  # when the first clock came
@@ -151,6 +155,7 @@ class MonitorNode:
     # ------------------------------------------------------------------------------------- the world
 
     def world_up(self, up: bool, now_s: float) -> None:
+        self.world_gone_at = None if up else now_s
         if not up and self.wall0 is not None and self.end is None:
             self._stalled(now_s, "its token is gone")
 
@@ -160,7 +165,16 @@ class MonitorNode:
             log.warning("the world stalls at t=%.2f (%s): agents' tokens are not judged until it is back", self.t,
                         why)
 
-    def clock(self, c: wire.Clock, now_s: float) -> None:
+    def refuse_end(self, why: str) -> None:
+        """The end claimed is not the world's: refused (counted by the adapter with its source), recording goes on."""
+        assert self.end is not None
+        log.warning("an end at t=%.2f (%s) refused: %s", self.end.t, self.end.reason, why)
+        self.refused_ends.append((self.end_source, f"end {self.end.reason!r} at tick {self.end.k}: {why}"))
+        self.end = None
+
+    def clock(self, c: wire.Clock, now_s: float, source: str = "") -> None:
+        if self.end is not None and not c.end and c.k >= self.end.k:  # the world ticks on: it did not end
+            self.refuse_end(f"the world's clock goes on (tick {c.k})")
         self.last_clock_s = now_s
         if self.stall_since is not None:
             self.emit(Event(round(self.stall_t, 9), EventKind.WORLD_STALLED,
@@ -176,8 +190,8 @@ class MonitorNode:
             self.wall0 = now_s
             if self.resume_from is None:
                 self.writer.set_meta(mission_start_unix=f"{now_s + self.unix_offset_s:.6f}")
-        if c.end:
-            self.end, self.end_at = c, now_s
+        if c.end and self.end is None:
+            self.end, self.end_at, self.end_source = c, now_s, source
 
     def _judge_deferred(self, now_s: float) -> None:
         """A stall is over: tokens that are down now (and were up) are losses; ones that flapped are not."""
@@ -193,6 +207,13 @@ class MonitorNode:
             raise wire.WireError("truth names an agent that is not in the scenario")
         if tr.k > self.written:
             self.pending[tr.k] = tr
+
+    def conflict(self, first_t: float) -> None:
+        """A process refused a conflicting command (two different commands for one agent's tick): the run is no
+        longer the in-process engine's, whatever else happened."""
+        if self.conflict_t is None:
+            log.warning("conflicting commands at t=%.2f: the run is not deterministic", first_t)
+        self.conflict_t = first_t if self.conflict_t is None else min(self.conflict_t, first_t)
 
     def telemetry(self, agent_id: int, rejected: int, guessed_k: int) -> None:
         """An agent's counters (from its report): messages it rejected, the first tick it guessed (-1: none)."""
@@ -240,7 +261,15 @@ class MonitorNode:
                 self._judge_deferred(now_s)
             self.network_events(now_s)
             return False
-        return self.written >= self.end.k or now_s - self.end_at > self.timing.end_grace_s
+        # A claimed end stands once its tick is recorded and the world is gone (it closes its session after its
+        # end: a forger's clock is followed by the world's), or after end_grace_s; the truth must not contradict
+        # it: "converged" is refused unless the record's own error says so at its tick.
+        if self.written >= self.end.k and self.end.reason == "converged" and not self.rec.converged():
+            self.refuse_end(f"the truth is not converged (max |e| {self.rec.max_error_m:.3g} m at tick {self.written})")
+            return False
+        gone = self.world_gone_at is not None and self.world_gone_at >= self.end_at
+        late = now_s - self.end_at > self.timing.end_grace_s
+        return (self.written >= self.end.k and gone) or late
 
     def finish(self, now_s: float, rejected_here: int) -> None:
         """Close the record: counters, the end reason (or the world's loss), the wall time."""
@@ -258,9 +287,10 @@ class MonitorNode:
                 log.info("not judged (the world was lost): tokens of agents %s", sorted(self.deferred))
         # Lockstep equals the in-process engine unless an agent had to act without all of a tick's data, or the
         # world stepped a robot without that tick's command (its end statistics say the first such tick).
+        # A conflicting command (someone else spoke for an agent) loses it too.
         uncommanded = extra.pop("uncommanded_from_s", None)
-        lost = [t for t in (self.guessed_k * self.s.meta.dt_s if self.guessed_k >= 0 else None, uncommanded)
-                if t is not None]
+        lost = [t for t in (self.guessed_k * self.s.meta.dt_s if self.guessed_k >= 0 else None, self.conflict_t,
+                            uncommanded) if t is not None]
         extra["deterministic"] = self.mode == "lockstep" and not lost
         extra["determinism_lost_at_s"] = round(min(lost), 9) if lost else None
         finished = self.end is not None and self.end.reason != "stopped"  # (stopped: the mission was cut short)

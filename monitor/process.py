@@ -25,7 +25,7 @@ from monitor.live import LiveFeed, LiveView
 from monitor.node import MonitorNode
 from reconswarm.errors import ProcessFailure
 from reconswarm.net import wire
-from reconswarm.net.admission import Membership
+from reconswarm.net.admission import Intrusion, IntrusionKind, Membership
 from reconswarm.net.gate import Gate
 from reconswarm.net.report import report_from_wire
 from reconswarm.net.session import Inbox, Member, Rejections, StartMark, Stopper, ZenohOptions, serving
@@ -94,7 +94,7 @@ class MonitorAdapter(Member):
             elif what == "clock":
                 c = wire.clock_from_wire(payload)
                 if gate.admit(c, source, key, now):
-                    node.clock(c, now)
+                    node.clock(c, now, source)
             elif what == "truth":
                 tr = wire.truth_from_wire(payload)
                 if gate.admit(tr, source, key, now):
@@ -116,6 +116,9 @@ class MonitorAdapter(Member):
             self.node.telemetry(aid, r.rejected, r.guessed_k)
         if r.rows is not None:
             self.node.writer.intrusions(r.process, list(r.rows))
+            for kind, _src, _n, first_t in r.rows:
+                if kind == IntrusionKind.CONFLICT.value:
+                    self.node.conflict(first_t)
 
     def sync(self, now: float) -> None:
         """Tell the node who is alive by the membership rule (token AND own beacons), as it changes."""
@@ -179,6 +182,9 @@ class MonitorAdapter(Member):
                     self.handle(*item)
                 self.sync(time.monotonic())
                 done = node.poll(time.monotonic())
+                for source, why in node.refused_ends:  # ends the world did not decide: intrusions
+                    self.gate.refuse(Intrusion(IntrusionKind.END, source, self.keys.clock, why), time.monotonic())
+                node.refused_ends.clear()
                 self.publish()
                 self.feed_live(time.monotonic())
                 if done:

@@ -31,6 +31,25 @@ def lost_agents(events: list[dict[str, Any]]) -> list[int]:
     return sorted(a for a, k in last.items() if k == "agent_lost")
 
 
+def distinct_intrusions(rows: list[dict[str, Any]]) -> tuple[dict[str, int], dict[str, int]]:
+    """(refused messages per kind, each counted once per run; refusals per receiving process).
+
+    Every process counts what it refuses, per kind and source, so one forged message heard by ten processes
+    (a clock: the monitor and every agent) is ten refusals but one message. Per kind and source, the
+    messages are the most any one process refused: those that reached several processes are counted once
+    (a process that heard only some of them, an agent that came later, counts fewer, never more)."""
+    most: dict[tuple[str, str], int] = {}
+    by_process: dict[str, int] = {}
+    for row in rows:
+        k, n = (row["kind"], row["source"]), int(row["count"])
+        most[k] = max(most.get(k, 0), n)
+        by_process[row["process"]] = by_process.get(row["process"], 0) + n
+    by_kind: dict[str, int] = {}
+    for (kind, _source), n in sorted(most.items()):
+        by_kind[kind] = by_kind.get(kind, 0) + n
+    return by_kind, by_process
+
+
 def convergence_time(t: np.ndarray, max_err: np.ndarray, tol: float) -> float | None:
     """Start of the final stretch with every live agent within tol, if the run ends inside it."""
     if max_err.size == 0 or not (max_err[-1] <= tol):
@@ -55,9 +74,7 @@ def summarize(rec: RunRecord) -> dict[str, Any]:
         path = np.zeros(len(rec.ids))
     counters = rec.counters()
     intrusions = rec.intrusions()
-    by_kind: dict[str, int] = {}
-    for row in intrusions:
-        by_kind[row["kind"]] = by_kind.get(row["kind"], 0) + int(row["count"])
+    by_kind, by_process = distinct_intrusions(intrusions)
     wall = rec.meta.get("wall_time_s")
     out: dict[str, Any] = {
         "scenario": rec.meta.get("scenario", s.meta.name),
@@ -87,6 +104,7 @@ def summarize(rec: RunRecord) -> dict[str, Any]:
         "messages_rejected_by_process": counters,
         "record_gaps": rec.gaps(),
         "intrusions_by_kind": by_kind,
+        "intrusions_by_process": by_process,
         "intrusion_sources": sorted({row["source"] for row in intrusions}),
         # The engine is deterministic; lockstep is unless an agent acted without all of a tick's data (the
         # monitor's extra below says so, with the simulated time it happened); realtime is not, by design.
@@ -115,7 +133,7 @@ def render(summary: dict[str, Any]) -> Any:
         if key == "messages_rejected_by_process":
             val = {k: v for k, v in val.items() if v}
         if key in ("path_length_m", "messages_rejected_by_process", "record_gaps", "intrusions_by_kind",
-                   "intrusion_sources"):
+                   "intrusions_by_process", "intrusion_sources"):
             if isinstance(val, dict) and val:
                 nums = [v for v in val.values() if isinstance(v, int | float)]
                 if key == "path_length_m" and nums:

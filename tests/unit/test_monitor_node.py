@@ -176,8 +176,10 @@ def test_topology_events_are_recorded_and_published_alike(tmp_path: Path) -> Non
     k = 0
     for k in range(60):
         tick(node, k, 0.01 * k, far if k >= 5 else None)
-    node.clock(clock(k + 1, end=True), 1.0)
+    end = clock(k + 1, end=True)
+    node.clock(wire.Clock(end.k, end.t, end.alive, end.mode, end.speed, True, "duration"), 1.0)  # (not converged)
     node.truth(truth(k + 1, far))
+    node.world_up(False, 1.0)  # the world closes its session after its end
     assert node.poll(1.0) is True
     node.finish(1.1, 2)
     out = node.take_events()
@@ -186,7 +188,7 @@ def test_topology_events_are_recorded_and_published_alike(tmp_path: Path) -> Non
     assert recorded(tmp_path) == [e.to_dict() for e in out]
     assert wire.event_from_wire(wire.event_to_wire(out[0])) == out[0]
     with RunRecord(tmp_path / "run.db") as rec:
-        assert rec.meta_json("extra")["end_reason"] == "converged" and rec.counters()["monitor"] == 2
+        assert rec.meta_json("extra")["end_reason"] == "duration" and rec.counters()["monitor"] == 2
         assert float(rec.meta["wall_time_s"]) == pytest.approx(1.1)  # from the first clock
 
 
