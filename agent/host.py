@@ -12,9 +12,10 @@ is for, through one inbox and one loop that steps every hosted node (agent/node.
 - per agent: its state (urgent: it starts a tick; in ROS 2 mode its odometry and its scan);
 - a sample is decoded once; each agent takes it through its own link (agent/link.py: its gate, counters).
 
-With more than one agent the subscriptions take local samples too (co-hosted agents hear each other
-without the router); each agent drops its own beacon and set coming back. A single agent takes remote
-samples only, as it always did.
+Co-hosted agents hear each other in the process: a beacon or set one of them publishes is handed, as the
+same bytes with the session as source, to the others that listen to its cell, at once (the subscriptions
+take remote samples only, so nobody's own puts wake a subscriber's thread). A node is stepped when it has
+input, a deadline, or every `agent_poll_s` (its timers).
 """
 
 from __future__ import annotations
@@ -74,7 +75,8 @@ class TaggedInbox:
         if not self._urgent and len(self._samples) < self._want and (timeout is None or timeout > 0):
             self._ready.wait(timeout)
         self._urgent = False
-        Inbox.wakeups += 1
+        if timeout != 0:  # (a round that only hands over what co-hosted agents published does not count)
+            Inbox.wakeups += 1
         out = []
         while self._samples:
             tag, sample, at = self._samples.popleft()
@@ -92,7 +94,10 @@ class AgentHost:
                  inbox: TaggedInbox) -> None:
         self.z, self.keys, self.links, self.inbox = session, keys, links, inbox
         self.active = dict(links)  # the agents still running (one that exited leaves this)
-        self.locality = zenoh.Locality.REMOTE if len(links) == 1 else zenoh.Locality.ANY
+        self.locality = zenoh.Locality.REMOTE  # (co-hosted agents' samples are handed over in the process)
+        self.source = str(session.info.zid())  # the source of what co-hosted agents hand each other
+        self.local: list[tuple[Tag, Item]] = []  # what co-hosted agents published since the last round
+        self.stepped: dict[int, float] = {}  # agent -> wall time its node was last stepped
         self.listening: dict[int, frozenset[Cell] | None] = {}  # agent -> the cells it listens to (None: all)
         self.cell_subs: dict[Cell | None, tuple[Any, Any]] = {}  # the host's subscriptions (None: every cell)
         self.sets: dict[int, Item] = {}  # agent -> the newest obstacle set heard from it (with its cell in its key)
@@ -167,6 +172,9 @@ class AgentHost:
         pending, self.pending = self.pending, []
         for aid, item in pending:
             self._deliver(("cell", None), item, batches, aid)
+        local, self.local = self.local, []
+        for tag, item in local:
+            self._deliver(tag, item, batches, None)
         seen: set[tuple[str, bytes, str]] = set()
         for tag, item in items:
             if tag[0] == "cell":
@@ -187,6 +195,9 @@ class AgentHost:
             return
         if tag == ALL:
             who = list(self.active)
+        elif tag[0] == "local":  # a co-hosted agent's: for the others that hear its cell
+            cell = self._cell(key)
+            who = [a for a in self.active if a != tag[1] and self._hears(self.listening.get(a, frozenset()), cell)]
         else:  # (a key with no valid cell: those the subscription it came through was for, to count it)
             cell = self._cell(key)
             who = [a for a in self.active if self._hears(self.listening.get(a, frozenset()), tag[1] if cell is None
@@ -220,13 +231,17 @@ class AgentHost:
             now = time.monotonic()
             needs = [w for w in (n.awaiting(now) for n in nodes) if w is not None]
             wakes = [w for w in (n.wake_at_s() for n in nodes) if w is not None]
-            timeout = poll_s if not wakes else min(poll_s, max(0.0, min(wakes) - now))
+            timeout = 0.0 if self.local else poll_s if not wakes else min(poll_s, max(0.0, min(wakes) - now))
             batches = self.route(self.inbox.take(min(needs) if needs else None, timeout))
             for aid, link in list(self.active.items()):
                 batch = batches[aid]
                 if link.ros2 is not None:
                     batch += link.ros2.take_invalid()
-                for out in link.node.step(batch, time.monotonic()):
+                now, wake = time.monotonic(), link.node.wake_at_s()
+                if not batch and now - self.stepped.get(aid, -math.inf) < poll_s and (wake is None or now < wake):
+                    continue  # nothing new for it, and none of its timers due
+                self.stepped[aid] = now
+                for out in link.node.step(batch, now):
                     if isinstance(out, Exit):
                         link.report(final=True)
                         codes.append(out.code)
@@ -240,7 +255,12 @@ class AgentHost:
                         return RECONNECT
                     if isinstance(out, Cells):
                         self.listen(aid, out)
-                    link.publish(out)
+                    put = link.publish(out)
+                    if put is not None and len(self.links) > 1:
+                        item = (put[0], put[1], "PUT", self.source, now)
+                        self.local.append((("local", aid), item))
+                        if isinstance(out, wire.ObstacleSet):
+                            self.sets[aid] = item  # (for an agent that starts listening to its cell later)
                 else:
                     link.report()
         for link in self.active.values():

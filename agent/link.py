@@ -59,9 +59,9 @@ def decode_sample(keys: wire.Keys, key: str, payload: bytes, kind: str) -> Decod
 class AgentLink(Member):
     """One agent's publishers, token, gate and counters in a session, around its node.
 
-    own_source: the session's id when co-hosted agents hear each other through it (the host's subscriptions
-    then take local samples too): our own beacon and set come back from it and are not for us. None (a lone
-    agent, whose subscriptions take remote samples only): anything on our own keys comes from another session.
+    own_source: the session's id when co-hosted agents share it (the host hands them each other's beacons and
+    sets with it as their source); None for a lone agent. Anything on our own keys that the session receives
+    comes from another session.
     """
 
     def __init__(self, node: AgentNode, keys: wire.Keys, session: zenoh.Session, rej: Rejections, gate: Gate,
@@ -113,7 +113,9 @@ class AgentLink(Member):
             odom = self.ros2.decode(key, payload)
             if isinstance(odom, Invalid):
                 self.rej.reject(key, odom.reason)
-            return odom
+                return odom
+            # The plant's (the world's session), a pose the robot can have reached: else refused and counted.
+            return odom if self.gate.admit_odometry(odom, source, key, time.monotonic()) else None
         if key.endswith("/obstacles") and not self.admit_bytes(len(payload), source, key):
             return None
         return self.take(decode_sample(self.keys, key, payload, kind), key, source)
@@ -140,18 +142,26 @@ class AgentLink(Member):
             return bad
         return m if self.gate.admit(m, source, key, time.monotonic()) else None
 
-    def publish(self, out: Output) -> None:
+    def publish(self, out: Output) -> tuple[str, bytes] | None:
+        """Put what the node returned; a beacon or obstacle set: its key and payload (for co-hosted agents)."""
         if isinstance(out, wire.Cmd):
             if self.ros2 is not None:
                 self.ros2.command(out)
             elif self.pub_cmd is not None:
                 self.pub_cmd.put(wire.cmd_to_wire(out))
         elif isinstance(out, wire.Beacon):
-            self.pub_beacon.put(wire.beacon_to_wire(out))
+            payload = wire.beacon_to_wire(out)
+            self.pub_beacon.put(payload)
+            assert self.home is not None
+            return self.keys.beacon(self.home, self.id), payload
         elif isinstance(out, wire.ObstacleSet):
-            self.pub_obs.put(wire.obstacles_to_wire(out))
+            payload = wire.obstacles_to_wire(out)
+            self.pub_obs.put(payload)
+            assert self.home is not None
+            return self.keys.obstacles(self.home, self.id), payload
         elif isinstance(out, Cells):
             self.cells(out)
+        return None
 
     def report(self, final: bool = False) -> None:
         """Our telemetry to the monitor: counters every `telemetry_s` (our heartbeat) and at once when we first

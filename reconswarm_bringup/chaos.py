@@ -38,6 +38,10 @@ def inject(f: Fault, fleet: Fleet, run: str, scenario_path: Path) -> list[Timer]
     if proc is None or proc.popen.poll() is not None:
         log.warning("fault: %s %s is not running", f.target, ident)
         return []
+    if proc.members:  # an agent host (--agents-per-process): the fault acts on its process, so on all its agents
+        log.warning("fault: agent %s runs in the process of agents %s: the %s acts on all of them", ident, proc.id,
+                    f.action)
+        ident = proc.id
     if f.action == "kill":
         # A killed agent stays dead; a killed monitor or router is restarted by the launcher's supervision.
         proc.expected_exit = f.target == "agent"  # the world's death ends the run (exit 3)

@@ -101,7 +101,8 @@ def launch_cmd(
         if hosts not in (1, 2):
             raise BadInput(f"--hosts: expected 1 or 2, got {hosts}")
         validate.launch(agents=agents, scenario=scenario, out=out.resolve(), timeout_s=timeout, speed=speed,
-                        router=router, hosts=hosts, available_mb=validate.available_memory_mb())
+                        router=router, hosts=hosts, available_mb=validate.available_memory_mb(),
+                        per_process=per_process)
         cfg = LaunchConfig(out=out.resolve(), scenario=scenario, agents=agents, clock=clock, speed=speed,
                            planner=planner, router=router, secure=secure,
                            faults=tuple(faults_mod.parse(f) for f in fault or []), timeout_s=timeout,

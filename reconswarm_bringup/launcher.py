@@ -47,13 +47,15 @@ def prepare_scenario(cfg: LaunchConfig) -> Scenario:
         raise BadInput("-n/--agents and -s/--scenario: give one (-n generates a scenario)")
     if cfg.agents is not None:
         option = f"-n {cfg.agents}"
-        validate.machine_holds(option, cfg.agents, validate.available_memory_mb(), routers=cfg.hosts)
+        validate.machine_holds(option, cfg.agents, validate.available_memory_mb(), routers=cfg.hosts,
+                               per_process=packing.per_process(cfg.agents_per_process, cfg.agents))
         # Through the loader's checks (what the wire can carry, ...), as every process will read it.
         s = parse(to_toml(generate(cfg.agents, max(1, min(10, cfg.agents // 5 + 2)), 0)), f"{option} (generated)")
     else:
         s = load(cfg.scenario or PAPER)
+        per = packing.per_process(cfg.agents_per_process, len(s.agents))
         validate.machine_holds(f"-s {cfg.scenario or PAPER}", len(s.agents), validate.available_memory_mb(),
-                               routers=cfg.hosts)
+                               routers=cfg.hosts, per_process=per)
     for w in warnings(s):
         log.warning("warning: %s", w)
     validate.fault_targets(cfg.faults, {a.id for a in s.agents})

@@ -13,11 +13,15 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from reconswarm.errors import BadInput
+from reconswarm_bringup import packing
 from reconswarm_bringup.faults import Fault
 
 # Peak RSS per process of a local run, in MB: docs/benchmarks.md (bench/bench_deploy.py, medians
 # at 10-50 agents); the launcher's own (a zenoh session, numpy, rich) measured at 54 MB (VmHWM, paper mission).
 PEAK_RSS_MB = {"agent": 64, "monitor": 86, "simworld": 62, "router": 50, "launcher": 60}
+# Each further agent of an agent host (--agents-per-process): a host of 5 paper agents peaked at 84-85 MB against
+# 77-81 MB for one agent's process, ~1 MB per further agent; counted at the 10 MB per agent the issue allows.
+HOSTED_AGENT_MB = 10
 # Endpoints the launcher can check and start a router on: PROTO/HOST:PORT.
 HOST_PORT_PROTOCOLS = ("tcp", "tls", "udp", "quic", "ws")
 _HOSTNAME = re.compile(r"^[A-Za-z0-9]([A-Za-z0-9-]{0,62})(\.[A-Za-z0-9]([A-Za-z0-9-]{0,62}))*\.?$")
@@ -78,20 +82,26 @@ def available_memory_mb(meminfo: str | None = None) -> float | None:
     return int(m.group(1)) / 1024 if m else None
 
 
-def run_memory_mb(n_agents: int, routers: int = 1) -> float:
-    """Peak memory of a local run: one process per agent, simworld, monitor, the routers, the launcher."""
-    p = PEAK_RSS_MB
-    return n_agents * p["agent"] + p["simworld"] + p["monitor"] + routers * p["router"] + p["launcher"]
+def run_memory_mb(n_agents: int, routers: int = 1, per_process: int = 1) -> float:
+    """Peak memory of a local run: the agents' processes (up to per_process agents each), simworld, monitor, the
+    routers, the launcher."""
+    p, procs = PEAK_RSS_MB, math.ceil(n_agents / max(1, per_process))
+    agents = procs * p["agent"] + (n_agents - procs) * HOSTED_AGENT_MB
+    return agents + p["simworld"] + p["monitor"] + routers * p["router"] + p["launcher"]
 
 
-def machine_holds(option: str, n_agents: int, available_mb: float | None, routers: int = 1) -> None:
+def machine_holds(option: str, n_agents: int, available_mb: float | None, routers: int = 1,
+                  per_process: int = 1) -> None:
     """Refuse a run whose processes need more memory than this machine has available."""
     if available_mb is None:
         return
-    need = run_memory_mb(n_agents, routers)
+    need = run_memory_mb(n_agents, routers, per_process)
     if need > available_mb:
-        raise BadInput(f"{option}: {n_agents} agent processes need about {_mb(need)} of memory "
-                       f"({PEAK_RSS_MB['agent']} MB each, plus simworld, monitor, router and launcher), "
+        procs = math.ceil(n_agents / max(1, per_process))
+        each = (f"{PEAK_RSS_MB['agent']} MB each" if per_process <= 1 else
+                f"in {procs} processes: {PEAK_RSS_MB['agent']} MB a process, {HOSTED_AGENT_MB} MB each further agent")
+        raise BadInput(f"{option}: {n_agents} agent{' processes' if per_process <= 1 else 's'} need about "
+                       f"{_mb(need)} of memory ({each}, plus simworld, monitor, router and launcher), "
                        f"this machine has {_mb(available_mb)} available")
 
 
@@ -132,14 +142,15 @@ def writable_file(option: str, path: Path) -> None:
 
 
 def launch(*, agents: int | None, scenario: Path | None, out: Path, timeout_s: float | None, speed: float,
-           router: str | None, hosts: int, available_mb: float | None) -> None:
+           router: str | None, hosts: int, available_mb: float | None, per_process: int | str = 1) -> None:
     """run_local.sh's arguments, before anything starts (the scenario's own size is checked once loaded,
     with `machine_holds`)."""
     if agents is not None and scenario is not None:
         raise BadInput("-n/--agents and -s/--scenario: give one (-n generates a scenario)")
     if agents is not None:
         agent_count("-n", agents)
-        machine_holds(f"-n {agents}", agents, available_mb, routers=hosts)
+        machine_holds(f"-n {agents}", agents, available_mb, routers=hosts,
+                      per_process=packing.per_process(per_process, agents))
     positive_seconds("--timeout", timeout_s)
     positive_finite("--speed", speed)
     if router is not None:

@@ -169,3 +169,22 @@ def test_bad_agents_per_process_is_one_line_exit_2(out: Path, args: list[str], l
     assert p.returncode == 2 and p.stdout == ""
     (last,) = p.stderr.strip().splitlines()
     assert line in last, last
+
+
+def test_restarting_a_hosted_agent_restarts_its_host_and_all_its_agents_rejoin(out: Path) -> None:
+    p = run_launcher(out, "--agents-per-process", "5", "--fault", "restart:agent:4@70+1", "--json")
+    assert p.returncode == 0, p.stderr[-3000:]
+    s = json.loads(p.stdout)
+    assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == [], s
+    ev = [(e["kind"], e["agent"]) for e in events(out / "run.db") if e["kind"] in ("agent_lost", "agent_joined")]
+    assert sorted(ev) == sorted([("agent_lost", a) for a in IDS[:5]] + [("agent_joined", a) for a in IDS[:5]])
+    # processes.tsv: the host's agents twice (the first host's pid, then the new one's), the others once.
+    rows = [line.split("\t") for line in (out / "processes.tsv").read_text().splitlines() if line.startswith("agent")]
+    pids = defaultdict(list)
+    for _, aid, pid in rows:
+        pids[int(aid)].append(int(pid))
+    assert all(len(pids[a]) == 2 and pids[a] == pids[1] and pids[a][0] != pids[a][1] for a in IDS[:5])
+    assert all(len(pids[a]) == 1 for a in IDS[5:])
+    log = (out / "logs" / "agent-1-5.log").read_text()
+    assert sorted(int(ln.split("agent ")[1].split(":")[0]) for ln in log.splitlines() if "joining at tick" in ln) \
+        == list(IDS[:5])

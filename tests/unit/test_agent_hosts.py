@@ -114,3 +114,15 @@ def test_secure_mode_gives_an_agent_host_one_credential_granted_exactly_its_agen
     assert not any(f"/{i}/" in k or k.endswith(f"/{i}") or k.endswith(f"-{i}") for k in sent("agents-1-5")
                    for i in range(6, 11))
     assert "agents-6" not in {c for sub in acl["subjects"] for c in sub["cert_common_names"]}
+
+
+def test_the_memory_check_counts_agent_hosts_as_fewer_processes() -> None:
+    from reconswarm_bringup import validate
+
+    with pytest.raises(BadInput, match=r"^-n 400: 400 agent processes need about 25\.\d GB"):
+        validate.machine_holds("-n 400", 400, 22_745.0)  # one process per agent: 64 MB each
+    validate.machine_holds("-n 400", 400, 22_745.0, per_process=200)  # 2 hosts: 128 + 398 x 10 MB and the rest
+    assert validate.run_memory_mb(400, per_process=200) == 2 * 64 + 398 * 10 + 62 + 86 + 50 + 60
+    with pytest.raises(BadInput, match=r"^-n 9000: 9000 agents need about .* \(in 180 processes: 64 MB a process, "
+                                       r"10 MB each further agent, plus simworld"):
+        validate.machine_holds("-n 9000", 9000, 22_745.0, per_process=50)
