@@ -140,8 +140,6 @@ class AgentNode:
             self._world_back(now)
             self.mode = m.mode
             self.period_s = self.s.meta.dt_s / m.speed if m.speed > 0 else 0.0
-            if m.end:
-                self.ended = True
         elif isinstance(m, wire.State):
             if m.id != self.id:
                 return
@@ -394,5 +392,7 @@ class AgentNode:
         if self.started and now - self.last_act > t.waiting_log_s and now > self.told_waiting + t.waiting_log_s:
             self.told_waiting = now
             log.info("agent %d: %s", self.id, self.waiting_for())
-        if self.ended:
+        last = self.clocks.get(max(self.clocks, default=-1))  # an end stands once the world's token went after it,
+        self.ended |= last is not None and last.end and (self.world_gone or now - self.last_clock > t.end_confirm_s)
+        if self.ended:  # (or no clock came for a while: a later clock from the world says the end was not its own)
             self._out.append(Exit(0))

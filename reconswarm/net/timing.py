@@ -39,6 +39,9 @@ class Timing:
     agent_poll_s: float = 0.05
     # After the world's end of mission, keep the token this long so the monitor sees the end first.
     agent_end_linger_s: float = 0.5
+    # An end clock stands once the world's token has gone (the world closes its session after its end), or
+    # after this long with no later clock from the world (whose next clock says someone else claimed the end).
+    end_confirm_s: float = 5.0
     # The agent's report (its counters, for the monitor) at least this often: its heartbeat, well inside the
     # monitor's 2 s of silence after which an agent with a token is not counted alive (admission.Membership).
     telemetry_s: float = 0.5

@@ -397,7 +397,20 @@ def test_world_silence_exits_3_and_the_end_of_mission_exits_0() -> None:
     assert Exit(3) in node.step([], T.world_silence_s + 0.01)
     node = started(peers=())
     assert node.step([], 1000.0) == []  # before the first clock nothing is watched
-    assert node.step([clock(0, (A,), end=True, reason="converged")], 1000.1) == [Exit(0)]
+    assert node.step([clock(0, (A,), end=True, reason="converged")], 1000.1) == []  # the world's end, once
+    assert node.step([WorldToken(False)], 1000.3) == [Exit(0)]  # its token goes after it (it closed its session)
+
+
+def test_an_end_the_worlds_next_clock_contradicts_is_not_the_end() -> None:
+    node = started(peers=())
+    node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
+    assert Exit(0) not in node.step([clock(1, (A,), end=True, reason="converged")], 0.1)  # (the world's id on it)
+    node.step([clock(1, (A,)), state(1, 100.0, 0.0)], 0.2)  # the world's own clock for that tick: it goes on
+    assert Exit(0) not in node.step([], 0.2 + T.end_confirm_s + 1.0)
+    node = started(peers=(), timing=dataclasses.replace(T, end_confirm_s=1.0))
+    node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
+    assert Exit(0) not in node.step([clock(1, (A,), end=True, reason="duration")], 0.1)
+    assert Exit(0) in node.step([], 1.2)  # no news of the world's token, no later clock: the end stands
 
 
 def test_while_waiting_the_node_logs_what_it_lacks(caplog: pytest.LogCaptureFixture) -> None:
