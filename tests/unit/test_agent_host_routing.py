@@ -1,0 +1,98 @@
+"""An agent host's routing (agent/host.py) on a real zenoh session (alone on 127.0.0.1): a beacon or set goes to
+the hosted agents that listen to the cell it was published in, whichever subscription it came through, once; a
+set heard before is replayed to an agent that starts listening to its cell; what a co-hosted agent publishes
+goes to the others, never back to itself; the host hears only remote samples."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+import zenoh
+
+from agent.host import AgentHost, TaggedInbox
+from agent.link import AgentLink
+from agent.messages import Invalid
+from agent.neighbours import Cells
+from agent.node import AgentNode
+from reconswarm.net import wire
+from reconswarm.net.gate import Gate
+from reconswarm.net.session import Rejections, ZenohOptions
+from reconswarm.scenario import load
+from tests.support import PAPER, free_port
+
+S = load(PAPER)
+KEYS = wire.Keys("host-test")
+PEER = "peer-session"
+A, B, C = (0, 0), (5, 5), (9, 9)  # cells
+
+
+@pytest.fixture
+def host() -> Iterator[AgentHost]:
+    z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{free_port()}",), "peer").config())
+    inbox = TaggedInbox()
+    zid = str(z.info.zid())
+    links = {a: AgentLink(AgentNode(S, a, 0.0), KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"), None, zid)
+             for a in (1, 2)}
+    h = AgentHost(z, KEYS, links, inbox)
+    try:
+        yield h
+    finally:
+        h.close()
+        z.close()
+
+
+def beacon(aid: int, cell: tuple[int, int], source: str = PEER) -> tuple[str, bytes, str, str, float]:
+    i = S.agent_index(aid)
+    b = wire.Beacon(aid, 0, 0.0, float(S.starts[i][0]), float(S.starts[i][1]), float(S.radii[i]))
+    return KEYS.beacon(cell, aid), wire.beacon_to_wire(b), "PUT", source, time.monotonic()
+
+
+def obstacle_set(aid: int, cell: tuple[int, int], rev: int = 1) -> tuple[str, bytes, str, str, float]:
+    return KEYS.obstacles(cell, aid), wire.obstacles_to_wire(wire.ObstacleSet(aid, 0, rev, {})), "PUT", PEER, 0.0
+
+
+def ids(batch: list[Any]) -> list[tuple[str, int]]:
+    return [(type(m).__name__, m.id) for m in batch if not isinstance(m, Invalid)]
+
+
+def test_a_beacon_goes_to_those_listening_to_its_cell_once_whichever_subscription(host: AgentHost) -> None:
+    assert host.listening == {1: None, 2: None}  # before their first command: every cell
+    assert set(host.cell_subs) == {None} and host.locality == zenoh.Locality.REMOTE
+    host.listen(1, Cells(A, frozenset({A})))
+    host.listen(2, Cells(B, frozenset({B})))
+    assert set(host.cell_subs) == {A, B}  # the every-cell subscription went once nobody needed it
+    got = host.route([(("cell", A), beacon(3, A)), (("cell", B), beacon(4, B)), (("cell", B), beacon(5, C))])
+    assert ids(got[1]) == [("Beacon", 3)] and ids(got[2]) == [("Beacon", 4)]  # 5's cell: nobody's
+    # The same sample through a subscription just replaced (every cell's) and through its cell's: once, to 1.
+    item = beacon(6, A)
+    got = host.route([(("cell", None), item), (("cell", A), item)])
+    assert ids(got[1]) == [("Beacon", 6)] and got[2] == []
+
+
+def test_a_set_heard_before_is_replayed_to_an_agent_that_starts_listening_to_its_cell(host: AgentHost) -> None:
+    host.listen(1, Cells(A, frozenset({A})))
+    host.listen(2, Cells(B, frozenset({B})))
+    got = host.route([(("cell", A), obstacle_set(3, A))])
+    assert ids(got[1]) == [("ObstacleSet", 3)] and got[2] == []
+    host.listen(2, Cells(B, frozenset({A, B})))  # agent 2 moves towards A: its history is agent 3's set
+    got = host.route([])
+    assert got[1] == [] and ids(got[2]) == [("ObstacleSet", 3)]
+    host.listen(2, Cells(B, frozenset({A, B, C})))  # already heard A: nothing again
+    assert host.route([]) == {1: [], 2: []}
+
+
+def test_what_a_co_hosted_agent_publishes_goes_to_the_others_never_back(host: AgentHost) -> None:
+    host.listen(1, Cells(A, frozenset({A})))
+    host.listen(2, Cells(A, frozenset({A, B})))
+    item = beacon(1, A, source=host.source)
+    host.local.append((("local", 1), item))
+    got = host.route([])
+    assert got[1] == [] and ids(got[2]) == [("Beacon", 1)]
+    # Agent 1's key from another session: agent 1 counts it invalid; agent 2's gate refuses it (agent 1 speaks
+    # from the host's session, pinned by the beacon above).
+    got = host.route([(("cell", A), beacon(1, A, source=PEER))])
+    assert [type(m).__name__ for m in got[1]] == ["Invalid"] and got[2] == []
+    assert host.links[1].rej.count == 1 and host.links[2].gate.count == 1
