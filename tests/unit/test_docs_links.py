@@ -111,7 +111,7 @@ TOP = ("reconswarm", "reconswarm_bringup", "agent", "simworld", "monitor", "test
 # A token that starts at a top-level directory of the repository and continues with a path: `agent/brain.py`,
 # `reconswarm/net/`, `tests/system/faults/test_secure.py`. Not preceded by a path or key character, so key
 # expressions (`swarm/<run>/agent/<id>/state`, `R/agent/i/cmd`) and URLs are not taken for paths.
-PATH_TOKEN = re.compile(r"(?<![\w./<>*{}$-])((?:" + "|".join(TOP) + r")/[\w./-]*[\w/])")
+PATH_TOKEN = re.compile(r"(?<![\w./<>*{}$-])((?:" + "|".join(TOP) + r")/[\w./*-]*[\w/*])")
 # Paths the code names that are not in the repository, each for a reason (outputs a run writes, such as
 # runs/latest/run.db, do not start at a source directory and are not taken for paths in the first place):
 NOT_IN_REPO: set[str] = set()
@@ -142,6 +142,13 @@ def _as_file(token: str) -> str:
     return token
 
 
+def _exists(token: str) -> bool:
+    """A path, or a glob pattern (`reconswarm_bringup/cli*.py`) that matches something."""
+    if "*" in token:
+        return next(ROOT.glob(token), None) is not None
+    return (ROOT / token).exists()
+
+
 def _named_paths() -> list[tuple[str, int, str]]:
     found = []
     for top in SCANNED:
@@ -161,6 +168,8 @@ def test_the_path_scanner_sees_paths_and_not_keys():
                                                                                     "reconswarm/net/"]
     assert PATH_TOKEN.findall("swarm/<run>/agent/<id>/state, R/agent/i/cmd, runs/latest/run.db") == []
     assert PATH_TOKEN.findall("tests/system/faults/test_secure.py::test_x.") == ["tests/system/faults/test_secure.py"]
+    assert PATH_TOKEN.findall("(reconswarm_bringup/cli*.py)") == ["reconswarm_bringup/cli*.py"]
+    assert _exists("reconswarm_bringup/cli*.py") and not _exists("reconswarm_bringup/nothing*.py")
     assert _as_file("simworld/ros2_io.Ros2World") == "simworld/ros2_io.py"
     assert _as_file("agent/brain.py") == "agent/brain.py"
     assert _as_file("agent/nothing.Here") == "agent/nothing.Here"
@@ -170,7 +179,7 @@ def test_every_repository_path_named_in_the_code_exists():
     named = _named_paths()
     assert len(named) > 50, "the scanner found almost nothing: the pattern is broken"
     missing = [f"{where}:{line}: {token}" for where, line, token in named
-               if token not in NOT_IN_REPO and not (ROOT / token).exists()]
+               if token not in NOT_IN_REPO and not _exists(token)]
     assert missing == [], "paths named in the code that do not exist:\n" + "\n".join(missing)
 
 
