@@ -175,6 +175,7 @@ class WorldAdapter(Member):
             if (change := self.uplink.poll()) is not None:
                 self.members.link(change is LinkChange.UP, now, self.node.k * self.node.s.meta.dt_s,
                                   self.node.timing.relink_settle_s)
+                self.node.link(change is LinkChange.UP, now)
             for item in items:
                 self.handle(*item)
             self.sync(time.monotonic())

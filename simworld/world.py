@@ -108,6 +108,7 @@ class WorldNode:
         self.waiting_for: set[int] = set()
         self.last_step_s: float | None = None
         self.resumed = False  # the world itself was stalled during this tick's wait
+        self.linked, self.unlinked_at = True, 0.0  # our own session has its router (see link)
 
     # ------------------------------------------------------------------------------------- inputs
 
@@ -119,6 +120,17 @@ class WorldNode:
         elif aid in self.alive:
             self.alive.discard(aid)
             log.warning("agent %d is gone", aid)
+
+    def link(self, up: bool, now_s: float) -> None:
+        """Our own session lost its router (up=False) or has one again. Meanwhile nobody is reachable: the world
+        holds as with no agent (ending the mission after `no_agents_grace_s`), no robot is stepped without its
+        command and nobody is lost; realtime's schedule then moves on by the time it held."""
+        if up != self.linked:
+            self.linked = up
+            if up:
+                self.t0 += now_s - self.unlinked_at
+            else:
+                self.unlinked_at = now_s
 
     def monitor_up(self, up: bool) -> None:
         self.monitor = up
@@ -148,12 +160,14 @@ class WorldNode:
         if self.started and self.stalled(now_s):
             self._own_stall(now_s, now_s - (self.last_step_s or now_s))
         self.last_step_s = now_s
+        if not self.linked and not stopping and self.phase in (Phase.WAIT_COMMANDS, Phase.WAIT_DUE):
+            self.phase = Phase.TICK  # (tick k is published again once the link is back)
         if self.phase == Phase.READY:
             return self._ready(now_s, stopping)
         if self.phase == Phase.TICK:
             return self._tick(now_s, stopping)
         if self.phase == Phase.NO_AGENTS:
-            if self.alive:
+            if self.alive and self.linked:
                 log.info("agents reachable again: %s", sorted(self.alive))
                 return self._publish_tick(now_s, "")
             if stopping or now_s >= self._deadline(now_s):
@@ -210,8 +224,9 @@ class WorldNode:
             reason = "duration"
         elif stopping:
             reason = "stopped"
-        elif not self.alive:
-            log.warning("no agent is reachable: holding the world for up to %.0f s", self.timing.no_agents_grace_s)
+        elif not self.alive or not self.linked:
+            log.warning("no agent is reachable%s: holding the world for up to %.0f s",
+                        "" if self.linked else " (our own link to the router is gone)", self.timing.no_agents_grace_s)
             self.phase, self.deadline_s = Phase.NO_AGENTS, now_s + self.timing.no_agents_grace_s
             return Step([], self.deadline_s)
         return self._publish_tick(now_s, reason)

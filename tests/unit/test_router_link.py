@@ -13,7 +13,9 @@ import zenoh
 from reconswarm.net.admission import Membership
 from reconswarm.net.session import ZenohOptions
 from reconswarm.net.uplink import LinkChange, Uplink
+from reconswarm.net.wire import ClockMode
 from tests.support import ROOT, free_port
+from tests.unit.test_world_node import IDS, S, T, advance, command_all, started
 
 
 def _members() -> Membership:
@@ -111,3 +113,43 @@ def test_a_peer_session_is_not_followed() -> None:
         assert not uplink.followed and uplink.poll() is None
     finally:
         session.close()
+
+
+def test_the_world_holds_while_its_own_link_is_gone_and_steps_nobody_uncommanded() -> None:
+    """Lockstep: the router dies while tick 3 waits for commands (two are in). The world neither times the step
+    out nor holds a robot: it waits for its link, publishes tick 3 again once back, and goes on."""
+    node = started()
+    now = 0.0
+    for k in range(3):
+        node.step(now)
+        command_all(node, k, (1.0, 0.0), now)
+        node.step(now)
+    node.step(now)  # tick 3 published
+    command_all(node, 3, (1.0, 0.0), now, skip=tuple(IDS[2:]))
+    node.link(False, now)
+    step = advance(node, now, now + 4 * T.step_timeout_s)  # 20 s without a router
+    now += 4 * T.step_timeout_s
+    assert node.k == 3 and step.ended is None and node.strikes == {} and node.uncommanded_k == -1
+    node.link(True, now)
+    again = node.step(now)
+    assert [o.clock.k for o in again.out] == [3]  # tick 3 again, for the agents whose state went nowhere
+    command_all(node, 3, (1.0, 0.0), now, skip=tuple(IDS[:2]))  # (the first two were kept)
+    node.step(now)
+    assert node.k == 4 and node.uncommanded_k == -1
+
+
+def test_a_realtime_world_resumes_its_schedule_after_the_link_and_ends_if_it_never_comes_back() -> None:
+    node = started(ClockMode.REALTIME)
+    advance(node, 0.0, 1.0, every_s=0.01)
+    k = node.k
+    assert k > 0
+    node.link(False, 1.0)
+    advance(node, 1.0, 11.0, every_s=0.01)
+    assert node.k == k  # held: no tick while nobody is reachable
+    node.link(True, 11.0)
+    advance(node, 11.0, 11.5, every_s=0.01)
+    period = S.meta.dt_s / 10.0
+    assert node.k - k <= round(0.5 / period) + 2  # the schedule moved on by the hold: no burst of ticks
+    node.link(False, 11.5)
+    end = advance(node, 11.5, 11.5 + T.no_agents_grace_s + 1.0, every_s=0.5)
+    assert end.ended == "no agents"
