@@ -98,7 +98,7 @@ class WorldAdapter(Member):
                 self.rej.reject(key, str(exc))
                 self.node.rejected = self.rej.count
                 return
-            self.gate.world_k = self.node.k
+            self.gate.world_k, self.gate.t = self.node.k, sim  # (sim: the intrusions' first_t)
             if self.gate.admit_twist(c, source, key, now):  # bounded, from agent i's own session
                 self.members.data(c.id, now, sim)
                 if not self.told.get(c.id) and self.members.alive(c.id, now, sim):
@@ -115,7 +115,7 @@ class WorldAdapter(Member):
                     self.sync(now)
             elif what == "agent" and leaf == "cmd" and aid is not None:
                 c = wire.cmd_from_wire(payload, aid)
-                self.gate.world_k = self.node.k
+                self.gate.world_k, self.gate.t = self.node.k, sim  # (sim: the intrusions' first_t)
                 if self.gate.admit(c, source, key, now):
                     self.members.data(c.id, now, sim)
                     if not self.told.get(c.id) and self.members.alive(c.id, now, sim):
