@@ -1,8 +1,9 @@
-"""`python -m agent`: the same as `reconswarm agent`."""
+"""`python -m agent`: the same command as `reconswarm agent` (agent/cli.py)."""
 
 import sys
 
-from reconswarm_bringup.cli import app
+from agent.cli import app
+from reconswarm.cli.console import run_app
 
 if __name__ == "__main__":
-    app(args=["agent", *sys.argv[1:]], prog_name="python -m agent")
+    run_app(app, sys.argv[1:], "python -m agent")

@@ -1,8 +1,9 @@
-"""`python -m monitor`: the same as `reconswarm monitor`."""
+"""`python -m monitor`: the same commands as `reconswarm monitor` (monitor/cli.py)."""
 
 import sys
 
-from reconswarm_bringup.cli import app
+from monitor.cli import monitor_app
+from reconswarm.cli.console import run_app
 
 if __name__ == "__main__":
-    app(args=["monitor", *sys.argv[1:]], prog_name="python -m monitor")
+    run_app(monitor_app, sys.argv[1:], "python -m monitor")

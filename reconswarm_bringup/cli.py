@@ -1,4 +1,6 @@
-"""`reconswarm`: the command line. Each command parses its options and calls a module's run(config).
+"""`reconswarm`: the command line. Each command parses its options and calls a module's run(config). The roles'
+commands live in their packages (agent/cli.py, simworld/cli.py, monitor/cli.py, also run by `python -m
+agent|simworld|monitor`) and are registered here; the conventions every command shares are in reconswarm/cli/.
 
 Exit codes (README.md): 0 success, 1 mission failed (not converged, or a collision), 2 bad input,
 3 a process of the run died or could not start. Errors are one line on stderr; `--debug` shows the
@@ -13,9 +15,9 @@ from typing import Annotated
 
 import typer
 
+from reconswarm.cli import help_style, outputs
+from reconswarm.cli.console import fail, mission_exit_code, print_json, run_app, set_debug
 from reconswarm.errors import BadInput, ReconswarmError
-from reconswarm_bringup import help_style
-from reconswarm_bringup.console import fail, is_debug, mission_exit_code, print_json, set_debug
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Multi-agent path planning with reconfigurable topology, over Eclipse Zenoh.")
@@ -43,7 +45,7 @@ def sim(
 ) -> None:
     """Run the mission in one process, vectorized (same math as the distributed deployment)."""
     from reconswarm.scenario import load, warnings
-    from reconswarm_bringup import engine, validate
+    from reconswarm_bringup import engine
 
     try:
         s = load(scenario)
@@ -58,7 +60,7 @@ def sim(
         if out is None:  # one directory per scenario and planner: the quick start's two runs keep both records
             name = f"{scenario.stem}-{s.planner.kind.value}" + ("" if seed is None else f"-seed{seed}")
             out = DEFAULT_SIM_ROOT / name
-        validate.writable_dir("-o", out)
+        outputs.writable_dir("-o", out)
         summary = engine.run(engine.SimConfig(s, out, progress=not as_json))
     except (ReconswarmError, OSError) as exc:
         fail(exc)
@@ -85,7 +87,6 @@ def scenario_generate(
     """Print a valid random scenario (TOML)."""
     from reconswarm.generate import generate
     from reconswarm.scenario import to_toml
-    from reconswarm_bringup import validate
 
     try:
         text = to_toml(generate(agents, obstacles, seed))
@@ -96,7 +97,7 @@ def scenario_generate(
         sys.stdout.write(text)
         return
     try:
-        validate.writable_file("-o", out)  # (its directory is made if missing)
+        outputs.writable_file("-o", out)  # (its directory is made if missing)
         out.write_text(text)
     except OSError as exc:
         fail(BadInput(f"-o {out}: cannot write there ({exc.strerror or exc})"))
@@ -120,11 +121,14 @@ def scenario_check(file: Annotated[Path, typer.Argument(help="Scenario TOML file
 
 
 def _register() -> None:
-    from reconswarm_bringup.cli_monitor import monitor_app
+    from agent.cli import agent_cmd
+    from monitor.cli import monitor_app
+    from reconswarm_bringup import cli_launch, cli_nodes, cli_sweep
+    from simworld.cli import simworld_cmd
 
     app.add_typer(monitor_app, name="monitor")
-    from reconswarm_bringup import cli_launch, cli_nodes, cli_sweep
-
+    app.command("agent")(agent_cmd)
+    app.command("simworld")(simworld_cmd)
     cli_nodes.register(app)
     cli_launch.register(app)
     cli_sweep.register(app)
@@ -136,13 +140,7 @@ _register()
 def main() -> None:
     from reconswarm_bringup.cli_launch import optional_values
 
-    try:
-        app(args=optional_values(sys.argv[1:]))
-    except OSError as exc:  # a path no command checked for: still one line naming it (--debug: the traceback)
-        if is_debug() or exc.filename is None:
-            raise
-        sys.stderr.write(f"reconswarm: error: {exc.filename}: {exc.strerror or exc}\n")
-        sys.exit(BadInput.exit_code)
+    run_app(app, optional_values(sys.argv[1:]))
 
 
 if __name__ == "__main__":

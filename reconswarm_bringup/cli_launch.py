@@ -10,9 +10,9 @@ from typing import Annotated
 
 import typer
 
+from reconswarm.cli import help_style
+from reconswarm.cli.console import fail, set_debug
 from reconswarm.errors import BadInput, ReconswarmError
-from reconswarm_bringup import help_style
-from reconswarm_bringup.console import fail, set_debug
 from reconswarm_bringup.fleet import ROOT
 
 help_style.install()

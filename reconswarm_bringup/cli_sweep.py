@@ -14,9 +14,9 @@ from typing import Annotated, Any
 
 import typer
 
+from reconswarm.cli import outputs
+from reconswarm.cli.console import fail, print_json
 from reconswarm.errors import BadInput, ProcessFailure, ReconswarmError
-from reconswarm_bringup import validate
-from reconswarm_bringup.console import fail, print_json
 
 
 def outcome(row: dict[str, Any]) -> str:
@@ -75,7 +75,7 @@ def sweep_cmd(
                 raise BadInput(f"{path}: no such scenario file")
         plan = sw.JobPlan(scenarios, seed_range, kinds, out)
         total = len(plan)
-        validate.writable_dir("-o", out)
+        outputs.writable_dir("-o", out)
     except (ReconswarmError, OSError) as exc:
         fail(exc)
         return

@@ -22,6 +22,7 @@ from typing import Any
 import zenoh
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+from reconswarm.cli import outputs
 from reconswarm.errors import BadInput
 from reconswarm.generate import generate
 from reconswarm.net import wire
@@ -100,7 +101,7 @@ class ClockWatch:
 
 
 def run(cfg: LaunchConfig) -> int:
-    validate.writable_dir("-o", cfg.out)
+    outputs.writable_dir("-o", cfg.out)
     if cfg.clock not in ("lockstep", "realtime"):
         raise BadInput(f"--clock: expected lockstep or realtime, got {cfg.clock!r}")
     if any(f.action == "partition" for f in cfg.faults) and cfg.hosts != 2:

@@ -15,10 +15,10 @@ from pathlib import Path
 
 from rich.console import Console
 
+from reconswarm.cli.console import mission_exit_code
 from reconswarm.record.store import RunRecord, note_stop
 from reconswarm.record.summary import render, summarize
 from reconswarm_bringup.config import LaunchConfig
-from reconswarm_bringup.console import mission_exit_code
 from reconswarm_bringup.network import listening
 
 log = logging.getLogger("reconswarm.launch")

@@ -8,7 +8,7 @@
     command line names OUTDIR/scenario.toml, as every process of a launch does);
   * OUTDIR/run.db is not a record the engine wrote (a launched run's record, or not a run record at all):
     the engine replaces only its own records.
-- `not_the_input`: an output path that is the very file a command reads is refused.
+(An output path that is the very file a command reads is refused by reconswarm/cli/outputs.py's `not_the_input`.)
 """
 
 from __future__ import annotations
@@ -25,23 +25,6 @@ from reconswarm.errors import BadInput
 
 LOCK_FILE = ".record.lock"
 ENGINE_MODE = "inprocess"  # the `mode` meta of a record the in-process engine wrote
-
-
-def same_file(a: Path, b: Path) -> bool:
-    """True if a and b name one file (the same inode if both exist, else the same resolved path)."""
-    with contextlib.suppress(OSError):
-        if a.exists() and b.exists():
-            return os.path.samefile(a, b)
-    return a.resolve() == b.resolve()
-
-
-def not_the_input(option: str, out: Path, *inputs: Path) -> None:
-    """Refuse writing `out` when it is one of the files the command reads (or their WAL companions)."""
-    for src in inputs:
-        for companion in (src, Path(f"{src}-wal"), Path(f"{src}-shm")):
-            if same_file(out, companion):
-                raise BadInput(f"{option} {out}: is the record this command reads ({src}); "
-                               f"write to another file")
 
 
 def _live_launch_pid(out: Path) -> int | None:

@@ -1,17 +1,17 @@
 """Checks of command-line values before anything starts: pure functions the CLIs call (run_local.sh's
-launcher, `reconswarm sim`, the monitor's commands). Each raises BadInput with one line naming the option.
+launcher, `reconswarm sweep`). Each raises BadInput with one line naming the option. (Output paths:
+reconswarm/cli/outputs.py.)
 """
 
 from __future__ import annotations
 
 import ipaddress
 import math
-import os
 import re
-import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
+from reconswarm.cli.outputs import writable_dir
 from reconswarm.errors import BadInput
 from reconswarm_bringup import packing
 from reconswarm_bringup.faults import Fault
@@ -109,36 +109,6 @@ def _mb(v: float) -> str:
     if v >= 1024**3:
         return f"{v / 1024:.3g} GB"
     return f"{v / 1024:,.1f} GB" if v >= 1024 else f"{v:,.0f} MB"
-
-
-def _why(exc: OSError) -> str:
-    # (mkdir -p through a path where a file stands says "File exists")
-    return "a file stands where a directory should be" if isinstance(exc, FileExistsError) else exc.strerror or str(exc)
-
-
-def _probe(directory: Path) -> None:
-    directory.mkdir(parents=True, exist_ok=True)
-    fd, probe = tempfile.mkstemp(prefix=".write-probe-", dir=directory)
-    os.close(fd)
-    os.unlink(probe)
-
-
-def writable_dir(option: str, path: Path) -> None:
-    """Create the directory if needed and make sure a file can be written in it."""
-    try:
-        _probe(path)
-    except OSError as exc:
-        raise BadInput(f"{option} {path}: cannot write there ({_why(exc)})") from None
-
-
-def writable_file(option: str, path: Path) -> None:
-    """The file can be created: not a directory, and its directory exists (or can be made) and is writable."""
-    if path.is_dir():
-        raise BadInput(f"{option} {path}: is a directory")
-    try:
-        _probe(path.parent)
-    except OSError as exc:
-        raise BadInput(f"{option} {path}: cannot write there ({_why(exc)})") from None
 
 
 def launch(*, agents: int | None, scenario: Path | None, out: Path, timeout_s: float | None, speed: float,

@@ -1,8 +1,9 @@
-"""`python -m simworld`: the same as `reconswarm simworld`."""
+"""`python -m simworld`: the same command as `reconswarm simworld` (simworld/cli.py)."""
 
 import sys
 
-from reconswarm_bringup.cli import app
+from reconswarm.cli.console import run_app
+from simworld.cli import app
 
 if __name__ == "__main__":
-    app(args=["simworld", *sys.argv[1:]], prog_name="python -m simworld")
+    run_app(app, sys.argv[1:], "python -m simworld")

@@ -1,4 +1,5 @@
-"""OUTDIR claims and reader outputs (reconswarm_bringup/outdir.py): who may replace which run.db."""
+"""OUTDIR claims (reconswarm_bringup/outdir.py) and reader outputs (reconswarm/cli/outputs.py): who may replace
+which run.db."""
 
 from __future__ import annotations
 
@@ -7,10 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from reconswarm.cli.outputs import not_the_input
 from reconswarm.errors import BadInput
 from reconswarm.generate import generate
 from reconswarm.record.store import RunWriter
-from reconswarm_bringup.outdir import RecordClaim, not_the_input, record_mode
+from reconswarm_bringup.outdir import RecordClaim, record_mode
 
 
 def _record(d: Path, mode: str) -> Path:

@@ -1,4 +1,5 @@
-"""Console conventions shared by every command: one-line errors, JSON output, the mission's exit code."""
+"""Console conventions shared by every command: one-line errors, JSON output, the mission's exit code, and
+`run_app`, how a command line is run (`reconswarm`, `python -m agent|simworld|monitor`)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from typing import Any
 
 import typer
 
-from reconswarm.errors import ReconswarmError
+from reconswarm.errors import BadInput, ReconswarmError
 
 _debug = False
 
@@ -38,3 +39,15 @@ def print_json(obj: Any) -> None:
 
 def mission_exit_code(summary: dict[str, Any]) -> int:
     return 0 if summary.get("converged") and not summary.get("collisions") else 1
+
+
+def run_app(app: typer.Typer, args: list[str], prog_name: str | None = None) -> None:
+    """Run a typer application on `args` and exit. An OSError about a path no command checked for is still one
+    line naming it, exit 2 (`--debug`: the traceback)."""
+    try:
+        app(args=args, prog_name=prog_name)
+    except OSError as exc:
+        if is_debug() or exc.filename is None:
+            raise
+        sys.stderr.write(f"reconswarm: error: {exc.filename}: {exc.strerror or exc}\n")
+        sys.exit(BadInput.exit_code)

@@ -1,4 +1,5 @@
-"""`reconswarm monitor ...`: commands that read a run record (and `record`, the live monitor process)."""
+"""`reconswarm monitor ...` (= `python -m monitor ...`): commands that read a run record (and `record`, the live
+monitor process). reconswarm_bringup/cli.py registers `monitor_app` as the `monitor` group."""
 
 from __future__ import annotations
 
@@ -10,11 +11,14 @@ from typing import Annotated, Any
 
 import typer
 
+from reconswarm.cli import help_style, outputs
+from reconswarm.cli.console import fail, print_json
 from reconswarm.errors import BadInput, ReconswarmError
-from reconswarm_bringup import outdir, validate
-from reconswarm_bringup.console import fail, print_json
 
-monitor_app = typer.Typer(no_args_is_help=True, help="Record runs and read run records (run.db).")
+help_style.install()
+
+monitor_app = typer.Typer(no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
+                          help="Record runs and read run records (run.db).")
 
 DbArg = Annotated[Path, typer.Argument(metavar="RUN.DB", help="A run record (run.db).")]
 
@@ -88,8 +92,8 @@ def export_cmd(
         if fmt == "mcap":
             if out is None:
                 raise BadInput("--format mcap: give the file to write with -o FILE.mcap")
-            outdir.not_the_input("-o", out, db)
-            validate.writable_file("-o", out)
+            outputs.not_the_input("-o", out, db)
+            outputs.writable_file("-o", out)
             from monitor.mcap_export import export_mcap
 
             rec = _open(db)
@@ -101,8 +105,8 @@ def export_cmd(
                        f"{stats.events} events")
             return
         if out is not None:
-            outdir.not_the_input("-o", out, db)
-            validate.writable_file("-o", out)
+            outputs.not_the_input("-o", out, db)
+            outputs.writable_file("-o", out)
         from monitor.csv_export import export_csv
 
         rec = _open(db)
@@ -169,12 +173,12 @@ def animate_cmd(
     try:
         from monitor.animate import animate_run, check_request
 
-        outdir.not_the_input("-o", out, db)
+        outputs.not_the_input("-o", out, db)
         if at_s is None:
             check_request(out, fps, speed)  # before opening the record: bad requests fail fast
         elif out.suffix.lower() != ".png":
             raise BadInput(f"{out}: --at writes one frame as a PNG (-o FILE.png)")
-        validate.writable_file("-o", out)
+        outputs.writable_file("-o", out)
         rec = _open(db)
         with _progress_bar(f"animating {db}") as progress:
             stats = animate_run(rec, out, fps, speed, dpi, progress, still_at_s=at_s)
@@ -198,8 +202,8 @@ def plot_cmd(
     try:
         from monitor.plot import plot_run
 
-        outdir.not_the_input("-o", out, db)
-        validate.writable_file("-o", out)
+        outputs.not_the_input("-o", out, db)
+        outputs.writable_file("-o", out)
         rec = _open(db)
         with _progress_bar(f"plotting {db}", counted=False):  # (nothing to count: it pulses while drawing)
             plot_run(rec, out)
@@ -234,7 +238,7 @@ def record_cmd(
 
         if foxglove is not None and not 0 <= foxglove <= 65535:
             raise BadInput(f"--foxglove: port must be in 0..65535, got {foxglove}")
-        validate.writable_file("--db", db)
+        outputs.writable_file("--db", db)
         code = run(MonitorConfig(scenario, db, ZenohOptions.build(connect, listen, mode, zenoh_config), run_id,
                                  live if live is not None else sys.stderr.isatty(), foxglove))
     except ReconswarmError as exc:
