@@ -42,27 +42,28 @@ def brute(p: np.ndarray, r: np.ndarray, ids: np.ndarray, ob_d: np.ndarray, obs: 
 
 
 @pytest.mark.parametrize("seed", range(6))
-@pytest.mark.parametrize("with_candidates", [False, True])
-def test_gaps_and_episodes_are_those_of_every_pair(seed: int, with_candidates: bool) -> None:
+@pytest.mark.parametrize("with_candidates", ["none", "pairs", "pairs and distances"])
+@pytest.mark.parametrize("r_max", [3.0, 8.0])  # radii up to 8 m: pairs in contact up to 18 m apart
+def test_gaps_and_episodes_are_those_of_every_pair(seed: int, with_candidates: str, r_max: float) -> None:
     rng = np.random.default_rng(seed)
     n, m = 9, 2
     ids = np.arange(3, 3 + n, dtype=np.int64) * 2  # ids are not indices
-    r = rng.uniform(0.5, 3.0, n)
+    r = rng.uniform(0.5, r_max, n)
     obs = ("a", "b")
     mon = SafetyMonitor(ids, r, obs, D_SAFE)
-    p = rng.uniform(-12.0, 12.0, (n, 2))
+    p = rng.uniform(-4 * r_max, 4 * r_max, (n, 2))
     ob_d = rng.uniform(0.0, 8.0, (n, m))
     open_now: dict[Key, float] = {}
     seen_kinds = set()
     for k in range(40):
         if k % 4:  # held still every fourth tick (the candidates are then the same as before)
-            p = p + rng.normal(0.0, 1.5, (n, 2))
+            p = p + rng.normal(0.0, r_max / 2, (n, 2))
             ob_d = np.clip(ob_d + rng.normal(0.0, 1.0, (n, m)), -1.0, None)
-        if with_candidates:
-            cand, cand_d = pairs_and_distances(p, 2 * float(r.max()) + mon.reach_m)
-            got = mon.step(k * 0.1, p, ob_d, cand, cand_d)
-        else:
+        if with_candidates == "none":
             got = mon.step(k * 0.1, p, ob_d)
+        else:
+            cand, cand_d = pairs_and_distances(p, 2 * float(r.max()) + mon.reach_m)
+            got = mon.step(k * 0.1, p, ob_d, cand, cand_d if with_candidates == "pairs and distances" else None)
         gap_a, gap_o, below = brute(p, r, ids, ob_d, obs)
         tick_a, tick_o, started, ended = got
         assert tick_a == pytest.approx(gap_a, abs=1e-12) and tick_o == pytest.approx(gap_o, abs=1e-12)
@@ -121,3 +122,20 @@ def test_nearest_gap_leaves_out_points_not_finite_in_either_coordinate(seed: int
     assert nearest_gap(p[bad], r[bad]) == math.inf
     assert nearest_gap(p[keep[:2]], r[keep[:2]]) == pytest.approx(math.dist(p[keep[0]], p[keep[1]]) - r[keep[0]]
                                                                   - r[keep[1]], abs=1e-9)
+
+
+def test_two_robots_in_contact_are_a_pair() -> None:
+    mon = SafetyMonitor(np.array([1, 2]), np.array([1.0, 1.0]), (), D_SAFE)
+    tick_a, _, started, _ = mon.step(0.0, np.array([[0.0, 0.0], [1.5, 0.0]]), np.zeros((2, 0)))
+    assert tick_a == -0.5 and sorted(e.kind for e in started) == ["collision", "safety"]
+
+
+def test_nearest_gap_finds_a_close_pair_of_large_robots_beyond_its_first_search_radius() -> None:
+    """100 small robots (r 0.1) 10 m apart (gaps 9.8) and, to the side, two of r 20 whose centres are 45 m
+    apart (gap 5): the nearest centres are not the nearest surfaces; the search must go on past the small
+    pairs' radius until no pair beyond it can have a smaller gap (a pair beyond R has a gap above R - 2 r_max)."""
+    grid = np.array([[10.0 * i, 10.0 * j] for i in range(10) for j in range(10)])
+    p = np.vstack([grid, [[200.0, 0.0], [245.0, 0.0]]])
+    r = np.concatenate([np.full(100, 0.1), [20.0, 20.0]])
+    assert nearest_gap(p, r) == pytest.approx(5.0)
+    assert nearest_gap(grid, r[:100]) == pytest.approx(9.8)
