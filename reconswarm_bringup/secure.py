@@ -1,38 +1,22 @@
-"""Secure mode (`run_local.sh --secure`): a CA, per-process credentials, mutual TLS and access control.
+"""Secure mode: a CA, per-process credentials, mutual TLS and access control, for a deployment
+(reconswarm_bringup/deployment.py): `run_local.sh --secure` (one host, or two with `--hosts 2`) and
+`reconswarm credentials DEPLOYMENT.toml -o DIR` (real machines) both call `write()`.
 
-`create()` writes into OUTDIR/secrets/ (directory 0700, every file 0600):
+`write()` puts into DIR (the launcher: OUTDIR/secrets/, every file of every host in it; the command: one
+directory per host, DIR/<host>/, holding only what that host needs), directories 0700, every file 0600:
 
-- `ca.pem`: the run's certificate authority (its private key is never written: nobody can issue more
-  credentials for this run once `create()` returns);
-- `<name>-cert.pem`, `<name>-key.pem` for the router (SAN 127.0.0.1, ::1, localhost and the endpoint's
-  host) and for every client: `monitor`, `simworld`, `agent-<id>`, `agents-<ids>` for each agent host of
-  the run (`--agents-per-process`: one process, one session, e.g. `agents-1-5`, granted exactly what its
-  agents are), `observer` (the launcher's clock watcher) and `intruder` (a valid certificate the ACL
-  grants nothing: the flood fault uses it); a client certificate's common name is its ACL subject;
-- `router.json5`: listens on `tls/HOST:PORT` only, requires a client certificate signed by the CA, and
-  enforces the access control rules below with `default_permission: "deny"`;
-- `<name>.json5`: each client's complete zenoh configuration (mode, router, TLS paths, lease,
-  timestamping), which `zenoh.Config.from_file` opens as is.
-
-The rules (`R` = `swarm/<run>`) allow, per subject and nothing else:
-
-- agent i: put `R/agent/i/cmd`, `R/cell/*/agent/i/{beacon,obstacles}` (in any cell, under its own id
-  only), its intrusion report `R/report/agent-i`; token `R/alive/agent/i`; the advanced publisher's cache
-  (queryable `R/cell/*/agent/i/obstacles/@adv/pub/**`, replies on `R/cell/*/agent/i/obstacles`); subscribe
-  (and receive) `R/agent/i/state`, `R/clock`, `R/cell/*/agent/*/beacon`,
-  `R/cell/*/agent/*/obstacles` (one cell or all); history queries on `R/cell/*/agent/*/obstacles/@adv/**`;
-  liveliness subscriptions on `R/alive/**` and `R/cell/*/agent/*/obstacles/@adv/pub/**`;
-- simworld: put `R/clock`, `R/truth`, `R/agent/*/state`, `R/report/simworld`; token
-  `R/alive/simworld`; subscribe `R/agent/*/cmd`, liveliness `R/alive/**`; the truth's advanced publisher
-  (queryable `R/truth/@adv/pub/**` replying on `R/truth`, heartbeats put under `R/truth/@adv/pub/**`);
-- monitor: put `R/event`; token `R/alive/monitor`; subscribe `R/truth`, `R/clock`, `R/report/*`, liveliness
-  `R/alive/**`; recovery of a lost truth (subscribe the heartbeats `R/truth/@adv/pub/**`, query
-  `R/truth/@adv/**`, receive replies on `R/truth`);
-- observer: subscribe `R/clock`, `R/event`;
-- intruder, or any other certificate of the CA: nothing.
-
-Ingress rules say what a subject may send to the router, egress rules what the router may forward to
-it, so a subject cannot even receive on keys it was not granted (should a peer send there).
+- `ca.pem`: the deployment's certificate authority (its private key is never written: nobody can issue more
+  credentials for it once `write()` returns);
+- `router-<host>-cert.pem`, `-key.pem` and `router-<host>.json5` for each host's router: it listens on its
+  `tls/HOST:PORT` only (SAN: that host, 127.0.0.1, ::1, localhost), requires a certificate signed by the CA
+  from everyone (mutual TLS), connects over mutual TLS to the routers of the hosts listed before it, and
+  enforces its access rules (reconswarm_bringup/acl.py: deny by default, naming its own processes and the
+  other hosts' routers);
+- `<name>-cert.pem`, `<name>-key.pem`, `<name>.json5` for each process, connecting to its own host's router:
+  `monitor`, `simworld`, `agent-<id>`, `agents-<ids>` for an agent host (one process, one session, e.g.
+  `agents-1-5`), `observer` (a watcher of the clock and events: the launcher's) and, for the launcher only,
+  `intruder` (a valid certificate the rules grant nothing: the flood fault uses it). A certificate's common
+  name is its ACL subject; `<name>.json5` is the complete zenoh configuration (`zenoh.Config.from_file`).
 """
 
 from __future__ import annotations
@@ -48,36 +32,68 @@ from typing import Any
 from reconswarm.errors import BadInput
 from reconswarm.net.session import LEASE_MS, ZenohOptions
 from reconswarm.scenario import Scenario
+from reconswarm_bringup import acl
+from reconswarm_bringup.deployment import Deployment, Host, tls_endpoint
 from reconswarm_bringup.packing import ids_spec
 
 ROLES = ("monitor", "simworld", "agent")
 VALID_DAYS = 30
-_ALL_FLOWS = ("ingress", "egress")
+LOCAL_HOST = "A"  # the launcher's host (and B, with --hosts 2)
+__all__ = ["Secrets", "create", "tls_endpoint", "write"]
 
 
 @dataclass(frozen=True)
 class Secrets:
-    """What `create()` wrote: the TLS endpoint and the configuration file of every participant."""
+    """What `write()` wrote: the deployment and where each participant's configuration is."""
 
     dir: Path
-    endpoint: str
-    run: str
-    agent_ids: tuple[int, ...]
-    hosts: tuple[tuple[int, ...], ...] = ()  # agent hosts (two agents or more in one process)
+    deployment: Deployment
+    split: bool = False  # one directory per host (DIR/<host>/) instead of every file in DIR
+
+    @property
+    def run(self) -> str:
+        return self.deployment.run
+
+    @property
+    def agent_ids(self) -> tuple[int, ...]:
+        return self.deployment.agent_ids
+
+    @property
+    def endpoint(self) -> str:
+        """The first host's router endpoint (the world's, in a local run)."""
+        return self.deployment.hosts[0].router
+
+    @property
+    def hosts(self) -> tuple[tuple[int, ...], ...]:
+        """The agent hosts: processes of two agents or more."""
+        return tuple(g for h in self.deployment.hosts for g in h.agent_processes if len(g) > 1)
+
+    def host_dir(self, host: str) -> Path:
+        return self.dir / host if self.split else self.dir
 
     @property
     def router_config(self) -> Path:
-        return self.dir / "router.json5"
+        return self.router_config_for(self.deployment.hosts[0].name)
+
+    def router_config_for(self, host: str) -> Path:
+        return self.host_dir(host) / f"router-{host}.json5"
 
     @property
     def ca(self) -> Path:
-        return self.dir / "ca.pem"
+        return self.host_dir(self.deployment.hosts[0].name) / "ca.pem"
+
+    def _dir_of(self, name: str) -> Path:
+        dep = self.deployment
+        for h in dep.hosts:
+            if name in acl.processes(dep, h):
+                return self.host_dir(h.name)
+        return self.host_dir(dep.world_host)  # intruder: with the world
 
     def config_for(self, role: str, ident: str = "-") -> Path:
         """The client configuration of a role: `monitor`, `simworld` or `agent` (ident = the agent id, or an agent
         host's ids, e.g. `1-5`)."""
-        if role == "agent" and ident in {host_name(h).removeprefix("agents-") for h in self.hosts}:
-            return self.dir / f"agents-{ident}.json5"
+        if role == "agent" and ident in {ids_spec(h) for h in self.hosts}:
+            return self._dir_of(f"agents-{ident}") / f"agents-{ident}.json5"
         if role == "agent":
             try:
                 aid = int(ident)
@@ -86,64 +102,69 @@ class Secrets:
             if aid not in self.agent_ids:
                 raise BadInput(f"secure: no credentials for agent {aid} (the scenario's agents: "
                                f"{', '.join(map(str, self.agent_ids))})")
-            return self.dir / f"agent-{aid}.json5"
+            return self._dir_of(f"agent-{aid}") / f"agent-{aid}.json5"
         if role in ("monitor", "simworld", "observer", "intruder"):
-            return self.dir / f"{role}.json5"
+            return self._dir_of(role) / f"{role}.json5"
         raise BadInput(f"secure: unknown role {role!r} (expected one of {', '.join(ROLES)})")
 
     def observer_options(self) -> ZenohOptions:
         """Zenoh options of the launcher's own watcher (may subscribe to the clock and events only)."""
-        return ZenohOptions.build(None, None, "client", self.dir / "observer.json5")
-
-
-def tls_endpoint(endpoint: str) -> str:
-    """`tcp/HOST:PORT` (or `tls/HOST:PORT`) -> `tls/HOST:PORT`; anything else is refused."""
-    proto, sep, addr = endpoint.partition("/")
-    host, _, port = addr.rpartition(":")
-    if not sep or proto not in ("tcp", "tls") or not host or not port.isdigit():
-        raise BadInput(f"--secure: the router endpoint must be tcp/HOST:PORT, got {endpoint!r}")
-    return f"tls/{addr}"
-
-
-def host_name(ids: tuple[int, ...]) -> str:
-    """An agent host's certificate name (its ACL subject): `agents-1-5`, `agents-1-3,5`."""
-    return f"agents-{ids_spec(ids)}"
+        return ZenohOptions.build(None, None, "client", self.config_for("observer"))
 
 
 def create(secrets_dir: Path, scenario: Scenario, endpoint: str, run: str | None = None,
-           hosts: tuple[tuple[int, ...], ...] = ()) -> Secrets:
-    """Create the CA, every credential and configuration of one secure run under secrets_dir.
+           hosts: tuple[tuple[int, ...], ...] = (), *, ros2_domain: int | None = None,
+           live_view: bool = False) -> Secrets:
+    """The launcher's one-host secure run: every credential and configuration under secrets_dir.
 
     run: the run id of the key prefix `swarm/<run>` the access rules name (default: the scenario name);
-    hosts: the agents of each agent host (those of more than one agent get a credential of their own)."""
+    hosts: the agents of each agent process (default: one each)."""
     ep = tls_endpoint(endpoint)
-    host = ep.partition("/")[2].rpartition(":")[0].strip("[]")
-    secrets_dir = Path(secrets_dir).resolve()
-    _private_dir(secrets_dir)
-    for old in secrets_dir.iterdir():  # credentials of an earlier run (another CA, other agents)
-        if old.is_file() and old.suffix in (".pem", ".json5"):
-            old.unlink()
     ids = tuple(a.id for a in scenario.agents)
-    many = tuple(h for h in hosts if len(h) > 1)
-    unknown = [a for h in many for a in h if a not in ids]
+    unknown = [a for h in hosts for a in h if a not in ids]
     if unknown:
         raise BadInput(f"secure: no agent {unknown[0]} in the scenario for an agent host")
-    sec = Secrets(secrets_dir, ep, run or scenario.meta.name, ids, many)
+    packed = {a for h in hosts for a in h}
+    groups = (*hosts, *((a,) for a in ids if a not in packed))
+    one = Host(LOCAL_HOST, ep, ids, tuple(sorted(groups, key=lambda g: ids.index(g[0]))))
+    dep = Deployment(run or scenario.meta.name, (one,), LOCAL_HOST, LOCAL_HOST, ros2_domain, live_view)
+    return write(secrets_dir, dep, intruder=True)
 
-    ca_key, ca_cert = _make_ca(sec.run)
-    _write(sec.ca, _cert_pem(ca_cert))
-    names = ["monitor", "simworld", *(f"agent-{i}" for i in ids), *map(host_name, many), "observer", "intruder"]
-    _issue(secrets_dir, "router", ca_key, ca_cert, server_names=_server_names(host))
-    for name in names:
-        _issue(secrets_dir, name, ca_key, ca_cert)
 
-    _write(sec.router_config, _dump(router_config(sec)))
-    for name in names:
-        _write(secrets_dir / f"{name}.json5", _dump(client_config(sec, name)))
+def write(out: Path, dep: Deployment, *, split: bool = False, install_dir: Path | None = None,
+          intruder: bool = False) -> Secrets:
+    """Create the CA and every credential and configuration of a deployment under out.
+
+    split: one directory per host; install_dir: where each host's files will be on that host (the paths the
+    configurations name; default: where they are written); intruder: also a certificate the rules grant nothing."""
+    out = Path(out).resolve()
+    _private_dir(out)
+    sec = Secrets(out, dep, split)
+    for h in dep.hosts:
+        d = sec.host_dir(h.name)
+        _private_dir(d)
+        for old in d.iterdir():  # credentials of an earlier run (another CA, other agents)
+            if old.is_file() and old.suffix in (".pem", ".json5"):
+                old.unlink()
+    ca_key, ca_cert = _make_ca(dep.run)
+    for h in dep.hosts:
+        d = sec.host_dir(h.name)
+        ref = install_dir if install_dir is not None else d
+        _write(d / "ca.pem", _cert_pem(ca_cert))
+        _issue(d, h.router_name, ca_key, ca_cert, server_names=_server_names(_host_of(h.router)))
+        _write(d / f"router-{h.name}.json5", _dump(router_config(dep, h, ref)))
+        names = acl.processes(dep, h) + (["intruder"] if intruder and h.name == dep.world_host else [])
+        for name in names:
+            _issue(d, name, ca_key, ca_cert)
+            _write(d / f"{name}.json5", _dump(client_config(h, name, ref)))
     return sec
 
 
 # --- configurations ------------------------------------------------------------------------------------
+
+def _host_of(endpoint: str) -> str:
+    return endpoint.partition("/")[2].rpartition(":")[0].strip("[]")
+
 
 def _base(mode: str, tls: dict[str, Any]) -> dict[str, Any]:
     """What every configuration of a secure run shares: no multicast, timestamps, the lease, mTLS with our CA."""
@@ -155,126 +176,36 @@ def _base(mode: str, tls: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def client_config(sec: Secrets, name: str) -> dict[str, Any]:
-    """A complete client configuration: `zenoh.Config.from_file` opens it as is."""
-    d = sec.dir
+def client_config(host: Host, name: str, ref: Path) -> dict[str, Any]:
+    """A complete client configuration (to its host's router): `zenoh.Config.from_file` opens it as is."""
     conf = _base("client", {
-        "root_ca_certificate": str(d / "ca.pem"),
-        "connect_private_key": str(d / f"{name}-key.pem"),
-        "connect_certificate": str(d / f"{name}-cert.pem"),
+        "root_ca_certificate": str(ref / "ca.pem"),
+        "connect_private_key": str(ref / f"{name}-key.pem"),
+        "connect_certificate": str(ref / f"{name}-cert.pem"),
         "verify_name_on_connect": True,
     })
-    conf["connect"] = {"endpoints": [sec.endpoint], "timeout_ms": {"router": -1, "peer": -1, "client": 15000}}
+    conf["connect"] = {"endpoints": [host.router], "timeout_ms": {"router": -1, "peer": -1, "client": 15000}}
     return conf
 
 
-def router_config(sec: Secrets) -> dict[str, Any]:
-    d = sec.dir
-    return {
-        **_base("router", {
-            "root_ca_certificate": str(d / "ca.pem"),
-            "listen_private_key": str(d / "router-key.pem"),
-            "listen_certificate": str(d / "router-cert.pem"),
-        }),
-        "listen": {"endpoints": [sec.endpoint]},
-        "access_control": access_control(sec.run, sec.agent_ids, sec.hosts),
-    }
-
-
-def access_control(run: str, agent_ids: tuple[int, ...], hosts: tuple[tuple[int, ...], ...] = ()) -> dict[str, Any]:
-    """Default deny; every subject (a certificate common name) gets exactly what its process uses (an agent
-    host: what each of its agents uses)."""
-    r = f"swarm/{run}"
-    rules: list[dict[str, Any]] = []
-    subjects: list[dict[str, Any]] = []
-    policies: list[dict[str, Any]] = []
-
-    def rule(rid: str, messages: list[str], flows: tuple[str, ...], keys: list[str]) -> str:
-        rules.append({"id": rid, "messages": messages, "flows": list(flows), "permission": "allow",
-                      "key_exprs": keys})
-        return rid
-
-    def subscribe(rid: str, keys: list[str]) -> list[str]:
-        """Declare a subscriber on keys (ingress) and receive the samples published there (egress)."""
-        return [rule(f"{rid}-declare", ["declare_subscriber"], ("ingress",), keys),
-                rule(f"{rid}-receive", ["put"], ("egress",), keys)]
-
-    def publish(rid: str, keys: list[str], subscribed_as: list[str] | None = None) -> list[str]:
-        """Put on keys (ingress), and learn of the subscribers there (egress): a client sends a sample only
-        when the router has declared a matching subscriber to it. Declarations keep the subscriber's own
-        key expression (`R/agent/*/cmd`), hence subscribed_as."""
-        return [rule(f"{rid}-put", ["put"], ("ingress",), keys),
-                rule(f"{rid}-matching", ["declare_subscriber"], ("egress",), [*keys, *(subscribed_as or [])])]
-
-    def membership(rid: str, token: str) -> list[str]:
-        """Declare one's own liveliness token and follow everyone's (subscriber with history)."""
-        return [rule(f"{rid}-token", ["liveliness_token"], ("ingress",), [token]),
-                rule(f"{rid}-follow", ["declare_liveliness_subscriber"], ("ingress",), [f"{r}/alive/**"]),
-                rule(f"{rid}-tokens", ["liveliness_token"], ("egress",), [f"{r}/alive/**"])]
-
-    def grant(subject: str, rule_ids: list[str]) -> None:
-        subjects.append({"id": subject, "cert_common_names": [subject]})
-        policies.append({"id": f"{subject}-policy", "rules": rule_ids, "subjects": [subject]})
-
-    # Shared by every agent: the swarm's beacons and obstacle sets, the clock, history of obstacle sets.
-    obstacles, beacons = f"{r}/cell/*/agent/*/obstacles", f"{r}/cell/*/agent/*/beacon"
-    agents_common = [
-        *subscribe("agents-sub", [f"{r}/clock", beacons, obstacles]),
-        # advanced subscriber: history query to the publishers' caches, their replies, late publishers
-        rule("agents-history-query", ["query"], ("ingress", "egress"), [f"{obstacles}/@adv/**"]),
-        rule("agents-history-reply", ["reply"], ("egress",), [obstacles]),
-        rule("agents-history-live", ["declare_liveliness_subscriber"], ("ingress",), [f"{obstacles}/@adv/pub/**"]),
-    ]
-    per_agent: dict[int, list[str]] = {}
-    for i in agent_ids:
-        a, own = f"{r}/agent/{i}", f"{r}/cell/*/agent/{i}"
-        per_agent[i] = [
-            *agents_common,
-            *publish(f"agent-{i}-pub", [f"{a}/cmd", f"{own}/beacon", f"{own}/obstacles", f"{r}/report/agent-{i}"],
-                     [f"{r}/agent/*/cmd", beacons, obstacles, f"{r}/report/*"]),
-            *subscribe(f"agent-{i}-own", [f"{a}/state"]),
-            *membership(f"agent-{i}", f"{r}/alive/agent/{i}"),
-            # its advanced publisher's cache: a queryable under its own key, replies with its own set only
-            rule(f"agent-{i}-cache", ["declare_queryable"], ("ingress",), [f"{own}/obstacles/@adv/pub/**"]),
-            rule(f"agent-{i}-cache-reply", ["reply"], ("ingress",), [f"{own}/obstacles"]),
-        ]
-        grant(f"agent-{i}", per_agent[i])
-    for h in hosts:
-        grant(host_name(h), list(dict.fromkeys(rid for i in h for rid in per_agent[i])))
-    grant("simworld", [
-        *publish("simworld-pub", [f"{r}/clock", f"{r}/truth", f"{r}/agent/*/state", f"{r}/report/simworld"],
-                 [f"{r}/report/*"]),
-        *subscribe("simworld-sub", [f"{r}/agent/*/cmd"]),
-        *membership("simworld", f"{r}/alive/simworld"),
-        # the truth's advanced publisher: its cache (a queryable, replies with the truth only) and heartbeats
-        rule("simworld-truth-cache", ["declare_queryable"], ("ingress",), [f"{r}/truth/@adv/pub/**"]),
-        rule("simworld-truth-reply", ["reply"], ("ingress",), [f"{r}/truth"]),
-        *publish("simworld-truth-heartbeat", [f"{r}/truth/@adv/pub/**"]),
-    ])
-    grant("monitor", [
-        *publish("monitor-pub", [f"{r}/event"]),
-        *subscribe("monitor-sub", [f"{r}/truth", f"{r}/clock", f"{r}/report/*"]),
-        *membership("monitor", f"{r}/alive/monitor"),
-        # recovery of a lost truth: the world's heartbeats, queries to its cache and their replies
-        *subscribe("monitor-truth-heartbeat", [f"{r}/truth/@adv/pub/**"]),
-        rule("monitor-truth-query", ["query"], ("ingress", "egress"), [f"{r}/truth/@adv/**"]),
-        rule("monitor-truth-reply", ["reply"], ("egress",), [f"{r}/truth"]),
-    ])
-    grant("observer", subscribe("observer-sub", [f"{r}/clock", f"{r}/event"]))
-    # "intruder" has a certificate of the CA but no subject: the default (deny) applies to it.
-    _dedupe(rules)
-    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
-            "policies": policies}
-
-
-def _dedupe(rules: list[dict[str, Any]]) -> None:
-    seen: set[str] = set()
-    keep = []
-    for rl in rules:
-        if rl["id"] not in seen:
-            seen.add(rl["id"])
-            keep.append(rl)
-    rules[:] = keep
+def router_config(dep: Deployment, host: Host, ref: Path) -> dict[str, Any]:
+    """A host's router: listens on its endpoint, connects to the routers of the hosts before it (mutual TLS with
+    its own certificate both ways), and holds the access rules of its own processes."""
+    me = host.router_name
+    earlier = [h.router for h in dep.hosts[:dep.hosts.index(host)]]
+    conf = _base("router", {
+        "root_ca_certificate": str(ref / "ca.pem"),
+        "listen_private_key": str(ref / f"{me}-key.pem"),
+        "listen_certificate": str(ref / f"{me}-cert.pem"),
+        "connect_private_key": str(ref / f"{me}-key.pem"),
+        "connect_certificate": str(ref / f"{me}-cert.pem"),
+        "verify_name_on_connect": True,
+    })
+    conf["listen"] = {"endpoints": [host.router]}
+    if earlier:
+        conf["connect"] = {"endpoints": earlier}
+    conf["access_control"] = acl.router_acl(dep, host)
+    return conf
 
 
 def _dump(cfg: dict[str, Any]) -> bytes:
@@ -359,7 +290,9 @@ def _issue(d: Path, cn: str, ca_key: Any, ca_cert: Any, server_names: list[Any] 
     from cryptography.x509.oid import ExtendedKeyUsageOID
 
     key = _new_key()
-    usage = [ExtendedKeyUsageOID.SERVER_AUTH] if server_names else [ExtendedKeyUsageOID.CLIENT_AUTH]
+    # a router listens (server) and connects to the other hosts' routers (client)
+    usage = ([ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH] if server_names
+             else [ExtendedKeyUsageOID.CLIENT_AUTH])
     builder = (x509.CertificateBuilder().subject_name(_name(cn)).issuer_name(ca_cert.subject)
                .public_key(key.public_key()).serial_number(x509.random_serial_number())
                .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)

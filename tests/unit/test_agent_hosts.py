@@ -96,14 +96,19 @@ def test_admission_takes_several_agents_from_one_session_and_refuses_others_for_
 def test_secure_mode_gives_an_agent_host_one_credential_granted_exactly_its_agents(tmp_path: Path) -> None:
     sec = secure.create(tmp_path / "secrets", S, "tcp/127.0.0.1:7447", "paper-0a1b2c", hosts=((1, 2, 3, 4, 5), (6,)))
     assert sec.config_for("agent", "1-5").name == "agents-1-5.json5"  # a host of one is a lone agent: agent-6
-    assert sec.config_for("agent", "6").name == "agent-6.json5" and sec.config_for("agent", "3").name == "agent-3.json5"
+    assert sec.config_for("agent", "6").name == "agent-6.json5" and sec.config_for("agent", "6").exists()
+    assert not (sec.dir / "agent-3.json5").exists()  # a hosted agent has no credential of its own
     client = json.loads(sec.config_for("agent", "1-5").read_text())
     assert client["transport"]["link"]["tls"]["connect_certificate"] == str(sec.dir / "agents-1-5-cert.pem")
     acl = json.loads(sec.router_config.read_text())["access_control"]
-    rules = {r["id"]: r for r in acl["rules"]}
+    # the same run with one process per agent: what each agent alone may send
+    lone = secure.create(tmp_path / "lone", S, "tcp/127.0.0.1:7447", "paper-0a1b2c")
+    lone_acl = json.loads(lone.router_config.read_text())["access_control"]
 
     def sent(subject: str) -> set[str]:
-        (pol,) = [p for p in acl["policies"] if p["subjects"] == [subject]]
+        a = lone_acl if subject.startswith("agent-") else acl
+        rules = {r["id"]: r for r in a["rules"]}
+        (pol,) = [p for p in a["policies"] if p["subjects"] == [subject]]
         return {k for rid in pol["rules"] for k in rules[rid]["key_exprs"] if "ingress" in rules[rid]["flows"]
                 and set(rules[rid]["messages"]) & {"put", "reply", "liveliness_token"}}
 

@@ -148,7 +148,7 @@ def test_secure_mission_completes(tmp_path: Path) -> None:
     d = out / "secrets"
     assert _mode(d) == 0o700 and all(_mode(f) == 0o600 for f in d.iterdir())
     ids = [a.id for a in load(PAPER).agents]
-    for name in ["monitor", "simworld", *(f"agent-{i}" for i in ids), "observer", "intruder", "router"]:
+    for name in ["monitor", "simworld", *(f"agent-{i}" for i in ids), "observer", "intruder", "router-A"]:
         zenoh.Config.from_file(str(d / f"{name}.json5"))
     print(f"secure paper mission: {wall:.1f} s wall, converged at {s['convergence_time_s']} s")
 
