@@ -64,7 +64,7 @@ def links(md: Path) -> list[str]:
 def test_the_docs_exist():
     names = {p.name for p in DOCS}
     assert {"README.md", "CHANGELOG.md", "paper.md", "scenario.md", "architecture.md", "wire.md", "faults.md",
-            "ros2.md", "foxglove.md", "sweeps.md", "benchmarks.md"} <= names, sorted(names)
+            "ros2.md", "foxglove.md", "sweeps.md", "benchmarks.md", "security.md"} <= names, sorted(names)
 
 
 def test_the_slug_rule():
