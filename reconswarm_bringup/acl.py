@@ -2,8 +2,9 @@
 
 zenoh's ACL sees only a router's direct neighbours, so each host's router holds the rules of its own processes
 (each a subject by its certificate's common name) and, for each other host's router (one subject), what
-crosses between the hosts: what the other hosts' processes may send and receive, and what ours may send
-their way. The rules (`R` = `swarm/<run>`) allow, per process and nothing else:
+crosses between the hosts: what the other hosts' processes may send and receive (their router holds their
+own rules), and what ours may send their way; nothing else (our clock, say, never comes in from there).
+The rules (`R` = `swarm/<run>`) allow, per process and nothing else:
 
 - agent i: put `R/agent/i/cmd`, `R/cell/*/agent/i/{beacon,obstacles}` (in any cell, under its own id
   only), its intrusion report `R/report/agent-i`; token `R/alive/agent/i`; the advanced publisher's cache
@@ -171,12 +172,13 @@ def _all_processes(dep: Deployment) -> tuple[_Rules, dict[str, list[str]]]:
     return b, grants
 
 
-def _mirror(b: _Rules, rid: str) -> str:
-    """The same rule in the other direction: what a process may send, the router may forward to another router
-    (and what it may receive, may come in from one)."""
+def _onward(b: _Rules, rid: str) -> str | None:
+    """What one of our processes may send (an ingress rule), the router may forward to another host's router
+    (egress); None for a rule of what it receives."""
     rl = b.rules[rid]
-    flows = tuple(sorted({"ingress" if f == "egress" else "egress" for f in rl["flows"]}))
-    return b.rule(f"{rid}~crossing", rl["messages"], flows, rl["key_exprs"])
+    if "ingress" not in rl["flows"]:
+        return None
+    return b.rule(f"{rid}~onward", rl["messages"], ("egress",), rl["key_exprs"])
 
 
 def router_acl(dep: Deployment, host: Host) -> dict[str, Any]:
@@ -197,7 +199,7 @@ def router_acl(dep: Deployment, host: Host) -> dict[str, Any]:
         grant(p, grants[p])
     if theirs:
         crossing = [rid for p in theirs for rid in grants[p]]
-        crossing += [_mirror(b, rid) for p in ours for rid in grants[p]]
+        crossing += [o for p in ours for rid in grants[p] if (o := _onward(b, rid)) is not None]
         for h in dep.hosts:
             if h.name != host.name:
                 grant(h.router_name, crossing)

@@ -123,7 +123,7 @@ def scenario_check(file: Annotated[Path, typer.Argument(help="Scenario TOML file
 def _register() -> None:
     from agent.cli import agent_cmd
     from monitor.cli import monitor_app
-    from reconswarm_bringup import cli_launch, cli_nodes, cli_sweep
+    from reconswarm_bringup import cli_credentials, cli_launch, cli_nodes, cli_sweep
     from simworld.cli import simworld_cmd
 
     app.add_typer(monitor_app, name="monitor")
@@ -132,6 +132,7 @@ def _register() -> None:
     cli_nodes.register(app)
     cli_launch.register(app)
     cli_sweep.register(app)
+    cli_credentials.register(app)
 
 
 _register()

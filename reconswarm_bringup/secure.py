@@ -38,6 +38,7 @@ from reconswarm_bringup.packing import ids_spec
 
 ROLES = ("monitor", "simworld", "agent")
 VALID_DAYS = 30
+CONNECT_MS = 60_000  # how long a process tries to reach its router before it gives up
 LOCAL_HOST = "A"  # the launcher's host (and B, with --hosts 2)
 __all__ = ["Secrets", "create", "tls_endpoint", "write"]
 
@@ -184,7 +185,8 @@ def client_config(host: Host, name: str, ref: Path) -> dict[str, Any]:
         "connect_certificate": str(ref / f"{name}-cert.pem"),
         "verify_name_on_connect": True,
     })
-    conf["connect"] = {"endpoints": [host.router], "timeout_ms": {"router": -1, "peer": -1, "client": 15000}}
+    # (a router on another host, or in another namespace, may come up a minute after its clients on a busy machine)
+    conf["connect"] = {"endpoints": [host.router], "timeout_ms": {"router": -1, "peer": -1, "client": CONNECT_MS}}
     return conf
 
 

@@ -1,0 +1,151 @@
+"""A secure deployment over two routers, as `reconswarm credentials` makes it for real machines (here both on
+127.0.0.1, each router on its own port): the routers link over mutual TLS; each router admits its own
+processes only; what one host's process may say crosses to the other host, what it may not is stopped at its
+own router; a session without credentials is refused by either router. A bad deployment file: one line, exit 2.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from reconswarm.net import wire
+from tests.support import ROOT, assert_all_gone, free_port, reconswarm
+
+from .test_secure import Catch, _anonymous_config, _open
+
+RUN = "paper-hosts"
+
+
+@dataclass
+class Two:
+    out: Path
+    ports: tuple[int, int]
+
+    def cfg(self, host: str, name: str) -> Path:
+        return self.out / host / f"{name}.json5"
+
+
+@pytest.fixture(scope="module")
+def two(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Two]:
+    d = tmp_path_factory.mktemp("hosts")
+    pa, pb = free_port(), free_port()
+    (d / "deployment.toml").write_text(f"""
+run = "{RUN}"
+world = "A"
+monitor = "A"
+
+[[host]]
+name = "A"
+router = "tls/127.0.0.1:{pa}"
+agents = [1, 2, 3, 4, 5]
+
+[[host]]
+name = "B"
+router = "tls/localhost:{pb}"
+agents = [6, 7, 8, 9, 10]
+""")
+    p = reconswarm("credentials", str(d / "deployment.toml"), "-o", str(d / "creds"))
+    assert p.returncode == 0, p.stderr
+    print(p.stdout)
+    two = Two(d / "creds", (pa, pb))
+    routers = []
+    for host in ("A", "B"):
+        log = (d / f"router-{host}.log").open("wb")
+        routers.append(subprocess.Popen([sys.executable, "-m", "reconswarm_bringup.cli", "router", "--zenoh-config",
+                                         str(two.cfg(host, f"router-{host}"))], cwd=ROOT, stdout=log, stderr=log))
+    try:
+        yield two
+    finally:
+        for r in routers:
+            r.terminate()
+        for r in routers:
+            r.wait(timeout=30)
+        assert_all_gone(d)
+
+
+def test_what_a_process_may_say_crosses_hosts_and_nothing_else(two: Two) -> None:
+    """Listeners and speakers are separate sessions (a session hears its own puts whatever the routers say)."""
+    keys = wire.Keys(RUN)
+    a1, a2, world = (_open(two.cfg("A", n)) for n in ("agent-1", "agent-2", "simworld"))  # host A
+    b6, b7 = (_open(two.cfg("B", n)) for n in ("agent-6", "agent-7"))  # host B
+    try:
+        on_a, on_b = Catch(), Catch()
+        a1.declare_subscriber(keys.cell_agents(None, "beacon"), on_a)
+        a1.declare_subscriber(keys.clock, on_a)
+        b6.declare_subscriber(keys.clock, on_b)
+        b6.declare_subscriber(keys.cell_agents(None, "beacon"), on_b)
+        time.sleep(3.0)  # declarations across both routers
+        for _ in range(5):
+            b7.put(keys.beacon((0, 0), 7), b"seven")  # its own: crosses to A
+            b7.put(keys.beacon((0, 0), 1), b"forged")  # agent 1's, from B: stopped at B's router
+            b7.put(keys.clock, b"forged clock")  # only the world (on A) may
+            world.put(keys.clock, b"clock")  # crosses to B
+            a2.put(keys.beacon((0, 0), 2), b"two")  # crosses to B
+            time.sleep(0.2)
+        time.sleep(1.5)
+        print("heard on A:", sorted(on_a.key_set()), "on B:", sorted(on_b.key_set()))
+        assert on_a.payloads(keys.beacon((0, 0), 7)) == [b"seven"] * 5
+        assert on_b.payloads(keys.beacon((0, 0), 2)) == [b"two"] * 5
+        assert on_a.payloads(keys.clock) == on_b.payloads(keys.clock) == [b"clock"] * 5  # only the world's
+        assert on_a.payloads(keys.beacon((0, 0), 1)) == on_b.payloads(keys.beacon((0, 0), 1)) == []
+    finally:
+        for z in (a1, a2, world, b6, b7):
+            z.close()
+
+
+def test_a_router_admits_only_its_own_hosts_processes(two: Two) -> None:
+    """Agent 1's credential (host A's) is valid for the CA but names nothing on B's router: connected there, it
+    hears nothing and says nothing."""
+    keys = wire.Keys(RUN)
+    a1_conf = zenoh.Config.from_file(str(two.cfg("A", "agent-1")))
+    a1_conf.insert_json5("connect/endpoints", f'["tls/localhost:{two.ports[1]}"]')
+    stray, b6, b7 = zenoh.open(a1_conf), _open(two.cfg("B", "agent-6")), _open(two.cfg("B", "agent-7"))
+    try:
+        got_stray, got_b6 = Catch(), Catch()
+        stray.declare_subscriber("swarm/**", got_stray)
+        stray.declare_subscriber(keys.cell_agents(None, "beacon"), got_stray)
+        b6.declare_subscriber(keys.cell_agents(None, "beacon"), got_b6)
+        time.sleep(2.0)
+        for _ in range(5):
+            stray.put(keys.beacon((0, 0), 1), b"from B's router")
+            b7.put(keys.beacon((0, 0), 7), b"seven")
+            time.sleep(0.2)
+        time.sleep(1.0)
+        print("stray heard:", sorted(got_stray.key_set()), "agent 6 heard:", sorted(got_b6.key_set()))
+        assert got_b6.payloads(keys.beacon((0, 0), 7)) == [b"seven"] * 5  # B works for its own
+        assert got_b6.payloads(keys.beacon((0, 0), 1)) == []  # the stray's puts reach nobody
+        # ... and nothing reaches it (a session hears its own puts locally, whatever the router says)
+        assert got_stray.key_set() <= {keys.beacon((0, 0), 1)}
+    finally:
+        for z in (stray, b6, b7):
+            z.close()
+
+
+def test_sessions_without_credentials_are_refused_by_both_routers(two: Two) -> None:
+    outcome = {}
+    for host, ep in (("A", f"tls/127.0.0.1:{two.ports[0]}"), ("B", f"tls/localhost:{two.ports[1]}"),
+                     ("B over tcp", f"tcp/127.0.0.1:{two.ports[1]}")):
+        try:
+            zenoh.open(_anonymous_config(ep)).close()
+            outcome[host] = "opened"
+        except Exception as exc:
+            outcome[host] = f"refused: {exc}".splitlines()[0][:100]
+    print(outcome)
+    assert all(o.startswith("refused") for o in outcome.values()), outcome
+
+
+def test_a_bad_deployment_file_is_one_line_exit_2(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text('run = "x"\nworld = "A"\nmonitor = "A"\n[[host]]\nname = "A"\nrouter = "udp/10.0.0.1:7450"\n'
+                   'agents = [1]\n')
+    p = reconswarm("credentials", str(bad), "-o", str(tmp_path / "out"))
+    assert p.returncode == 2 and p.stderr.strip().count("\n") == 0, p.stderr
+    assert "bad.toml: host[0].router:" in p.stderr and not (tmp_path / "out" / "A").exists()
