@@ -263,13 +263,20 @@ class MonitorNode:
             return False
         # A claimed end stands once its tick is recorded and the world is gone (it closes its session after its
         # end: a forger's clock is followed by the world's), or after end_grace_s; the truth must not contradict
-        # it: "converged" is refused unless the record's own error says so at its tick.
-        if self.written >= self.end.k and self.end.reason == "converged" and not self.rec.converged():
-            self.refuse_end(f"the truth is not converged (max |e| {self.rec.max_error_m:.3g} m at tick {self.written})")
-            return False
+        # it: "converged" is refused unless the record's own error says so at its tick (or, its tick never come,
+        # at the last one recorded, which the summary will judge).
         gone = self.world_gone_at is not None and self.world_gone_at >= self.end_at
         late = now_s - self.end_at > self.timing.end_grace_s
+        if (self.written >= self.end.k or late) and self.end_contradicted():
+            return False
         return (self.written >= self.end.k and gone) or late
+
+    def end_contradicted(self) -> bool:
+        """A claimed "converged" that the record's truth contradicts is refused (True)."""
+        if self.end is None or self.end.reason != "converged" or self.rec.converged():
+            return False
+        self.refuse_end(f"the truth is not converged (max |e| {self.rec.max_error_m:.3g} m at tick {self.written})")
+        return True
 
     def finish(self, now_s: float, rejected_here: int) -> None:
         """Close the record: counters, the end reason (or the world's loss), the wall time."""

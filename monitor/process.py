@@ -197,6 +197,9 @@ class MonitorAdapter(Member):
                     last_counts = time.monotonic()
                     if live is not None:
                         live.update(self.live_view())
+            node.end_contradicted()  # (stopped with an end pending: the record must not claim it either)
+            for source, why in node.refused_ends:
+                self.gate.refuse(Intrusion(IntrusionKind.END, source, self.keys.clock, why), time.monotonic())
             node.writer.intrusions("monitor", self.gate.tally.as_rows())
             node.finish(time.monotonic(), self.rej.count)
             self.publish()

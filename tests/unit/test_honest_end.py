@@ -76,3 +76,12 @@ def test_a_conflicting_command_makes_lockstep_not_deterministic(tmp_path: Path) 
     with RunRecord(tmp_path / "run.db") as rec:
         s = summarize(rec)
     assert (s["deterministic"], s["determinism_lost_at_s"]) == (False, round(2 * DT, 9))
+
+
+def test_a_converged_end_whose_tick_never_comes_is_judged_at_the_last_tick_recorded(tmp_path: Path) -> None:
+    node = node_for(tmp_path)
+    tick(node, 0, 0.0)
+    node.clock(end_clock(2, "converged"), 0.1, "world-zid")
+    assert node.poll(0.1) is False  # its tick not in yet
+    assert node.poll(3.2) is False and node.end is None  # the grace is over: the record is not converged
+    assert "not converged" in node.refused_ends[0][1]

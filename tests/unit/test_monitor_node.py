@@ -195,7 +195,7 @@ def test_topology_events_are_recorded_and_published_alike(tmp_path: Path) -> Non
 def test_the_end_waits_for_the_last_tick_or_the_grace(tmp_path: Path) -> None:
     node = node_for(tmp_path)
     tick(node, 0, 0.0)
-    node.clock(clock(2, end=True), 0.1)
+    node.clock(wire.Clock(2, 2 * DT, tuple(IDS), wire.ClockMode.LOCKSTEP, 0.0, True, "duration"), 0.1)
     assert node.poll(0.1) is False  # tick 2 not in yet
     node.agent_up(IDS[0], False, 0.2)  # agents leave at the end: not a loss
     assert node.poll(3.2) is True and node.take_events() == []
