@@ -13,7 +13,7 @@ from typing import Any
 from reconswarm.errors import BadInput, ProcessFailure
 from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions
 from reconswarm.scenario import Scenario
-from reconswarm_bringup import netns, packing, runid, secure
+from reconswarm_bringup import netns, runid
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.endpoints import addresses, host_port
 
@@ -88,8 +88,6 @@ def plan_network(cfg: LaunchConfig, s: Scenario, run: str, lock: runid.EndpointL
     """How the run reaches its router(s). `lock`, when given, is taken on the endpoint first (one launch per
     router endpoint); a plain router already listening there is used only if no run's world is alive on it."""
     endpoint = cfg.router or DEFAULT_ROUTER
-    if cfg.secure and cfg.hosts > 1:
-        raise BadInput("--secure with --hosts 2 is not supported")
     hp = host_port(endpoint)
     if cfg.secure and hp is not None and ":" in hp[0]:  # zenoh 1.10.2 says "invalid dns name" for tls/[::1]:P
         raise BadInput(f"--router {endpoint} with --secure: zenoh's TLS link cannot check a router's name at an "
@@ -97,24 +95,9 @@ def plan_network(cfg: LaunchConfig, s: Scenario, run: str, lock: runid.EndpointL
     if lock is not None and cfg.hosts == 1:
         lock.acquire(run)
     if cfg.secure:
-        ids = [a.id for a in s.agents]
-        packed = tuple(packing.hosts(ids, packing.per_process(cfg.agents_per_process, len(ids)), lambda a: ""))
-        sec = secure.create(cfg.out / "secrets", s, endpoint, run, packed)
-        reach: dict[tuple[str, str], tuple[list[str], list[str]]] = {
-            ("monitor", "-"): ([], ["--zenoh-config", str(sec.config_for("monitor", "-"))]),
-                 ("simworld", "-"): ([], ["--zenoh-config", str(sec.config_for("simworld", "-"))]),
-                 ("flood", "-"): ([], ["--zenoh-config", str(cfg.out / "secrets" / "intruder.json5")])}
-        reach |= {("agent", str(a.id)): ([], ["--zenoh-config", str(sec.config_for("agent", str(a.id)))])
-                  for a in s.agents}
-        # An agent host reaches the router with its own credential (named after its first agent, as it starts).
-        reach |= {("agent", str(h[0])): ([], ["--zenoh-config", str(sec.config_for("agent", packing.ids_spec(h)))])
-                  for h in sec.hosts}
-        if not _port_free(sec.endpoint):  # a router already there holds another run's CA: it cannot serve us
-            raise BadInput(f"{sec.endpoint}: in use by a router this launch did not start; secure mode starts "
-                           f"its own router: pass another --router port")
-        routers: list[tuple[str, list[str], list[str]]] = [
-            ("-", ["router", "--zenoh-config", str(sec.router_config)], [])]
-        return Net(sec.observer_options(), routers, reach, [], wait_on=sec.endpoint)
+        from reconswarm_bringup import secure_net  # (it builds on Net)
+
+        return secure_net.plan(cfg, s, run, endpoint)
     if cfg.hosts == 2:
         hosts = netns.TwoHosts.for_run(os.getpid())
         hosts.create()
