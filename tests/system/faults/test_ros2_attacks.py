@@ -44,13 +44,30 @@ class Outsider:
         self.lock = threading.Lock()
         self.truth: wire.Truth | None = None
         self.clocks: list[wire.Clock] = []
+        self.head3: dict[int, tuple[float, float]] = {}  # tick -> robot 3's head point, by the world's truth
+        self.beacons3: list[wire.Beacon] = []  # agent 3's idea of its robot, as it tells its peers
         self.subs = [self.z.declare_subscriber(self.keys.truth, self._on_truth),
-                     self.z.declare_subscriber(self.keys.clock, self._on_clock)]
+                     self.z.declare_subscriber(self.keys.clock, self._on_clock),
+                     self.z.declare_subscriber(f"{self.keys.prefix}/cell/*/agent/3/beacon", self._on_beacon)]
         self.sent = 0
 
     def _on_truth(self, s: Any) -> None:
+        tr = wire.truth_from_wire(s.payload.to_bytes())
+        i3 = tr.ids.index(3)
         with self.lock:
-            self.truth = wire.truth_from_wire(s.payload.to_bytes())
+            self.truth = tr
+            self.head3[tr.k] = (tr.px[i3], tr.py[i3])
+
+    def _on_beacon(self, s: Any) -> None:
+        b = wire.beacon_from_wire(s.payload.to_bytes(), 3)
+        with self.lock:
+            self.beacons3.append(b)
+
+    def idea_off_m(self) -> float:
+        """How far agent 3's beacons put its robot from where the world has it, at the same tick (the largest)."""
+        with self.lock:
+            return max((math.hypot(b.px - self.head3[b.k][0], b.py - self.head3[b.k][1]) for b in self.beacons3
+                        if b.k in self.head3), default=math.nan)
 
     def _on_clock(self, s: Any) -> None:
         c = wire.clock_from_wire(s.payload.to_bytes())
@@ -160,6 +177,9 @@ def _run(tmp_path: Path, attack: str) -> tuple[dict[str, Any], Outsider, int]:
 def test_forged_odometry_cannot_move_an_agents_idea_of_its_robot(tmp_path: Path) -> None:
     s, o, _ = _run(tmp_path, "odometry")
     assert o.sent > 100
+    off = o.idea_off_m()
+    print(f"agent 3's beacons ({len(o.beacons3)}) off the world's robot 3 by at most {off:.3g} m")
+    assert off < 1e-6  # (NaN, no beacon compared, fails too)
     assert s["collisions"] == 0 and s["min_agent_gap_m"] > 0 and s["agents_lost"] == []
     refused = refused_from(tmp_path / "run" / "run.db", o.zid)
     assert refused.get("agent-3", {}).get("not_from_world", 0) == o.sent, refused  # each one, at its addressee
