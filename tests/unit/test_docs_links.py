@@ -142,6 +142,12 @@ def _as_file(token: str) -> str:
     return token
 
 
+def _key_fragment(token: str) -> bool:
+    """`agent/1/`, `agent/3/state`: a key with an id in it, not a path (no file or folder of the repository
+    has a name starting with a digit)."""
+    return any(part[:1].isdigit() for part in token.split("/")[1:])
+
+
 def _exists(token: str) -> bool:
     """A path, or a glob pattern (`reconswarm_bringup/cli*.py`) that matches something."""
     if "*" in token:
@@ -159,6 +165,8 @@ def _named_paths() -> list[tuple[str, int, str]]:
                 for m in PATH_TOKEN.finditer(text):
                     if any(repo in text[max(0, m.start() - 40):m.start()] for repo in OTHER_REPOSITORIES):
                         continue
+                    if _key_fragment(m.group(1)):
+                        continue
                     found.append((str(py.relative_to(ROOT)), line, _as_file(m.group(1))))
     return found
 
@@ -170,6 +178,7 @@ def test_the_path_scanner_sees_paths_and_not_keys():
     assert PATH_TOKEN.findall("tests/system/faults/test_secure.py::test_x.") == ["tests/system/faults/test_secure.py"]
     assert PATH_TOKEN.findall("(reconswarm_bringup/cli*.py)") == ["reconswarm_bringup/cli*.py"]
     assert _exists("reconswarm_bringup/cli*.py") and not _exists("reconswarm_bringup/nothing*.py")
+    assert _key_fragment("agent/1/") and _key_fragment("agent/3/state") and not _key_fragment("agent/brain.py")
     assert _as_file("simworld/ros2_io.Ros2World") == "simworld/ros2_io.py"
     assert _as_file("agent/brain.py") == "agent/brain.py"
     assert _as_file("agent/nothing.Here") == "agent/nothing.Here"
