@@ -8,6 +8,7 @@ import logging
 import os
 
 from reconswarm.errors import BadInput
+from reconswarm.net.session import ZenohOptions
 from reconswarm.scenario import Scenario
 from reconswarm_bringup import netns, packing, secure
 from reconswarm_bringup.config import LaunchConfig
@@ -68,4 +69,6 @@ def plan(cfg: LaunchConfig, s: Scenario, run: str, endpoint: str) -> Net:
         log.info("two hosts, secure: A (this namespace, router %s: simworld, monitor, agents %s) and B (%s, router %s, "
                  "connected to A's over mutual TLS: agents %s)", dep.hosts[0].router, list(dep.hosts[0].agents),
                  hosts.ns_b, dep.hosts[1].router, list(dep.hosts[1].agents))
-    return Net(sec.observer_options(), routers, reach, [], hosts, wait_on=sec.endpoint)  # (A's: in this namespace)
+    # the launcher's watcher: the observer's rights, on A's router (named: the ROS 2 notice shows it)
+    watch = ZenohOptions.build([sec.endpoint], None, "client", sec.config_for("observer"))
+    return Net(watch, routers, reach, [], hosts, wait_on=sec.endpoint)  # (A's router: in this namespace)

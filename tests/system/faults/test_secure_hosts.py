@@ -149,3 +149,66 @@ def test_a_bad_deployment_file_is_one_line_exit_2(tmp_path: Path) -> None:
     p = reconswarm("credentials", str(bad), "-o", str(tmp_path / "out"))
     assert p.returncode == 2 and p.stderr.strip().count("\n") == 0, p.stderr
     assert "bad.toml: host[0].router:" in p.stderr and not (tmp_path / "out" / "A").exists()
+
+
+# --- run_local.sh --secure --hosts 2 (network namespaces: root) -----------------------------------------------
+
+def test_secure_two_hosts_converge_through_a_partition_and_refuse_outsiders(tmp_path: Path) -> None:
+    """The paper at --secure --hosts 2 with the link between the hosts cut for 10 s: the routers relink over
+    mutual TLS and the mission converges as in open mode; meanwhile a session without credentials is refused by
+    host A's router and the CA-signed certificate no rule names hears nothing there."""
+    import json
+    import signal
+
+    from reconswarm.scenario import load
+    from tests.support import events, launcher_cmd, paper_with, read_run_id, tick_count
+
+    from .test_partition import need_network_namespaces
+
+    need_network_namespaces()
+    out = tmp_path / "run"
+    scen = paper_with(tmp_path, **{"duration_s = 300.0": "duration_s = 600.0"})  # (as the open partition test)
+    err = tmp_path / "launcher.err"
+    with err.open("wb") as fh:
+        proc = subprocess.Popen(launcher_cmd(out, "-s", str(scen), "--secure", "--hosts", "2", "--fault",
+                                             "partition@60+10", "--json"), cwd=ROOT, stdout=subprocess.PIPE, stderr=fh)
+    try:
+        deadline = time.monotonic() + 300
+        while tick_count(out / "run.db") < 20:
+            assert proc.poll() is None and time.monotonic() < deadline, err.read_text()[-3000:]
+            time.sleep(0.2)
+        secrets = out / "secrets"
+        router_a = json.loads((secrets / "router-A.json5").read_text())
+        ep_a = router_a["listen"]["endpoints"][0]
+        assert router_a["access_control"]["default_permission"] == "deny"
+        assert json.loads((secrets / "router-B.json5").read_text())["connect"]["endpoints"] == [ep_a]
+        run = f"swarm/{read_run_id(out)}"
+        try:
+            zenoh.open(_anonymous_config(ep_a)).close()
+            anonymous = "opened"
+        except Exception as exc:
+            anonymous = f"refused: {exc}".splitlines()[0][:100]
+        intruder, got = _open(secrets / "intruder.json5"), Catch()
+        intruder.declare_subscriber(f"{run}/**", got)
+        intruder.liveliness().declare_subscriber(f"{run}/alive/**", got, history=True)
+        time.sleep(3.0)
+        intruder.close()
+        stdout, _ = proc.communicate(timeout=600)
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            proc.wait(timeout=60)
+        assert_all_gone(out)
+    assert proc.returncode == 0, err.read_text()[-3000:]
+    s = json.loads(stdout)
+    print(f"secure, two hosts, partition@60+10: converged {s['converged']} at {s['convergence_time_s']} s, "
+          f"collisions {s['collisions']}, intrusions {s['intrusions']}; outsider {anonymous}; "
+          f"intruder heard {len(got)}")
+    assert anonymous.startswith("refused") and len(got) == 0
+    assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
+    ev = events(out / "run.db")
+    net = [e for e in ev if e.get("cause") == "network"]
+    assert [e["kind"] for e in net] == ["split", "merge"]
+    b_agents = [a.id for a in load(scen).agents][5:]
+    assert net[0]["after"] == [[1, 2, 3, 4, 5], b_agents]
+    assert sorted(e["agent"] for e in ev if e["kind"] == "agent_lost") == b_agents  # B's, while cut off
