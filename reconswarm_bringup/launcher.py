@@ -30,7 +30,7 @@ from reconswarm.net.admission import Admission
 from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions, open_session, sample_source
 from reconswarm.net.timing import TIMING
 from reconswarm.scenario import Scenario, load, parse, to_toml, warnings
-from reconswarm_bringup import chaos, netns, outcome, packing, runid, validate
+from reconswarm_bringup import chaos, netns, outcome, outdir, packing, runid, validate
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.fleet import ROOT, Fleet, Proc
 from reconswarm_bringup.network import Net, check_live_port, plan_network
@@ -108,6 +108,9 @@ def run(cfg: LaunchConfig) -> int:
         raise BadInput("--fault partition@...: needs --hosts 2 (two hosts to cut apart)")
     check_live_port(cfg)
     s = prepare_scenario(cfg)  # refused before anything of a previous run in OUTDIR is touched
+    # OUTDIR is ours for the run: not while another launch or a `reconswarm sim` writes there (its record would go).
+    claim = outdir.RecordClaim(cfg.out, replaces=None, what="a launch (run_local.sh)")
+    claim.acquire()
     for stale in ("processes.tsv", "faults.tsv", "run.db", "run.db-wal", "run.db-shm", runid.RUN_ID_FILE):
         (cfg.out / stale).unlink(missing_ok=True)
     scen_path = cfg.out / "scenario.toml"  # every process reads the same file
@@ -165,6 +168,7 @@ def run(cfg: LaunchConfig) -> int:
             net.hosts.delete()
             netns.ACTIVE.clear()
         lock.release()
+        claim.release()
     if stop_sig:
         log.warning("stopped by signal %d", stop_sig[0])
         return 128 + stop_sig[0]

@@ -5,6 +5,7 @@
 - `reconswarm sim -o DIR` while a launched run writes DIR/run.db is refused (exit 2, one line) and the
   live record goes on to be the launch's own; afterwards sim still does not replace that launched record.
 - `reconswarm sim -o DIR` while another engine holds DIR is refused; sim replaces its own finished record.
+- a second launch into the directory of a live launch is refused (exit 2) before it deletes anything.
 """
 
 from __future__ import annotations
@@ -80,7 +81,11 @@ def test_sim_refuses_a_live_launch_dir_and_its_record(tiny: tuple[Path, Path], o
             assert launch.poll() is None and time.monotonic() < deadline, "the launch did not start recording"
             time.sleep(0.2)
         r = reconswarm("sim", str(path), "-o", str(out))
-        _refused(r, "a launched run is writing its record there")
+        _refused(r, "run is writing its record there")  # (the launch's claim on the directory)
+        # a second launch into the same directory (on its own router) neither starts nor deletes the record
+        second = subprocess.run(launcher_cmd(out, "-s", str(path), "--json"), cwd=ROOT, text=True,
+                                capture_output=True, timeout=120)
+        assert second.returncode == 2 and "another run is writing its record there" in second.stderr, second.stderr
         assert tick_count(out / "run.db") >= 5
         stdout, stderr = launch.communicate(timeout=600)
     finally:
