@@ -19,7 +19,8 @@ The rules (`R` = `swarm/<run>`) allow, per process and nothing else:
   (subscribe, history queries and their replies, the publishers' liveliness), as an agent reads them.
 - observer (the launcher's watcher): subscribe `R/clock`, `R/event`.
 - With ROS 2 (domain D, rmw_zenoh's keys): agent i puts `D/robot_i/cmd_vel/**` and subscribes
-  `D/robot_i/odom/**`; simworld puts `D/robot_*/odom/**` and subscribes `D/robot_*/cmd_vel/**`; each declares
+  `D/robot_i/odom/**` and its scan `R/agent/i/scan` (which simworld puts on `R/agent/*/scan`);
+  simworld puts `D/robot_$*/odom/**` and subscribes `D/robot_$*/cmd_vel/**`; each declares
   its node's liveliness tokens only (`@ros2_lv/D/*/*/*/*/*/*/<node>` and below: `agent_i`, `simworld`).
 - Any other certificate of the CA (`intruder`): nothing.
 
@@ -119,9 +120,10 @@ def _agent(b: _Rules, i: int, domain: int | None) -> list[str]:
         b.rule(f"agent-{i}-cache", ["declare_queryable"], ("ingress",), [f"{own}/obstacles/@adv/pub/**"]),
         b.rule(f"agent-{i}-cache-reply", ["reply"], ("ingress",), [f"{own}/obstacles"]),
     ]
-    if domain is not None:
-        out += b.ros2_node(f"agent-{i}", domain, f"agent_{i}", f"{domain}/robot_{i}/cmd_vel/**",
-                           f"{domain}/robot_{i}/odom/**")
+    if domain is not None:  # the plant's odometry replaces the state; its scan comes on the project's key
+        out += [*b.ros2_node(f"agent-{i}", domain, f"agent_{i}", f"{domain}/robot_{i}/cmd_vel/**",
+                             f"{domain}/robot_{i}/odom/**"),
+                *b.subscribe(f"agent-{i}-scan", [f"{a}/scan"])]
     return out
 
 
@@ -138,7 +140,9 @@ def _simworld(b: _Rules, domain: int | None) -> list[str]:
         *b.publish("simworld-truth-heartbeat", [f"{r}/truth/@adv/pub/**"]),
     ]
     if domain is not None:
-        out += b.ros2_node("simworld", domain, "simworld", f"{domain}/robot_*/odom/**", f"{domain}/robot_*/cmd_vel/**")
+        robots = f"{domain}/robot_$*"  # (`robot_*` is no key expression: `$*` within a chunk)
+        out += [*b.ros2_node("simworld", domain, "simworld", f"{robots}/odom/**", f"{robots}/cmd_vel/**"),
+                *b.publish("simworld-scan", [f"{r}/agent/*/scan"])]
     return out
 
 

@@ -88,9 +88,6 @@ def launch_cmd(
             raise BadInput(f"--planner: expected reconfigurable or virtual-leader, got {planner!r}")
         if foxglove is not None and not 1 <= foxglove <= 65535:
             raise BadInput(f"--foxglove: port must be in 1..65535, got {foxglove}")
-        if secure and (ros2 or foxglove is not None):
-            raise BadInput(f"{'--ros2' if ros2 else '--foxglove'} and --secure cannot be combined (the access rules "
-                           "cover neither the ROS 2 keys nor the live view's reading of the obstacle sets)")
         per_process = packing.parse(agents_per_process)
         if per_process != 1 and ros2:
             raise BadInput(f"--agents-per-process {agents_per_process}: --ros2 runs one agent per process (one ROS 2 "

@@ -13,7 +13,7 @@ from typing import Any
 from reconswarm.errors import BadInput, ProcessFailure
 from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions
 from reconswarm.scenario import Scenario
-from reconswarm_bringup import netns, runid
+from reconswarm_bringup import netns, runid, secure_net
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.endpoints import addresses, host_port
 
@@ -95,9 +95,8 @@ def plan_network(cfg: LaunchConfig, s: Scenario, run: str, lock: runid.EndpointL
     if lock is not None and cfg.hosts == 1:
         lock.acquire(run)
     if cfg.secure:
-        from reconswarm_bringup import secure_net  # (it builds on Net)
-
-        return secure_net.plan(cfg, s, run, endpoint)
+        sn = secure_net.plan(cfg, s, run, endpoint, _port_free)
+        return Net(sn.watch, sn.routers, sn.reach, [], sn.hosts, wait_on=sn.endpoint)
     if cfg.hosts == 2:
         hosts = netns.TwoHosts.for_run(os.getpid())
         hosts.create()

@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
 
 from reconswarm.errors import BadInput
 from reconswarm.net.session import ZenohOptions
@@ -13,7 +16,6 @@ from reconswarm.scenario import Scenario
 from reconswarm_bringup import netns, packing, secure
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.deployment import Deployment, Host, tls_endpoint
-from reconswarm_bringup.network import Net, _port_free
 
 log = logging.getLogger("reconswarm.launch")
 
@@ -31,9 +33,20 @@ def _deployment(cfg: LaunchConfig, s: Scenario, run: str, endpoints: list[str]) 
     return Deployment(run, hosts, "A", "A", cfg.ros_domain_id, cfg.foxglove_port is not None)
 
 
-def plan(cfg: LaunchConfig, s: Scenario, run: str, endpoint: str) -> Net:
+@dataclass(frozen=True)
+class SecureNet:
+    """What reconswarm_bringup/network.py's Net is made of, for a secure run."""
+
+    watch: ZenohOptions  # the launcher's watcher: the observer's rights, on A's router
+    routers: list[tuple[str, list[str], list[str]]]
+    reach: dict[tuple[str, str], tuple[list[str], list[str]]]
+    hosts: Any  # netns.TwoHosts with --hosts 2, else None
+    endpoint: str  # A's router endpoint (in this namespace: the launcher waits for it)
+
+
+def plan(cfg: LaunchConfig, s: Scenario, run: str, endpoint: str, port_free: Callable[[str], bool]) -> SecureNet:
     """The secure run's network: its credentials under OUTDIR/secrets, a router per host (B's connects to A's over
-    mutual TLS), each process with its own configuration."""
+    mutual TLS), each process with its own configuration. port_free(endpoint): nothing listens there."""
     hosts = None
     if cfg.hosts == 2:
         hosts = netns.TwoHosts.for_run(os.getpid())
@@ -42,7 +55,7 @@ def plan(cfg: LaunchConfig, s: Scenario, run: str, endpoint: str) -> Net:
     else:
         dep = _deployment(cfg, s, run, [endpoint])
     sec = secure.write(cfg.out / "secrets", dep, intruder=True)
-    if hosts is None and not _port_free(sec.endpoint):  # a router already there holds another CA: it cannot serve us
+    if hosts is None and not port_free(sec.endpoint):  # a router already there holds another CA: it cannot serve us
         raise BadInput(f"{sec.endpoint}: in use by a router this launch did not start; secure mode starts "
                        f"its own router: pass another --router port")
     if hosts is not None:
@@ -71,4 +84,4 @@ def plan(cfg: LaunchConfig, s: Scenario, run: str, endpoint: str) -> Net:
                  hosts.ns_b, dep.hosts[1].router, list(dep.hosts[1].agents))
     # the launcher's watcher: the observer's rights, on A's router (named: the ROS 2 notice shows it)
     watch = ZenohOptions.build([sec.endpoint], None, "client", sec.config_for("observer"))
-    return Net(watch, routers, reach, [], hosts, wait_on=sec.endpoint)  # (A's router: in this namespace)
+    return SecureNet(watch, routers, reach, hosts, sec.endpoint)

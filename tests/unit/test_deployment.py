@@ -127,9 +127,10 @@ def test_ros2_keys_and_live_view_granted_only_when_named() -> None:
     a, b = (acl.router_acl(d, h) for h in d.hosts)
     sent, heard = _sent_and_heard(a, "agent-3")
     assert {"7/robot_3/cmd_vel/**", "@ros2_lv/7/*/*/*/*/*/*/agent_3", "@ros2_lv/7/*/*/*/*/*/*/agent_3/**"} <= sent
-    assert "7/robot_3/odom/**" in heard and not any("robot_1" in k or "agent_1" in k for k in sent | heard)
+    assert {"7/robot_3/odom/**", "swarm/paper/agent/3/scan"} <= heard  # (its scan: the plant's, on our key)
+    assert not any("robot_1" in k or "agent_1" in k or "agent/1/" in k for k in sent | heard)
     sent_w, heard_w = _sent_and_heard(a, "simworld")
-    assert "7/robot_*/odom/**" in sent_w and "7/robot_*/cmd_vel/**" in heard_w
+    assert {"7/robot_$*/odom/**", "swarm/paper/agent/*/scan"} <= sent_w and "7/robot_$*/cmd_vel/**" in heard_w
     assert not any("cmd_vel" in k for k in sent_w)  # the plant never speaks for an agent
     _, heard_m = _sent_and_heard(b, "monitor")
     assert "swarm/paper/cell/*/agent/*/obstacles" in heard_m  # what the live view draws
@@ -137,6 +138,18 @@ def test_ros2_keys_and_live_view_granted_only_when_named() -> None:
     assert not any("robot_" in k or "@ros2_lv" in k for rl in plain_a["rules"] for k in rl["key_exprs"])
     _, heard_pm = _sent_and_heard(acl.router_acl(plain, plain.hosts[1]), "monitor")
     assert "swarm/paper/cell/*/agent/*/obstacles" not in heard_pm
+
+
+def test_every_configuration_opens_in_zenoh(tmp_path: Path) -> None:
+    """zenoh parses the rules' key expressions (`robot_*` is refused, `robot_$*` is not) and the TLS fields."""
+    import zenoh
+
+    sec = secure.write(tmp_path / "out", _dep(ros2_domain=7, live_view=True), split=True)
+    files = sorted((tmp_path / "out").glob("*/*.json5"))
+    assert len(files) == 2 + 6
+    for p in files:
+        zenoh.Config.from_file(str(p))
+    assert sec.config_for("agent", "1-2").parent.name == "A"
 
 
 def test_write_one_directory_per_host_with_only_its_own_keys(tmp_path: Path) -> None:
