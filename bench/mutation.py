@@ -70,6 +70,13 @@ def configure(tree: Path, module: str, tests: tuple[str, ...]) -> None:
     ])
     with (tree / "pyproject.toml").open("a") as fh:
         fh.write(cfg)
+    # Hypothesis in the copy: no shrinking (a failing example kills the mutant as it is; shrinking it took
+    # so long that mutmut timed the mutant out) and few examples unless a test asks for more.
+    with (tree / "tests" / "conftest.py").open("a") as fh:
+        fh.write("\n\nfrom hypothesis import Phase as _Phase\nfrom hypothesis import settings as _settings\n\n"
+                 "_settings.register_profile('mutation', max_examples=25, deadline=None, database=None,\n"
+                 "                           phases=[_Phase.explicit, _Phase.reuse, _Phase.generate])\n"
+                 "_settings.load_profile('mutation')\n")
 
 
 def outcomes(tree: Path, module: str) -> dict[str, int | None]:
