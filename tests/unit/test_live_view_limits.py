@@ -28,7 +28,13 @@ def _masked_text_frame(text: str) -> bytes:
     return head + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(data))
 
 
-def _client_that_never_reads(port: int) -> socket.socket:
+def _channel_ids(view: LiveView) -> list[int]:
+    """The view's channel ids (the SDK numbers channels per process: not 1..6 once other channels exist)."""
+    ch = view.channels
+    return [c.id() for c in (ch.world, ch.swarm, ch.events, ch.errors, ch.metrics, view.knowledge)]
+
+
+def _client_that_never_reads(port: int, channels: list[int]) -> socket.socket:
     c = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     c.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
     c.connect(("127.0.0.1", port))
@@ -36,15 +42,15 @@ def _client_that_never_reads(port: int) -> socket.socket:
     c.sendall((f"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
                f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
                f"Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n").encode())
-    time.sleep(0.3)  # (the server advertises its channels: ids 1..6 here)
-    subs = [{"id": k, "channelId": ch} for k, ch in enumerate(range(1, 7))]
+    time.sleep(0.3)  # (the server advertises its channels)
+    subs = [{"id": k, "channelId": ch} for k, ch in enumerate(channels)]
     c.sendall(_masked_text_frame(json.dumps({"op": "subscribe", "subscriptions": subs})))
     return c
 
 
 def test_clients_that_never_read_do_not_hold_the_close() -> None:
     view = LiveView(S, 0, max_rate_hz=1000.0)
-    clients = [_client_that_never_reads(view.port) for _ in range(5)]
+    clients = [_client_that_never_reads(view.port, _channel_ids(view)) for _ in range(5)]
     try:
         n = len(S.agents)
         alive, edges = np.ones(n, dtype=bool), np.zeros((0, 2), dtype=np.int64)
