@@ -66,6 +66,10 @@ def configure(tree: Path, module: str, tests: tuple[str, ...]) -> None:
         f"pytest_add_cli_args_test_selection = {json.dumps([f'tests/unit/{t}' for t in tests])}",
         'pytest_add_cli_args = ["-p", "no:cacheprovider", "-q", "-x"]',
         "use_git_change_detection = false",
+        # Mutants are forked from a server that has only collected the tests: the tests that open a zenoh
+        # session hang in a child forked from a process whose zenoh runtime already runs (mutmut's default).
+        'process_isolation = "forkserver"',
+        'forkserver_warmup = "collect"',
         "",
     ])
     with (tree / "pyproject.toml").open("a") as fh:
