@@ -13,15 +13,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import Edges, norm2
+from reconswarm.geometry.plane import Edges, norm2
 from reconswarm.paper.blocked import blocked_hulls, pass_gap_m
 from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
 from reconswarm.paper.knowledge import KnownObstacles, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
 from reconswarm.paper.link import linked
 from reconswarm.paper.planner import Neighbours, ObstacleView, command, errors, repulsion
-from reconswarm.scenario import PlannerKind, Scenario
-from reconswarm.sim.unicycle import inputs
+from reconswarm.plant.unicycle import inputs
+from reconswarm.scenario.model import PlannerKind, Scenario
 
 Array = NDArray[np.float64]
 
@@ -64,7 +64,7 @@ class AgentBrain:
 
     def inputs(self, u: Array, theta: float) -> tuple[float, float]:
         """The command u (2,) as the unicycle's own inputs (v, ω) at heading θ: eq. 3 inverted
-        (reconswarm.sim.unicycle.inputs, which the in-process engine applies to everyone at once)."""
+        (reconswarm.plant.unicycle.inputs, which the in-process engine applies to everyone at once)."""
         v, w = inputs(u[None, :], np.array([theta]), self.l)
         return float(v[0]), float(w[0])
 

@@ -36,6 +36,7 @@ from agent.messages import Exit, Input, Reconnect
 from agent.neighbours import Cells
 from reconswarm.net import wire
 from reconswarm.net.cells import Cell, chunk_cell
+from reconswarm.net.keys import Keys
 from reconswarm.net.session import Inbox, Item, StartMark, Stopper, to_item
 
 log = logging.getLogger("reconswarm.agent")
@@ -90,7 +91,7 @@ class TaggedInbox:
 class AgentHost:
     """The session's subscriptions around the hosted agents' links; `run` is the process's loop."""
 
-    def __init__(self, session: zenoh.Session, keys: wire.Keys, links: dict[int, AgentLink],
+    def __init__(self, session: zenoh.Session, keys: Keys, links: dict[int, AgentLink],
                  inbox: TaggedInbox) -> None:
         self.z, self.keys, self.links, self.inbox = session, keys, links, inbox
         self.active = dict(links)  # the agents still running (one that exited leaves this)

@@ -23,6 +23,7 @@ from agent.ros2_io import AgentRos2
 from reconswarm.net import wire
 from reconswarm.net.cells import Cell
 from reconswarm.net.gate import Gate
+from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.report import report_to_wire
 from reconswarm.net.session import Member, Rejections
 
@@ -30,7 +31,7 @@ log = logging.getLogger("reconswarm.agent")
 Decoded = Input | None  # what a sample decodes to (None: a key no agent reads)
 
 
-def decode_sample(keys: wire.Keys, key: str, payload: bytes, kind: str) -> Decoded:
+def decode_sample(keys: Keys, key: str, payload: bytes, kind: str) -> Decoded:
     """A sample as a node input, for any agent (who may take it is `AgentLink.take`'s question); a malformed one
     becomes Invalid."""
     try:
@@ -52,7 +53,7 @@ def decode_sample(keys: wire.Keys, key: str, payload: bytes, kind: str) -> Decod
         if leaf == "obstacles":
             return wire.obstacles_from_wire(payload, aid)
         return None
-    except wire.WireError as exc:
+    except WireError as exc:
         return Invalid(key, str(exc))
 
 
@@ -64,7 +65,7 @@ class AgentLink(Member):
     comes from another session.
     """
 
-    def __init__(self, node: AgentNode, keys: wire.Keys, session: zenoh.Session, rej: Rejections, gate: Gate,
+    def __init__(self, node: AgentNode, keys: Keys, session: zenoh.Session, rej: Rejections, gate: Gate,
                  ros2_domain_id: int | None = None, own_source: str | None = None,
                  odometry: Any = None) -> None:
         self.node, self.keys, self.z, self.rej, self.gate = node, keys, session, rej, gate

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 from reconswarm.net import wire
 from reconswarm.net.cells import Cell, CellGrid
-from reconswarm.scenario import PlannerKind, Scenario
+from reconswarm.scenario.model import PlannerKind, Scenario
 
 XY = tuple[float, float]
 # Realtime: a live peer silent this long (wall seconds; at least 3 periods) has left the cells we listen to

@@ -29,7 +29,7 @@ from agent.neighbours import Neighbourhood
 from agent.sets import PeerSets, own_set, scan_sets
 from reconswarm.net import wire
 from reconswarm.net.timing import TIMING, Timing
-from reconswarm.scenario import Scenario
+from reconswarm.scenario.model import Scenario
 
 log = logging.getLogger("reconswarm.agent")
 

@@ -18,11 +18,11 @@ from agent.host import RECONNECT, AgentHost, TaggedInbox
 from agent.link import AgentLink
 from agent.node import AgentNode
 from reconswarm.errors import BadInput
-from reconswarm.net import wire
 from reconswarm.net.gate import Gate
+from reconswarm.net.keys import Keys
 from reconswarm.net.session import Rejections, ZenohOptions, serving
 from reconswarm.net.timing import TIMING, Timing
-from reconswarm.scenario import load
+from reconswarm.scenario.model import load
 
 __all__ = ["AgentConfig", "AgentLink", "parse_ids", "run"]
 log = logging.getLogger("reconswarm.agent")
@@ -71,7 +71,7 @@ def run(cfg: AgentConfig) -> int:
     nodes = {a: AgentNode(s, a, time.monotonic(), cfg.timing) for a in ids}
     gates = {a: Gate(s, f"agent-{a}") for a in ids}
     rejs = {a: Rejections(f"agent {a}") for a in ids}
-    keys = wire.Keys(cfg.run_id or s.meta.name)
+    keys = Keys(cfg.run_id or s.meta.name)
     who = _who(ids)
     while True:
         with serving(cfg.zenoh, who, cfg.timing.session_open_timeout_s) as (session, stop):

@@ -9,7 +9,7 @@ import statistics
 import sys
 from collections.abc import Sequence
 
-from reconswarm.scenario import Scenario
+from reconswarm.scenario.model import Scenario
 
 
 def median(xs: Sequence[float]) -> float:

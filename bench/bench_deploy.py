@@ -43,7 +43,7 @@ from grid import grid_scenario
 
 from agent.process import parse_ids
 from reconswarm.record.store import RunRecord
-from reconswarm.scenario import to_toml
+from reconswarm.scenario.model import to_toml
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"

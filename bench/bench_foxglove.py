@@ -30,7 +30,7 @@ from _common import command_line, machine, median
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 from monitor.live import LiveView  # noqa: E402
-from reconswarm.scenario import load  # noqa: E402
+from reconswarm.scenario.model import load  # noqa: E402
 from tests.support import PAPER, free_port, launcher_cmd  # noqa: E402
 from tests.system.test_foxglove_live import Watched, watch  # noqa: E402
 

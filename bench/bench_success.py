@@ -30,7 +30,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import command_line, machine, median
 
-from reconswarm.generate import generate
+from reconswarm.scenario.generate import generate
 from reconswarm_bringup.sweep import Job, percentile, run_sweep
 
 LARGE_OBSTACLES = 8

@@ -19,7 +19,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import command_line, fmt_list, machine, median, with_ticks
 
-from reconswarm.generate import generate
+from reconswarm.scenario.generate import generate
 from reconswarm_bringup import engine
 
 

@@ -47,7 +47,7 @@ from reconswarm.net.cells import CellGrid
 from reconswarm.net.keys import Keys
 from reconswarm.net.session import Inbox, ZenohOptions, open_session
 from reconswarm.net.wire import VERSION
-from reconswarm.scenario import Scenario
+from reconswarm.scenario.model import Scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 PATTERNS = ("cells", "all")

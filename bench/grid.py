@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from reconswarm.scenario import AgentSpec, PlannerConfig, PlannerKind, Scenario, ScenarioMeta, WorldConfig
+from reconswarm.scenario.model import AgentSpec, PlannerConfig, PlannerKind, Scenario, ScenarioMeta, WorldConfig
 
 SPACING_M = 25.0
 

@@ -4,7 +4,7 @@ prints per module how many mutants the tests killed and how many survived, and t
 --diff, each survivor's change). Slow (minutes to tens of minutes per module on two cores): not part of CI.
 
     python bench/mutation.py                                   # every core module
-    python bench/mutation.py reconswarm/sim/unicycle.py --jobs 2 --diff
+    python bench/mutation.py reconswarm/plant/unicycle.py --jobs 2 --diff
     python bench/mutation.py --list                            # the modules and their tests
 
 A survivor is a change of the code that none of the module's tests notices: either a test to write, or an
@@ -30,7 +30,7 @@ PACKAGES = ("reconswarm", "agent", "simworld", "monitor", "reconswarm_bringup")
 # The core modules and the unit tests that hold them (unit tests only: no processes, seconds each).
 CORE: dict[str, tuple[str, ...]] = {
     "reconswarm/paper/planner.py": ("test_planner.py", "test_admission.py", "test_engine.py"),
-    "reconswarm/sim/unicycle.py": ("test_unicycle.py", "test_unicycle_vw.py", "test_unicycle_limits.py"),
+    "reconswarm/plant/unicycle.py": ("test_unicycle.py", "test_unicycle_vw.py", "test_unicycle_limits.py"),
     "reconswarm/paper/topology.py": ("test_topology_metrics.py", "test_summary_counts.py"),
     "reconswarm/net/wire.py": ("test_wire.py", "test_wire_points.py", "test_wire_fields.py"),
     "reconswarm/net/admission.py": ("test_admission.py", "test_membership_rules.py"),

@@ -37,10 +37,11 @@ from zenoh import ext
 from monitor import scene
 from reconswarm.errors import BadInput
 from reconswarm.net import wire
+from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.session import Inbox, Rejections
 from reconswarm.paper.events import Event
 from reconswarm.paper.topology import labels
-from reconswarm.scenario import Scenario
+from reconswarm.scenario.model import Scenario
 
 log = logging.getLogger("reconswarm.monitor")
 
@@ -184,7 +185,7 @@ class LiveFeed:
     """The zenoh side of the live view: the agents' obstacle sets (an advanced subscriber: sets announced
     before the monitor started come from the agents' caches), decoded on the monitor's loop."""
 
-    def __init__(self, view: LiveView, keys: wire.Keys, session: Any, rej: Rejections) -> None:
+    def __init__(self, view: LiveView, keys: Keys, session: Any, rej: Rejections) -> None:
         self.view, self.keys, self.rej = view, keys, rej
         self.inbox = Inbox()
         self.sub = ext.declare_advanced_subscriber(session, keys.cell_agents(None, "obstacles"), self.inbox.handler(),
@@ -195,9 +196,9 @@ class LiveFeed:
             try:
                 _, aid, _ = self.keys.parse(key)
                 if aid is None or aid not in self.view.index:
-                    raise wire.WireError(f"agent {aid} is not in the scenario")
+                    raise WireError(f"agent {aid} is not in the scenario")
                 self.view.obstacle_set(wire.obstacles_from_wire(payload, aid))
-            except wire.WireError as exc:
+            except WireError as exc:
                 self.rej.reject(key, str(exc))
 
     def close(self) -> None:

@@ -23,11 +23,12 @@ from typing import Any
 import numpy as np
 
 from reconswarm.net import wire
+from reconswarm.net.keys import WireError
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.paper.events import Event, EventKind, Groups
 from reconswarm.record.recorder import Recorder
 from reconswarm.record.store import RunWriter
-from reconswarm.scenario import Scenario
+from reconswarm.scenario.model import Scenario
 
 log = logging.getLogger("reconswarm.monitor")
 
@@ -204,7 +205,7 @@ class MonitorNode:
 
     def truth(self, tr: wire.Truth) -> None:
         if any(a not in self.index for a in tr.ids):
-            raise wire.WireError("truth names an agent that is not in the scenario")
+            raise WireError("truth names an agent that is not in the scenario")
         if tr.k > self.written:
             self.pending[tr.k] = tr
 
@@ -218,7 +219,7 @@ class MonitorNode:
     def telemetry(self, agent_id: int, rejected: int, guessed_k: int) -> None:
         """An agent's counters (from its report): messages it rejected, the first tick it guessed (-1: none)."""
         if agent_id not in self.index:
-            raise wire.WireError(f"agent {agent_id} is not in the scenario")
+            raise WireError(f"agent {agent_id} is not in the scenario")
         self.counts[f"agent {agent_id}"] = rejected
         if guessed_k >= 0 and (self.guessed_k < 0 or guessed_k < self.guessed_k):
             if self.guessed_k < 0:

@@ -25,14 +25,16 @@ from monitor.live import LiveFeed, LiveView
 from monitor.node import MonitorNode
 from reconswarm.errors import ProcessFailure
 from reconswarm.net import wire
-from reconswarm.net.admission import Intrusion, IntrusionKind, Membership
+from reconswarm.net.admission import Intrusion, IntrusionKind
 from reconswarm.net.gate import Gate
+from reconswarm.net.keys import Keys, WireError
+from reconswarm.net.membership import Membership
 from reconswarm.net.report import report_from_wire
 from reconswarm.net.session import Inbox, Member, Rejections, StartMark, Stopper, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
 from reconswarm.net.uplink import LinkChange, Uplink
 from reconswarm.record.store import RunWriter
-from reconswarm.scenario import load
+from reconswarm.scenario.model import load
 
 log = logging.getLogger("reconswarm.monitor")
 
@@ -56,7 +58,7 @@ def disk_full(exc: BaseException) -> bool:
 class MonitorAdapter(Member):
     def __init__(self, node: MonitorNode, run: str, session: Any) -> None:
         self.node = node
-        self.keys = k = wire.Keys(run)
+        self.keys = k = Keys(run)
         self.rej = Rejections("monitor")
         self.inbox = Inbox()
         self.feed: LiveFeed | None = None
@@ -101,7 +103,7 @@ class MonitorAdapter(Member):
                     node.truth(tr)
             elif what == "report":
                 self.report(key, leaf, aid, payload, source, now)
-        except wire.WireError as exc:
+        except WireError as exc:
             self.rej.reject(key, str(exc))
 
     def report(self, key: str, process: str, aid: int | None, payload: bytes, source: str, now: float) -> None:

@@ -55,7 +55,7 @@ from foxglove.messages import (
 from numpy.typing import NDArray
 
 from reconswarm.paper.topology import graph_edges, labels
-from reconswarm.scenario import Scenario
+from reconswarm.scenario.model import Scenario
 
 Array = NDArray[np.float64]
 

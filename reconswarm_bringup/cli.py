@@ -44,7 +44,7 @@ def sim(
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
 ) -> None:
     """Run the mission in one process, vectorized (same math as the distributed deployment)."""
-    from reconswarm.scenario import load, warnings
+    from reconswarm.scenario.model import load, warnings
     from reconswarm_bringup import engine
 
     try:
@@ -85,8 +85,8 @@ def scenario_generate(
     out: Annotated[Path | None, typer.Option("-o", "--out", help="Write to a file instead of stdout.")] = None,
 ) -> None:
     """Print a valid random scenario (TOML)."""
-    from reconswarm.generate import generate
-    from reconswarm.scenario import to_toml
+    from reconswarm.scenario.generate import generate
+    from reconswarm.scenario.model import to_toml
 
     try:
         text = to_toml(generate(agents, obstacles, seed))
@@ -108,7 +108,7 @@ def scenario_generate(
 @scenario_app.command("check")
 def scenario_check(file: Annotated[Path, typer.Argument(help="Scenario TOML file.")]) -> None:
     """Validate a scenario: exit 0, or one line naming the file and field and exit 2."""
-    from reconswarm.scenario import check
+    from reconswarm.scenario.model import check
 
     try:
         s, warns = check(file)

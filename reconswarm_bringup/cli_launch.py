@@ -69,7 +69,7 @@ def launch_cmd(
 ) -> None:
     """Run the mission as separate processes over Zenoh on this machine (router, simworld, monitor, agents)."""
     from reconswarm.net.ros2 import resolve_domain_id
-    from reconswarm.scenario import PLANNERS
+    from reconswarm.scenario.model import PLANNERS
     from reconswarm_bringup import faults as faults_mod
     from reconswarm_bringup import packing, validate
     from reconswarm_bringup.config import LaunchConfig

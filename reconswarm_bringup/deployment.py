@@ -29,7 +29,7 @@ from typing import Any
 
 from reconswarm.errors import BadInput
 from reconswarm.net.ros2 import MAX_DOMAIN_ID
-from reconswarm.toml_reader import TableReader, kind_of
+from reconswarm.scenario.toml_reader import TableReader, kind_of
 from reconswarm_bringup import packing
 from reconswarm_bringup.validate import endpoint as check_endpoint
 

@@ -1,5 +1,5 @@
 """The in-process engine: the whole mission in one process, every agent at once, same functions as the
-distributed deployment (reconswarm.paper, reconswarm.sim, reconswarm.record). Deterministic for a scenario and seed.
+distributed deployment (reconswarm.paper, reconswarm.plant, reconswarm.record). Deterministic for a scenario and seed.
 
 Tick k, in this order (the agent process follows the same order for its own row):
   1. sense: every agent's scan of contour points within R_v of p_i(k);
@@ -28,19 +28,19 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import Edges, rows_where
-from reconswarm.pairs import NearPairs
+from reconswarm.geometry.pairs import NearPairs
+from reconswarm.geometry.plane import Edges, rows_where
 from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
 from reconswarm.paper.knowledge import SwarmKnowledge, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
 from reconswarm.paper.link import HYSTERESIS_M, linked
 from reconswarm.paper.planner import NeighbourTables, ObstacleView, command, errors, repulsion
+from reconswarm.plant import unicycle
+from reconswarm.plant.sensing import ContourField
 from reconswarm.record.recorder import Recorder
 from reconswarm.record.store import RunRecord, RunWriter
 from reconswarm.record.summary import summarize
-from reconswarm.scenario import PlannerKind, Scenario
-from reconswarm.sim import unicycle
-from reconswarm.sim.sensing import ContourField
+from reconswarm.scenario.model import PlannerKind, Scenario
 from reconswarm_bringup.outdir import ENGINE_MODE, RecordClaim
 
 Array = NDArray[np.float64]

@@ -21,10 +21,11 @@ from typing import Any
 
 import msgpack
 
-from reconswarm.net import wire
 from reconswarm.net.cells import Cell, CellGrid
+from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions, open_session
-from reconswarm.scenario import load
+from reconswarm.scenario.model import load
+from reconswarm.scenario.wire_limits import MAX_PAYLOAD_BYTES
 
 
 def _pack(o: Any) -> bytes:
@@ -44,7 +45,7 @@ def payloads(rng: random.Random, key_id: int) -> list[Callable[[], bytes]]:
         lambda: _pack({"v": 1, "id": other, "k": 1, "t": 0.0, "x": 0.0, "y": 0.0, "theta": 0.0, "px": 0.0,
                        "py": 0.0, "ux": 1.0, "uy": 1.0, "radius": 1.0, "rev": 1, "points": [], "obstacles": {}}),
         lambda: _pack([1, 2, 3]),
-        lambda: b"\x00" * (wire.MAX_PAYLOAD_BYTES + 1),  # over the size limit
+        lambda: b"\x00" * (MAX_PAYLOAD_BYTES + 1),  # over the size limit
     ]
 
 
@@ -57,7 +58,7 @@ class FloodConfig:
     seed: int = 0
 
 
-def _cells_now(session: Any, k: wire.Keys, ids: list[int], start: dict[int, Cell]) -> dict[int, Cell]:
+def _cells_now(session: Any, k: Keys, ids: list[int], start: dict[int, Cell]) -> dict[int, Cell]:
     """The cell of each agent's latest beacon (listening up to 2 s), else of its start."""
     heard: dict[int, Cell] = {}
 
@@ -82,7 +83,7 @@ def run(cfg: FloodConfig) -> dict[str, int]:
     ids = [a.id for a in s.agents] if s else list(range(1, 11))
     grid = CellGrid.for_scenario(s) if s else None
     start = {a.id: grid.cell_of(*a.start_m) for a in s.agents} if s and grid else {}
-    k = wire.Keys(cfg.run)
+    k = Keys(cfg.run)
     rng = random.Random(cfg.seed)
     sent: dict[str, int] = {}
     import zenoh

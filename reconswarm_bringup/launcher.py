@@ -24,12 +24,14 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from reconswarm.cli import outputs
 from reconswarm.errors import BadInput
-from reconswarm.generate import generate
 from reconswarm.net import wire
 from reconswarm.net.admission import Admission
+from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions, open_session, sample_source
 from reconswarm.net.timing import TIMING
-from reconswarm.scenario import Scenario, load, parse, to_toml, warnings
+from reconswarm.paper.events import Event
+from reconswarm.scenario.generate import generate
+from reconswarm.scenario.model import Scenario, load, parse, to_toml, warnings
 from reconswarm_bringup import chaos, netns, outcome, outdir, packing, runid, validate
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.fleet import ROOT, Fleet, Proc
@@ -71,7 +73,7 @@ class ClockWatch:
     """
 
     def __init__(self, run: str, zopts: ZenohOptions, s: Scenario) -> None:
-        self.keys = wire.Keys(run)
+        self.keys = Keys(run)
         self.admission = Admission(s)  # a clock counts only from the world's session (an `end` above all)
         self.session = open_session(zopts, "run_local")
         self.clock_sub = self.session.declare_subscriber(self.keys.clock, zenoh.handlers.RingChannel(1))
@@ -80,10 +82,10 @@ class ClockWatch:
         self.k = -1
         self.alive = 0
         self.end: wire.Clock | None = None
-        self.events: list[wire.Event] = []
+        self.events: list[Event] = []
 
     def poll(self) -> None:
-        with contextlib.suppress(wire.WireError):
+        with contextlib.suppress(WireError):
             sample = self.clock_sub.try_recv()
             if sample is not None:
                 c = wire.clock_from_wire(sample.payload.to_bytes())
@@ -93,7 +95,7 @@ class ClockWatch:
                     if c.end:
                         self.end = c
         while (sample := self.event_sub.try_recv()) is not None:
-            with contextlib.suppress(wire.WireError):
+            with contextlib.suppress(WireError):
                 self.events.append(wire.event_from_wire(sample.payload.to_bytes()))
 
     def close(self) -> None:

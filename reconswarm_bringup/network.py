@@ -12,7 +12,7 @@ from typing import Any
 
 from reconswarm.errors import BadInput, ProcessFailure
 from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions
-from reconswarm.scenario import Scenario
+from reconswarm.scenario.model import Scenario
 from reconswarm_bringup import netns, runid, secure_net
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.endpoints import addresses, host_port

@@ -16,7 +16,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from reconswarm.errors import BadInput
-from reconswarm.scenario import Scenario
+from reconswarm.scenario.model import Scenario
 
 log = logging.getLogger("reconswarm.launch")
 

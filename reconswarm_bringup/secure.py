@@ -31,7 +31,7 @@ from typing import Any
 
 from reconswarm.errors import BadInput
 from reconswarm.net.session import LEASE_MS, ZenohOptions
-from reconswarm.scenario import Scenario
+from reconswarm.scenario.model import Scenario
 from reconswarm_bringup import acl
 from reconswarm_bringup.deployment import Deployment, Host, tls_endpoint
 from reconswarm_bringup.packing import ids_spec

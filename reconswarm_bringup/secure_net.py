@@ -12,7 +12,7 @@ from typing import Any
 
 from reconswarm.errors import BadInput
 from reconswarm.net.session import ZenohOptions
-from reconswarm.scenario import Scenario
+from reconswarm.scenario.model import Scenario
 from reconswarm_bringup import netns, packing, secure
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.deployment import Deployment, Host, tls_endpoint

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from reconswarm.errors import BadInput
-from reconswarm.scenario import PLANNERS, Scenario, load
+from reconswarm.scenario.model import PLANNERS, Scenario, load
 from reconswarm_bringup import engine
 
 COLUMNS = ("scenario", "planner", "seed", "converged", "convergence_time_s", "final_max_error_m", "collisions",

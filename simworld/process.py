@@ -18,14 +18,15 @@ from zenoh import ext
 
 from reconswarm.errors import BadInput
 from reconswarm.net import ros2, wire
-from reconswarm.net.admission import Membership
 from reconswarm.net.gate import Gate
+from reconswarm.net.keys import Keys, WireError
+from reconswarm.net.membership import Membership
 from reconswarm.net.report import report_to_wire
 from reconswarm.net.session import Inbox, Member, Rejections, StartMark, Stopper, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
 from reconswarm.net.uplink import LinkChange, Uplink
 from reconswarm.net.wire import ClockMode
-from reconswarm.scenario import load
+from reconswarm.scenario.model import load
 from simworld.ros2_io import Ros2World, WorldRos2
 from simworld.world import Phase, TickOut, WorldNode
 
@@ -55,7 +56,7 @@ class WorldAdapter(Member):
 
     def __init__(self, node: WorldNode, run: str, session: zenoh.Session, ros2_domain_id: int | None = None) -> None:
         self.node = node
-        self.keys = k = wire.Keys(run)
+        self.keys = k = Keys(run)
         self.inbox = Inbox()
         self.rej = Rejections("simworld")
         block = zenoh.CongestionControl.BLOCK
@@ -94,7 +95,7 @@ class WorldAdapter(Member):
         if self.ros2 is not None and self.ros2.owns(key):
             try:
                 c = self.ros2.decode(key, payload)
-            except (ros2.Ros2Error, wire.WireError) as exc:
+            except (ros2.Ros2Error, WireError) as exc:
                 self.rej.reject(key, str(exc))
                 self.node.rejected = self.rej.count
                 return
@@ -121,7 +122,7 @@ class WorldAdapter(Member):
                     if not self.told.get(c.id) and self.members.alive(c.id, now, sim):
                         self.sync(now)
                     self.node.command(c, now)
-        except wire.WireError as exc:
+        except WireError as exc:
             self.rej.reject(key, str(exc))
             self.node.rejected = self.rej.count
 

@@ -19,10 +19,11 @@ from typing import Any
 import numpy as np
 
 from reconswarm.net import ros2, wire
+from reconswarm.net.keys import WireError
 from reconswarm.net.ros2_node import Ros2Node
 from reconswarm.net.wire import ClockMode
-from reconswarm.scenario import Scenario
-from reconswarm.sim import unicycle
+from reconswarm.plant import unicycle
+from reconswarm.scenario.model import Scenario
 from simworld.world import WorldNode
 
 
@@ -36,7 +37,7 @@ class Ros2World(WorldNode):
     def twist(self, agent_id: int, v_mps: float, omega_radps: float, now_s: float) -> None:
         """A cmd_vel of robot `agent_id`: held from the tick in progress on."""
         if agent_id not in self.index:
-            raise wire.WireError(f"agent {agent_id} is not in the scenario")
+            raise WireError(f"agent {agent_id} is not in the scenario")
         self.cmds.setdefault(self.k, {})[self.index[agent_id]] = np.array([v_mps, omega_radps])
         self.unresponsive.discard(agent_id)
         sent = self.pub_time.get(self.k)

@@ -29,12 +29,13 @@ import numpy as np
 from reconswarm.errors import ProcessFailure
 from reconswarm.net import wire
 from reconswarm.net.cells import CellGrid
+from reconswarm.net.keys import WireError
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.net.wire import ClockMode
 from reconswarm.paper.planner import errors
-from reconswarm.scenario import Scenario
-from reconswarm.sim import unicycle
-from reconswarm.sim.sensing import ContourField
+from reconswarm.plant import unicycle
+from reconswarm.plant.sensing import ContourField
+from reconswarm.scenario.model import Scenario
 
 log = logging.getLogger("reconswarm.simworld")
 
@@ -137,7 +138,7 @@ class WorldNode:
 
     def command(self, c: wire.Cmd, now_s: float) -> None:
         if c.id not in self.index:
-            raise wire.WireError(f"agent {c.id} is not in the scenario")
+            raise WireError(f"agent {c.id} is not in the scenario")
         self.cmds.setdefault(c.k, {})[self.index[c.id]] = np.array([c.v_mps, c.omega_radps])
         if c.id in self.unresponsive:
             self.unresponsive.discard(c.id)

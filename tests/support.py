@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from reconswarm.geometry import Edges
+from reconswarm.geometry.plane import Edges
 from reconswarm.paper.knowledge import obstacle_view
 from reconswarm.paper.planner import ObstacleView
 

@@ -39,12 +39,11 @@ from enum import Enum
 
 import numpy as np
 
-from reconswarm.geometry import Edges, sample_boundary, signed_distance
+from reconswarm.geometry.plane import SAMPLE_SPACING_M, Edges, sample_boundary, signed_distance
 from reconswarm.net import wire
 from reconswarm.net.membership import Membership as Membership  # (its home before; re-exported)
 from reconswarm.paper.planner import max_repulsion_speed
-from reconswarm.scenario import Scenario
-from reconswarm.sim.sensing import SAMPLE_SPACING_M
+from reconswarm.scenario.model import Scenario
 
 HULL_TOL_M = 1e-3  # a shared vertex must lie within this of the true boundary (float error is ~1e-12 m)
 RADIUS_RTOL = 1e-9

@@ -16,8 +16,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from reconswarm.paper.topology import HYSTERESIS_M
-from reconswarm.scenario import Scenario
+from reconswarm.paper.link import HYSTERESIS_M
+from reconswarm.scenario.model import Scenario
 
 Cell = tuple[int, int]
 

@@ -14,7 +14,7 @@ import logging
 from reconswarm.net import wire
 from reconswarm.net.admission import Admission, Intrusion, IntrusionTally
 from reconswarm.net.report import Report
-from reconswarm.scenario import Scenario
+from reconswarm.scenario.model import Scenario
 
 log = logging.getLogger("reconswarm.admission")
 Message = wire.Beacon | wire.Cmd | wire.ObstacleSet | wire.Clock | wire.State | wire.Scan | wire.Truth | Report

@@ -16,7 +16,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from reconswarm.net.wire import WireError, _int, _num, _pack, _str, _unpack
+from reconswarm.net.keys import WireError
+from reconswarm.net.wire import _int, _num, _pack, _str, _unpack
 
 MAX_ROWS = 300
 Row = tuple[str, str, int, float]  # kind, source, count, first_t

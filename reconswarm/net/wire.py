@@ -14,18 +14,22 @@ from typing import Any
 
 import msgpack
 
-from reconswarm.net.keys import Keys as Keys
-from reconswarm.net.keys import WireError as WireError
-from reconswarm.paper.events import Event as Event
-from reconswarm.paper.events import EventKind as EventKind
-from reconswarm.wire_limits import MAX_AGENT_ID as MAX_AGENT_ID
-from reconswarm.wire_limits import MAX_ARRAY_LEN, MAX_MAP_LEN, MAX_REASON, MAX_STATS, MAX_STR_BYTES
-from reconswarm.wire_limits import MAX_IDS as MAX_IDS
-from reconswarm.wire_limits import MAX_OBSTACLES as MAX_OBSTACLES
-from reconswarm.wire_limits import MAX_PAYLOAD_BYTES as MAX_PAYLOAD_BYTES
-from reconswarm.wire_limits import MAX_POINTS as MAX_POINTS
-from reconswarm.wire_limits import MAX_STR as MAX_STR
-from reconswarm.wire_limits import MAX_VERTICES as MAX_VERTICES
+from reconswarm.net.keys import WireError
+from reconswarm.paper.events import Event
+from reconswarm.scenario.wire_limits import (
+    MAX_AGENT_ID,
+    MAX_ARRAY_LEN,
+    MAX_IDS,
+    MAX_MAP_LEN,
+    MAX_OBSTACLES,
+    MAX_PAYLOAD_BYTES,
+    MAX_POINTS,
+    MAX_REASON,
+    MAX_STATS,
+    MAX_STR,
+    MAX_STR_BYTES,
+    MAX_VERTICES,
+)
 
 VERSION = 1
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import convex_hull, distance_to_polygon, norm2
+from reconswarm.geometry.plane import convex_hull, distance_to_polygon, norm2
 
 Array = NDArray[np.float64]
 

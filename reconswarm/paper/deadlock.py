@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import norm2
+from reconswarm.geometry.plane import norm2
 
 Array = NDArray[np.float64]
 

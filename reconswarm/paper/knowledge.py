@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import Edges, convex_hull, merge_hull, rows_where, signed_distance
+from reconswarm.geometry.plane import Edges, convex_hull, merge_hull, rows_where, signed_distance
 from reconswarm.paper.planner import ObstacleView
 
 Array = NDArray[np.float64]

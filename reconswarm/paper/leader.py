@@ -12,11 +12,11 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import Edges, norm2
+from reconswarm.geometry.plane import Edges, norm2
 from reconswarm.paper.deadlock import LEADER_STREAM, StallState, generator, stall_step, window_ticks
 from reconswarm.paper.knowledge import obstacle_view
 from reconswarm.paper.planner import attraction, obstacle_repulsion
-from reconswarm.scenario import PlannerConfig, Scenario
+from reconswarm.scenario.model import PlannerConfig, Scenario
 
 Array = NDArray[np.float64]
 

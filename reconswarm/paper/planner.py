@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import norm2
-from reconswarm.scenario import PlannerConfig
+from reconswarm.geometry.plane import norm2
+from reconswarm.scenario.model import PlannerConfig
 
 Array = NDArray[np.float64]
 Mask = NDArray[np.bool_]

@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import norm2, rows_where
-from reconswarm.pairs import pairs_within
+from reconswarm.geometry.pairs import pairs_within
+from reconswarm.geometry.plane import norm2, rows_where
 from reconswarm.paper.link import HYSTERESIS_M, linked
 
 PERSISTENCE_S = 1.0

@@ -8,10 +8,10 @@ from numpy.typing import NDArray
 
 from reconswarm.paper.events import Event
 from reconswarm.paper.topology import TopologyTracker
+from reconswarm.plant.sensing import ContourField
 from reconswarm.record.safety import SafetyMonitor
 from reconswarm.record.store import RunWriter
-from reconswarm.scenario import Scenario
-from reconswarm.sim.sensing import ContourField
+from reconswarm.scenario.model import Scenario
 
 Array = NDArray[np.float64]
 

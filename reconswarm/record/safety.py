@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import norm2
-from reconswarm.pairs import pairs_and_distances, pairs_within
+from reconswarm.geometry.pairs import pairs_and_distances, pairs_within
+from reconswarm.geometry.plane import norm2
 
 Array = NDArray[np.float64]
 

@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from reconswarm.errors import BadInput
 from reconswarm.paper.events import Event
 from reconswarm.record.safety import Episode
-from reconswarm.scenario import Scenario, parse, to_toml
+from reconswarm.scenario.model import Scenario, parse, to_toml
 
 SCHEMA_VERSION = "1"
 DDL = """

@@ -18,6 +18,7 @@ import pytest
 import zenoh
 
 from reconswarm.net import wire
+from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions, sample_source
 from tests.support import (
     PAPER,
@@ -110,7 +111,7 @@ def test_an_outside_client_sees_each_hosted_agent_as_its_own(tmp_path: Path, out
             z.close()
     assert proc.returncode in (0, 1), stderr[-3000:]
     assert json.loads(stdout)["deterministic"] is True
-    keys = wire.Keys((out / "run_id").read_text().strip())
+    keys = Keys((out / "run_id").read_text().strip())
     seen_tokens = set()
     while not tokens.empty():
         key, kind = tokens.get()

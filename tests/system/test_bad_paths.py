@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from reconswarm.generate import generate
-from reconswarm.scenario import load, to_toml
+from reconswarm.scenario.generate import generate
+from reconswarm.scenario.model import load, to_toml
 from tests.support import reconswarm
 
 

@@ -9,7 +9,7 @@ import json
 import re
 from pathlib import Path
 
-from reconswarm.scenario import to_toml
+from reconswarm.scenario.model import to_toml
 from tests.support import ROOT, max_difference, reconswarm, run_launcher, trajectories
 
 N = 36  # a 6 x 6 grid 25 m apart (bench/grid.py): 125 m across, wider than what one agent listens to

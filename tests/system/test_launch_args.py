@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 from reconswarm.errors import BadInput
-from reconswarm.generate import generate
-from reconswarm.scenario import to_toml
+from reconswarm.scenario.generate import generate
+from reconswarm.scenario.model import to_toml
 from reconswarm_bringup import validate
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -6,8 +6,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from reconswarm.generate import generate
-from reconswarm.scenario import to_toml
+from reconswarm.scenario.generate import generate
+from reconswarm.scenario.model import to_toml
 from tests.support import run_launcher
 
 

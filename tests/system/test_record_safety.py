@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from reconswarm.generate import generate
-from reconswarm.scenario import to_toml
+from reconswarm.scenario.generate import generate
+from reconswarm.scenario.model import to_toml
 from reconswarm_bringup.outdir import RecordClaim
 from tests.support import ROOT, launcher_cmd, reconswarm, summary, tick_count
 

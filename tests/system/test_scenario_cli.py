@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from reconswarm.generate import generate
-from reconswarm.scenario import check, parse
+from reconswarm.scenario.generate import generate
+from reconswarm.scenario.model import check, parse
 from tests.support import PAPER
 from tests.support import reconswarm as cli
 from tests.unit import test_scenario as unit

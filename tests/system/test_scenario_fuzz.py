@@ -21,9 +21,9 @@ import numpy as np
 import pytest
 
 from reconswarm.errors import BadInput
-from reconswarm.limits import physics_warnings
 from reconswarm.record.store import RunRecord
-from reconswarm.scenario import Scenario, parse, warnings
+from reconswarm.scenario.limits import physics_warnings
+from reconswarm.scenario.model import Scenario, parse, warnings
 from reconswarm_bringup import engine
 
 ROOT = Path(__file__).resolve().parents[2]

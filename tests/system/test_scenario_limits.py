@@ -1,8 +1,8 @@
-"""Scenario limits (reconswarm/limits.py): what the wire refuses is refused by `scenario check` first,
+"""Scenario limits (reconswarm/scenario/limits.py): what the wire refuses is refused by `scenario check` first,
 magnitudes that broke `sim` are refused, and the physics warnings fire where runs collide.
 
 The wire's limits are reconswarm.net.wire's; the bounds on scans and hulls are checked against the real
-sensing (reconswarm.sim.sensing) and knowledge (reconswarm.paper.knowledge) code, message by message, and
+sensing (reconswarm.plant.sensing) and knowledge (reconswarm.paper.knowledge) code, message by message, and
 the sizes the check computes against the wire's encoder, byte for byte.
 """
 
@@ -17,12 +17,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reconswarm import limits, wire_limits
 from reconswarm.errors import BadInput
 from reconswarm.net import wire
+from reconswarm.net.keys import Keys, WireError
+from reconswarm.paper.events import Event, EventKind
 from reconswarm.paper.knowledge import KnownObstacles
-from reconswarm.scenario import load, parse, warnings
-from reconswarm.sim.sensing import ContourField
+from reconswarm.plant.sensing import ContourField
+from reconswarm.scenario import limits, wire_limits
+from reconswarm.scenario.model import load, parse, warnings
+from reconswarm.scenario.wire_limits import (
+    MAX_AGENT_ID,
+    MAX_OBSTACLES,
+    MAX_PAYLOAD_BYTES,
+    MAX_POINTS,
+    MAX_STR,
+    MAX_VERTICES,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
@@ -68,7 +78,7 @@ def test_obstacle_id_longer_than_the_wire_allows_is_refused_by_check(tmp_path):
     assert r.returncode == 2 and r.stdout == "" and "Traceback" not in r.stderr
     lines = r.stderr.splitlines()
     assert len(lines) == 1 and f"{f}: obstacles[0].id: 200 characters" in lines[0], r.stderr
-    assert str(wire.MAX_STR) in lines[0]
+    assert str(MAX_STR) in lines[0]
     # The same through sim: refused before anything runs.
     r = cli("sim", str(f), "-o", str(tmp_path / "run"), "--json")
     assert r.returncode == 2 and len(r.stderr.splitlines()) == 1 and "obstacles[0].id" in r.stderr
@@ -76,7 +86,7 @@ def test_obstacle_id_longer_than_the_wire_allows_is_refused_by_check(tmp_path):
 
 
 def test_obstacle_id_at_the_wire_limit_is_accepted_and_its_scans_decode():
-    oid = "d" * wire.MAX_STR
+    oid = "d" * MAX_STR
     s = parse(sub('id = "diamond"', f'id = "{oid}"'))
     field = ContourField.from_scenario(s)
     p = np.array([[300.0, 60.0]])
@@ -86,14 +96,14 @@ def test_obstacle_id_at_the_wire_limit_is_accepted_and_its_scans_decode():
                 for (x, y), o in zip(field.samples[qs], field.owner[qs], strict=True))
     assert {pt[2] for pt in pts} == {oid}
     assert wire.scan_from_wire(wire.scan_to_wire(wire.Scan(1, 0, 0.0, pts))).points == pts
-    refused(sub('id = "diamond"', f'id = "{"d" * (wire.MAX_STR + 1)}"'), "obstacles[0].id")
+    refused(sub('id = "diamond"', f'id = "{"d" * (MAX_STR + 1)}"'), "obstacles[0].id")
 
 
 def test_agent_ids_are_the_wires():
-    top = wire.MAX_AGENT_ID
+    top = MAX_AGENT_ID
     s = parse(sub("id = 10\n", f"id = {top}\n"))
     assert s.agents[-1].id == top
-    assert wire.Keys("paper").parse(wire.Keys("paper").state(top)) == ("agent", top, "state")
+    assert Keys("paper").parse(Keys("paper").state(top)) == ("agent", top, "state")
     refused(sub("id = 10\n", f"id = {top + 1}\n"), "agents[9].id")
     refused(sub("id = 10\n", "id = -1\n"), "agents[9].id")
 
@@ -109,13 +119,13 @@ def test_agent_count_follows_the_truth_message_size():
     truth = wire.truth_to_wire(wire.Truth(6000, 300.0, tuple(a.id for a in s.agents), *cols))
     assert wire.truth_from_wire(truth).ids[-1] == ok_n
     msg = refused(grid_scenario(big_n), "agents")
-    assert "truth" in msg and f"{wire.MAX_PAYLOAD_BYTES:,}" in msg
+    assert "truth" in msg and f"{MAX_PAYLOAD_BYTES:,}" in msg
     cols = [tuple(rng.normal(0, 1e5, big_n).tolist()) for _ in range(5)]
-    with pytest.raises(wire.WireError):
+    with pytest.raises(WireError):
         wire.truth_from_wire(wire.truth_to_wire(wire.Truth(6000, 300.0, tuple(range(1, big_n + 1)), *cols)))
 
 
-LONGEST_KIND = max(wire.EventKind, key=lambda k: len(k.value))
+LONGEST_KIND = max(EventKind, key=lambda k: len(k.value))
 
 
 def worst_messages(s) -> dict[str, bytes]:
@@ -126,13 +136,13 @@ def worst_messages(s) -> dict[str, bytes]:
     scan = {o.id: limits.scan_points_max(o, s.planner.sensing_range_m) for o in s.obstacles}
     hull = {o.id: limits.hull_vertices_max(o) for o in s.obstacles}
     pts = tuple(pt for o in s.obstacles for pt in ((f, f, o.id),) * scan[o.id])
-    stats = {f"{j:0{wire.MAX_STR}d}": f for j in range(wire_limits.MAX_STATS)}
+    stats = {f"{j:0{MAX_STR}d}": f for j in range(wire_limits.MAX_STATS)}
     return {
         "truth": wire.truth_to_wire(wire.Truth(k, t, ids, *(((f,) * n,) * 5))),
         "clock": wire.clock_to_wire(wire.Clock(k, t, ids, wire.ClockMode.REALTIME, f, True,
                                                "r" * wire_limits.MAX_REASON, 2**53, stats)),
-        "event": wire.event_to_wire(wire.Event(t, LONGEST_KIND, (ids,), tuple((i,) for i in ids), a_max,
-                                               "c" * wire.MAX_STR, f, f, f)),
+        "event": wire.event_to_wire(Event(t, LONGEST_KIND, (ids,), tuple((i,) for i in ids), a_max,
+                                               "c" * MAX_STR, f, f, f)),
         "state": wire.state_to_wire(wire.State(a_max, k, t, f, f, f, f, f, wire.Scan(a_max, k, t, pts, tuple(
             (i, f, f) for i in ids if i != a_max)))),
         "obstacle set": wire.obstacles_to_wire(wire.ObstacleSet(a_max, k, 2**53, {
@@ -145,9 +155,9 @@ def test_computed_sizes_are_the_encoders_byte_for_byte(case):
     """The loader computes message sizes from msgpack's rules (it may not import the wire, a layer above);
     here they are checked against the wire's own encoder, and the decoder accepts them."""
     text = {"paper": PAPER_TEXT,
-            "long-ids": sub('id = "diamond"', f'id = "{"d" * wire.MAX_STR}"',
+            "long-ids": sub('id = "diamond"', f'id = "{"d" * MAX_STR}"',
                             sub('id = "hexagon"', 'id = "h' + "x" * 40 + '"')),
-            "big-ids": sub("id = 10\n", f"id = {wire.MAX_AGENT_ID}\n", sub("id = 9\n", "id = 70000\n")),
+            "big-ids": sub("id = 10\n", f"id = {MAX_AGENT_ID}\n", sub("id = 9\n", "id = 70000\n")),
             "many-agents": grid_scenario(3000, first_id=100),
             "wide-sensing": sub("sensing_range_m = 40.0", "sensing_range_m = 700.0")}[case]
     s = parse(text)
@@ -156,7 +166,7 @@ def test_computed_sizes_are_the_encoders_byte_for_byte(case):
     computed = {what: size for _, what, size in limits.largest_messages(s, scan, hull)}
     encoded = worst_messages(s)
     # The check allows an event kind of MAX_STR characters (the kinds are a layer above it); the longest is shorter.
-    slack = {"event": (wire.MAX_STR + 2) - (len(LONGEST_KIND.value) + 1)}
+    slack = {"event": (MAX_STR + 2) - (len(LONGEST_KIND.value) + 1)}
     assert computed == {what: len(b) + slack.get(what, 0) for what, b in encoded.items()}
     decode = {"truth": wire.truth_from_wire, "clock": wire.clock_from_wire, "event": wire.event_from_wire,
               "state": wire.state_from_wire, "obstacle set": wire.obstacles_from_wire}
@@ -165,7 +175,7 @@ def test_computed_sizes_are_the_encoders_byte_for_byte(case):
 
 
 def test_more_obstacles_than_an_obstacle_set_carries_is_refused():
-    n = wire.MAX_OBSTACLES + 1
+    n = MAX_OBSTACLES + 1
     def tri(k: int) -> str:  # a small triangle, 3 m apart from the next
         x, y = 2000.0 + 3 * (k % 100), 3.0 * (k // 100)
         return f'[[obstacles]]\nid = "o{k}"\nvertices_m = [[{x}, {y}], [{x + 1}, {y}], [{x}, {y + 1}]]'
@@ -173,7 +183,7 @@ def test_more_obstacles_than_an_obstacle_set_carries_is_refused():
     obs = "\n".join(tri(k) for k in range(n))
     text = PAPER_TEXT[:PAPER_TEXT.index("[[obstacles]]")] + obs
     msg = refused(text, "obstacles")
-    assert f"{n} obstacles" in msg and str(wire.MAX_OBSTACLES) in msg
+    assert f"{n} obstacles" in msg and str(MAX_OBSTACLES) in msg
 
 
 def test_hull_with_more_vertices_than_the_wire_carries_is_refused():
@@ -185,7 +195,7 @@ def test_hull_with_more_vertices_than_the_wire_carries_is_refused():
                       for i in range(v))
     text = sub(DIAMOND, f"vertices_m = [{verts}]")  # (the limits come before where agents start)
     msg = refused(text, "obstacles[0].vertices_m")
-    assert "4200" in msg and str(wire.MAX_VERTICES) in msg
+    assert "4200" in msg and str(MAX_VERTICES) in msg
 
 
 def test_scan_larger_than_the_wire_carries_is_refused():
@@ -193,7 +203,7 @@ def test_scan_larger_than_the_wire_carries_is_refused():
     big = "vertices_m = [[400000.0, 0.0], [377500.0, 10000.0], [355000.0, 0.0], [377500.0, -10000.0]]"
     msg = refused(sub("sensing_range_m = 40.0", "sensing_range_m = 30000.0", sub(DIAMOND, big)),
                   "planner.sensing_range_m")
-    assert str(wire.MAX_POINTS) in msg
+    assert str(MAX_POINTS) in msg
 
 
 @pytest.mark.parametrize("sensing_range_m", [3.0, 40.0, 300.0])
@@ -201,7 +211,7 @@ def test_scan_and_hull_bounds_hold_for_the_real_sensing_and_knowledge(sensing_ra
     """Soundness of the bounds the check relies on: from head points all around the obstacles, every real
     scan (simworld's sensing) holds at most scan_points_max points and decodes; an agent's hull (agent's
     knowledge, merging scan after scan) has at most hull_vertices_max vertices, and its obstacle set decodes."""
-    oid = "x" * wire.MAX_STR
+    oid = "x" * MAX_STR
     text = sub('id = "diamond"', f'id = "{oid}"', sub("sensing_range_m = 40.0", f"sensing_range_m = {sensing_range_m}"))
     s = parse(text)
     field = ContourField.from_scenario(s)

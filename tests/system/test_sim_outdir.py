@@ -8,8 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from reconswarm.generate import generate
-from reconswarm.scenario import to_toml
+from reconswarm.scenario.generate import generate
+from reconswarm.scenario.model import to_toml
 from tests.support import summary
 
 

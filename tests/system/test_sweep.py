@@ -17,8 +17,8 @@ from typing import Any
 import pytest
 from typer.testing import CliRunner
 
-from reconswarm.generate import generate
-from reconswarm.scenario import load, to_toml
+from reconswarm.scenario.generate import generate
+from reconswarm.scenario.model import load, to_toml
 from reconswarm_bringup import engine
 from reconswarm_bringup.cli import app
 from reconswarm_bringup.sweep import COLUMNS, make_jobs, run_sweep

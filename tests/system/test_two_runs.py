@@ -18,9 +18,9 @@ from typing import Any
 import pytest
 import zenoh
 
-from reconswarm.generate import generate
 from reconswarm.net.session import ZenohOptions
-from reconswarm.scenario import to_toml
+from reconswarm.scenario.generate import generate
+from reconswarm.scenario.model import to_toml
 from tests.support import (
     PAPER,
     ROOT,

@@ -10,7 +10,8 @@ import msgpack
 import numpy as np
 import pytest
 
-from reconswarm.geometry import convex_hull, norm2
+from reconswarm.geometry.pairs import pairs_within
+from reconswarm.geometry.plane import convex_hull, norm2
 from reconswarm.net import wire
 from reconswarm.net.admission import (
     UNATTRIBUTED,
@@ -18,17 +19,17 @@ from reconswarm.net.admission import (
     Intrusion,
     IntrusionKind,
     IntrusionTally,
-    Membership,
     command_bound_mps,
 )
-from reconswarm.pairs import pairs_within
+from reconswarm.net.keys import Keys, WireError
+from reconswarm.net.membership import Membership
 from reconswarm.paper.planner import command, neighbour_table
-from reconswarm.scenario import load
-from reconswarm.sim.sensing import ContourField
+from reconswarm.plant.sensing import ContourField
+from reconswarm.scenario.model import load
 from tests.support import PAPER, view_of
 
 S = load(PAPER)
-KEYS = wire.Keys("paper-0a1b2c")
+KEYS = Keys("paper-0a1b2c")
 WORLD, A2, A5, X = "world-zid", "agent2-zid", "agent5-zid", "intruder-zid"
 K = IntrusionKind
 
@@ -312,9 +313,9 @@ def test_report_round_trip_and_key() -> None:
     tally.add(Intrusion(K.COMMAND, X, KEYS.cmd(2), "x"), 1.5)
     m = Report("agent-3", tuple(tally.as_rows()))
     assert report_from_wire(report_to_wire(m), "agent-3") == m
-    with pytest.raises(wire.WireError):
+    with pytest.raises(WireError):
         report_from_wire(report_to_wire(m), "agent-4")  # another process's key
-    with pytest.raises(wire.WireError):
+    with pytest.raises(WireError):
         report_from_wire(report_to_wire(Report("simworld", (("k", "s", -1, 0.0),))))
     beat = Report("agent-3", None, 7, 412)  # a heartbeat: counters, the tally unchanged (no rows)
     assert report_from_wire(report_to_wire(beat), "agent-3") == beat
@@ -322,12 +323,12 @@ def test_report_round_trip_and_key() -> None:
     for field, bad_value in (("rejected", -1), ("guessed_k", -2), ("guessed_k", 1.5), ("rows", "x")):
         raw = msgpack.unpackb(report_to_wire(beat))
         raw[field] = bad_value
-        with pytest.raises(wire.WireError, match=field):
+        with pytest.raises(WireError, match=field):
             report_from_wire(msgpack.packb(raw), "agent-3")
     assert KEYS.parse(KEYS.report("agent-3")) == ("report", 3, "agent-3")
     assert KEYS.parse(KEYS.report("simworld")) == ("report", None, "simworld")
     for bad in ("monitor", "agent-x", "agent-1/x"):
-        with pytest.raises(wire.WireError):
+        with pytest.raises(WireError):
             KEYS.parse(KEYS.report(bad))
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from agent.brain import AgentBrain, Peer
-from reconswarm.scenario import load
+from reconswarm.scenario.model import load
 from reconswarm_bringup.engine import Engine
 from tests.support import PAPER
 

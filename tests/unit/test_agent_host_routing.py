@@ -19,12 +19,13 @@ from agent.neighbours import Cells
 from agent.node import AgentNode
 from reconswarm.net import wire
 from reconswarm.net.gate import Gate
+from reconswarm.net.keys import Keys
 from reconswarm.net.session import Rejections, ZenohOptions
-from reconswarm.scenario import load
+from reconswarm.scenario.model import load
 from tests.support import PAPER, free_port
 
 S = load(PAPER)
-KEYS = wire.Keys("host-test")
+KEYS = Keys("host-test")
 PEER = "peer-session"
 A, B, C = (0, 0), (5, 5), (9, 9)  # cells
 

@@ -13,12 +13,13 @@ from agent.process import parse_ids
 from reconswarm.errors import BadInput
 from reconswarm.net import wire
 from reconswarm.net.admission import Admission, IntrusionKind
-from reconswarm.scenario import load
+from reconswarm.net.keys import Keys
+from reconswarm.scenario.model import load
 from reconswarm_bringup import packing, secure
 from tests.support import PAPER
 
 S = load(PAPER)
-KEYS = wire.Keys("paper-0a1b2c")
+KEYS = Keys("paper-0a1b2c")
 
 
 def test_ids_and_ranges() -> None:

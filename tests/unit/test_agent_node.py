@@ -18,7 +18,7 @@ from agent.neighbours import REALTIME_SILENT_S, Cells
 from agent.node import AgentNode
 from reconswarm.net import wire
 from reconswarm.net.timing import Timing
-from reconswarm.scenario import PlannerKind, Scenario, load
+from reconswarm.scenario.model import PlannerKind, Scenario, load
 from tests.support import PAPER
 
 A, B, C = 1, 2, 3  # the node under test and two peers

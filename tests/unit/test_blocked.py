@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 
 from agent.brain import AgentBrain, Peer
-from reconswarm.geometry import distance_to_polygon, norm2, points_inside_hull
+from reconswarm.geometry.plane import distance_to_polygon, norm2, points_inside_hull
 from reconswarm.paper.blocked import blocked_hulls, disc_polygon, pass_gap_m
-from reconswarm.scenario import Scenario, load
+from reconswarm.scenario.model import Scenario, load
 from tests.support import PAPER
 
 SQUARE = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])

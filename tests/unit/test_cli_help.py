@@ -16,8 +16,8 @@ from typing import Any
 import pytest
 from typer.testing import CliRunner
 
-from reconswarm.generate import generate
-from reconswarm.scenario import to_toml
+from reconswarm.scenario.generate import generate
+from reconswarm.scenario.model import to_toml
 from reconswarm_bringup.cli import app
 
 COMMANDS = [(), ("sim",), ("sweep",), ("launch",), ("scenario",), ("scenario", "generate"), ("scenario", "check"),
@@ -104,7 +104,7 @@ def test_simworld_command_defaults_to_real_time(tiny: Path, monkeypatch: pytest.
 
 def test_world_node_defaults_to_real_time(tiny: Path) -> None:
     from reconswarm.net.wire import ClockMode
-    from reconswarm.scenario import load
+    from reconswarm.scenario.model import load
     from simworld.world import WorldNode
 
     s = load(tiny)

@@ -9,7 +9,7 @@ import pytest
 
 from reconswarm.paper.deadlock import ESCAPE_WINDOWS, StallState, generator, stall_step, window_ticks
 from reconswarm.paper.leader import VirtualLeader
-from reconswarm.scenario import AgentSpec, PlannerConfig, PlannerKind, Scenario, ScenarioMeta, WorldConfig
+from reconswarm.scenario.model import AgentSpec, PlannerConfig, PlannerKind, Scenario, ScenarioMeta, WorldConfig
 
 K_ATT, R_C, TOL, DT = 0.08, 80.0, 0.5, 0.05
 

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from shapely.geometry import Point, Polygon
 
-from reconswarm.generate import generate
 from reconswarm.record.store import RunRecord
-from reconswarm.scenario import load, parse, to_toml, warnings
+from reconswarm.scenario.generate import generate
+from reconswarm.scenario.model import load, parse, to_toml, warnings
 from reconswarm_bringup.engine import Engine, SimConfig, run
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -20,7 +20,7 @@ from typer.testing import CliRunner
 
 from reconswarm.record.store import RunRecord
 from reconswarm.record.summary import summarize
-from reconswarm.scenario import load, parse, to_toml
+from reconswarm.scenario.model import load, parse, to_toml
 from reconswarm_bringup.cli import app
 from reconswarm_bringup.engine import SimConfig, run
 

@@ -1,4 +1,4 @@
-"""reconswarm/geometry.py: canonical hulls, signed distances (against shapely), contour sampling, pairs."""
+"""reconswarm/geometry/plane.py: canonical hulls, signed distances (against shapely), contour sampling, pairs."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from shapely.geometry import MultiPoint, Point, Polygon
 
-from reconswarm.geometry import (
+from reconswarm.geometry.plane import (
     Edges,
     convex_hull,
     distance_to_polygon,

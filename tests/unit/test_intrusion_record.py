@@ -7,11 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
-from reconswarm.net import wire
 from reconswarm.net.admission import Intrusion, IntrusionKind, IntrusionTally
+from reconswarm.net.keys import Keys
 from reconswarm.record.store import RunRecord, RunWriter
 from reconswarm.record.summary import summarize
-from reconswarm.scenario import load
+from reconswarm.scenario.model import load
 from tests.support import PAPER
 
 
@@ -20,7 +20,7 @@ def _record(db: Path) -> None:
     n = len(s.agents)
     w = RunWriter(db, s, "lockstep")
     w.tick(0, 0.0, s.starts, s.headings, np.ones(n, bool), 1.0, 5.0, 5.0, 1)
-    keys = wire.Keys("paper-0a1b2c")
+    keys = Keys("paper-0a1b2c")
     world, agent3 = IntrusionTally(), IntrusionTally()
     for _ in range(5):
         world.add(Intrusion(IntrusionKind.IMPERSONATION, "zid-x", keys.cmd(2), "agent 2 speaks from zid-2"), 3.5)

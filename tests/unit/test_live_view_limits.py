@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from monitor.live import LiveView
-from reconswarm.scenario import load
+from reconswarm.scenario.model import load
 from tests.support import PAPER
 
 S = load(PAPER)

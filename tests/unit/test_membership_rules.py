@@ -12,14 +12,15 @@ import pytest
 from monitor.node import MonitorNode
 from reconswarm.net import wire
 from reconswarm.net.admission import Admission, IntrusionKind, Pins
+from reconswarm.net.keys import Keys
 from reconswarm.net.timing import Timing
 from reconswarm.paper.events import EventKind
 from reconswarm.record.store import RunWriter
-from reconswarm.scenario import load
+from reconswarm.scenario.model import load
 from tests.support import PAPER
 
 S = load(PAPER)
-KEYS = wire.Keys("pins-0a1b2c")
+KEYS = Keys("pins-0a1b2c")
 REAL, OTHER = "agent2-zid", "someone-else"
 
 

@@ -10,11 +10,12 @@ import pytest
 
 from monitor.node import MonitorNode
 from reconswarm.net import wire
+from reconswarm.net.keys import WireError
 from reconswarm.net.timing import Timing
 from reconswarm.paper.events import Event, EventKind
 from reconswarm.record.store import RunRecord, RunWriter
 from reconswarm.record.summary import summarize
-from reconswarm.scenario import load
+from reconswarm.scenario.model import load
 from tests.support import PAPER
 
 T = Timing(burst_s=1.0, end_grace_s=3.0, commit_sim_s=0.5, world_stall_s=2.0)
@@ -204,9 +205,9 @@ def test_the_end_waits_for_the_last_tick_or_the_grace(tmp_path: Path) -> None:
 def test_bad_input_is_refused(tmp_path: Path) -> None:
     node = node_for(tmp_path)
     bad = wire.Truth(0, 0.0, (999,), (0.0,), (0.0,), (0.0,), (0.0,), (0.0,))
-    with pytest.raises(wire.WireError):
+    with pytest.raises(WireError):
         node.truth(bad)
-    with pytest.raises(wire.WireError):
+    with pytest.raises(WireError):
         node.telemetry(999, 0, -1)
     node.telemetry(IDS[0], 4, -1)
     tick(node, 0, 0.0)

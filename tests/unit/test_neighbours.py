@@ -20,7 +20,7 @@ from agent.neighbours import Cells, Neighbourhood
 from agent.node import AgentNode
 from reconswarm.net import wire
 from reconswarm.net.cells import CellGrid
-from reconswarm.scenario import PlannerKind, load
+from reconswarm.scenario.model import PlannerKind, load
 from tests.support import PAPER
 
 A, B, C = 1, 2, 3

@@ -10,8 +10,8 @@ import pytest
 
 from reconswarm.cli.outputs import not_the_input
 from reconswarm.errors import BadInput
-from reconswarm.generate import generate
 from reconswarm.record.store import RunWriter
+from reconswarm.scenario.generate import generate
 from reconswarm_bringup.outdir import RecordClaim, record_mode
 
 

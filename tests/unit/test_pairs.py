@@ -1,4 +1,4 @@
-"""Pairs of nearby points (reconswarm.pairs): the dense and the grid search give exactly the pairs within
+"""Pairs of nearby points (reconswarm.geometry.pairs): the dense and the grid search give exactly the pairs within
 the radius, sorted, and the Verlet list gives a fresh search's pairs, order and distances."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from reconswarm.pairs import NearPairs, pairs_and_distances, pairs_within
+from reconswarm.geometry.pairs import NearPairs, pairs_and_distances, pairs_within
 
 
 def brute_pairs(p: np.ndarray, radius: float) -> set[tuple[int, int]]:

@@ -15,7 +15,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Point, Polygon
 
-from reconswarm.pairs import pairs_within
+from reconswarm.geometry.pairs import pairs_within
 from reconswarm.paper.planner import (
     Neighbours,
     ObstacleView,
@@ -30,7 +30,7 @@ from reconswarm.paper.planner import (
     obstacle_repulsion,
     repulsion_speed,
 )
-from reconswarm.scenario import PlannerConfig, PlannerKind
+from reconswarm.scenario.model import PlannerConfig, PlannerKind
 from tests.support import view_of
 
 SETTINGS = settings(max_examples=120, deadline=None)

@@ -13,9 +13,10 @@ from reconswarm.net import ros2, wire
 from reconswarm.net.admission import Admission, IntrusionKind
 from reconswarm.net.cells import CellGrid
 from reconswarm.net.gate import Gate
+from reconswarm.net.keys import Keys
 from reconswarm.net.membership import Membership
 from reconswarm.record.summary import distinct_intrusions
-from reconswarm.scenario import load
+from reconswarm.scenario.model import load
 from tests.support import PAPER
 
 S = load(PAPER)
@@ -90,7 +91,7 @@ def test_may_matter_of_a_robot_at_the_float_limit_is_false_not_an_overflow() -> 
 
 def test_two_different_commands_for_one_agents_tick_conflict() -> None:
     adm = pinned()
-    key = wire.Keys("r").cmd(2)
+    key = Keys("r").cmd(2)
     assert adm.check_cmd(wire.Cmd(2, 4, 1.0, 0.0), "a2", key, 0.0, world_k=4) is None
     assert adm.check_cmd(wire.Cmd(2, 4, 1.0, 0.0), "a2", key, 0.1, world_k=4) is None  # the same again: fine
     got = adm.check_cmd(wire.Cmd(2, 4, -3.0, 0.2), "a2", key, 0.2, world_k=4)  # stamped with agent 2's id

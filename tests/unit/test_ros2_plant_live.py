@@ -14,7 +14,7 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from monitor.live import knowledge_update
 from monitor.scene import GROUP_RGB
 from reconswarm.net.wire import ClockMode
-from reconswarm.scenario import load
+from reconswarm.scenario.model import load
 from reconswarm_bringup.cli_launch import FOXGLOVE_PORT, optional_values
 from simworld.ros2_io import Ros2World
 from tests.support import PAPER

@@ -10,7 +10,7 @@ import time
 
 import zenoh
 
-from reconswarm.net.admission import Membership
+from reconswarm.net.membership import Membership
 from reconswarm.net.session import ZenohOptions
 from reconswarm.net.uplink import LinkChange, Uplink
 from reconswarm.net.wire import ClockMode

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reconswarm.generate import generate
 from reconswarm.record.store import RunRecord, RunWriter
+from reconswarm.scenario.generate import generate
 
 
 @pytest.mark.parametrize("n", [10, 300])

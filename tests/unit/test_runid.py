@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from reconswarm.errors import BadInput
-from reconswarm.net import wire
+from reconswarm.net.keys import Keys
 from reconswarm_bringup import runid
 
 
@@ -17,7 +17,7 @@ def test_run_ids_are_unique_valid_key_chunks(tmp_path: Path) -> None:
     assert len(ids) == 200
     for r in ids:
         assert re.fullmatch(r"paper-[0-9a-f]{6}", r)
-        keys = wire.Keys(r)
+        keys = Keys(r)
         assert keys.parse(keys.clock) == ("clock", None, "")
     runid.write_run_id(tmp_path, "paper-0a1b2c")
     assert (tmp_path / "run_id").read_text() == "paper-0a1b2c\n"

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from reconswarm.pairs import pairs_and_distances
+from reconswarm.geometry.pairs import pairs_and_distances
 from reconswarm.record.safety import SafetyMonitor, nearest_gap
 
 D_SAFE = 2.0

@@ -11,9 +11,9 @@ import pytest
 from shapely.geometry import Point, Polygon
 
 from reconswarm.errors import BadInput
-from reconswarm.generate import D_MAX_M, D_SAFE_M, R_MAX_M, SLOT_SPACING_M, START_SPACING_M, generate
-from reconswarm.geometry import is_strictly_convex, polygon_area
-from reconswarm.scenario import load, parse, to_toml, warnings
+from reconswarm.geometry.plane import is_strictly_convex, polygon_area
+from reconswarm.scenario.generate import D_MAX_M, D_SAFE_M, R_MAX_M, SLOT_SPACING_M, START_SPACING_M, generate
+from reconswarm.scenario.model import load, parse, to_toml, warnings
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"

@@ -1,4 +1,5 @@
-"""Sensing (reconswarm/sim/sensing.py) and obstacle knowledge with its sharing rule (reconswarm/paper/knowledge.py)."""
+"""Sensing (reconswarm/plant/sensing.py) and obstacle knowledge with its sharing rule
+(reconswarm/paper/knowledge.py)."""
 
 from __future__ import annotations
 
@@ -10,10 +11,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Point, Polygon
 
-from reconswarm.geometry import convex_hull, merge_hull
+from reconswarm.geometry.plane import convex_hull, merge_hull
 from reconswarm.paper.knowledge import KnownObstacles, SwarmKnowledge
-from reconswarm.scenario import AgentSpec, ObstacleSpec, PlannerConfig, PlannerKind, Scenario, ScenarioMeta, WorldConfig
-from reconswarm.sim.sensing import ContourField
+from reconswarm.plant.sensing import ContourField
+from reconswarm.scenario.model import (
+    AgentSpec,
+    ObstacleSpec,
+    PlannerConfig,
+    PlannerKind,
+    Scenario,
+    ScenarioMeta,
+    WorldConfig,
+)
 
 SETTINGS = settings(max_examples=60, deadline=None)
 

@@ -14,7 +14,7 @@ import pytest
 from reconswarm.record.recorder import Recorder
 from reconswarm.record.store import RunRecord, RunWriter
 from reconswarm.record.summary import summarize
-from reconswarm.scenario import parse
+from reconswarm.scenario.model import parse
 
 DT = 0.1
 TOML = """

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 
-from reconswarm.generate import generate
 from reconswarm.record.store import RunRecord, RunWriter
 from reconswarm.record.summary import render, summarize
+from reconswarm.scenario.generate import generate
 from reconswarm_bringup.cli_sweep import outcome
 
 

@@ -8,8 +8,8 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
-from reconswarm.generate import generate
-from reconswarm.scenario import to_toml
+from reconswarm.scenario.generate import generate
+from reconswarm.scenario.model import to_toml
 from reconswarm_bringup import sweep as sw
 
 

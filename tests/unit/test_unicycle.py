@@ -2,7 +2,7 @@
 
 The oracle integrates the body (s, θ) of eq. (1) with RK4 at a step hundreds of times finer than dt,
 recomputing [v, ω] = M(θ)⁻¹ u at every stage (the continuous feedback linearisation), and reads the head
-point from eq. (2). reconswarm.sim.unicycle.step must agree with it: without limits the head point moves by
+point from eq. (2). reconswarm.plant.unicycle.step must agree with it: without limits the head point moves by
 exactly u dt and the heading follows its closed form.
 """
 
@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from reconswarm.sim.unicycle import (
+from reconswarm.plant.unicycle import (
     SUBSTEPS,
     body_centre,
     head_point,

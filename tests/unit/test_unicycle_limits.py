@@ -1,5 +1,5 @@
 """Each actuator limit alone, and each at values below 1 (m/s, rad/s): a limit of 0 means none, a positive one
-binds whatever its size, and one limit never clamps the other input. (Mutants of reconswarm/sim/unicycle.py
+binds whatever its size, and one limit never clamps the other input. (Mutants of reconswarm/plant/unicycle.py
 that survived the other tests: a speed limit of 0 read as "stand still", a turn-rate limit of 0 as "never
 turn", limits of 1 or below ignored.)"""
 
@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from reconswarm.sim.unicycle import body_centre, inputs, step, step_vw
+from reconswarm.plant.unicycle import body_centre, inputs, step, step_vw
 
 L = np.array([0.5])
 DT = 0.05

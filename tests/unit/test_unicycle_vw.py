@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from reconswarm.sim.unicycle import body_centre, step_vw, wrap
+from reconswarm.plant.unicycle import body_centre, step_vw, wrap
 
 
 def rk4_body(s: np.ndarray, th: np.ndarray, v: np.ndarray, w: np.ndarray, dt: float, n: int = 200):

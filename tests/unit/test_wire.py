@@ -10,6 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from reconswarm.net import wire
+from reconswarm.net.keys import Keys, WireError
+from reconswarm.paper.events import Event, EventKind
+from reconswarm.scenario.wire_limits import MAX_PAYLOAD_BYTES
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 ids = st.integers(min_value=0, max_value=2**31)
@@ -43,7 +46,7 @@ def test_state_carries_its_scan_in_the_same_message(aid, k, t, px, py, pts, bodi
 def test_a_state_with_a_malformed_scan_is_refused(fields):
     payload = wire._pack({"id": 3, "k": 1, "t": 0.05, "x": 0.0, "y": 0.0, "theta": 0.0, "px": 0.5, "py": 0.0,
                           **fields})
-    with pytest.raises(wire.WireError, match=r"point|bodies|body"):
+    with pytest.raises(WireError, match=r"point|bodies|body"):
         wire.state_from_wire(payload, 3)
 
 
@@ -65,7 +68,7 @@ def test_scan_round_trip_with_held_bodies(aid, k, t, bodies):
                                     [[True, 2.0, 3.0]], "x", [[1, 2.0, "y"]]])
 def test_malformed_held_bodies_are_refused(bodies):
     payload = wire._pack({"id": 3, "k": 1, "t": 0.05, "points": [], "bodies": bodies})
-    with pytest.raises(wire.WireError, match=r"body|bodies"):
+    with pytest.raises(WireError, match=r"body|bodies"):
         wire.scan_from_wire(payload, 3)
 
 
@@ -109,14 +112,14 @@ def test_truth_round_trip(k, t, rows):
 
 
 def test_event_round_trip():
-    m = wire.Event(12.5, wire.EventKind.SPLIT, ((1, 2, 3),), ((1,), (2, 3)), None)
+    m = Event(12.5, EventKind.SPLIT, ((1, 2, 3),), ((1,), (2, 3)), None)
     assert wire.event_from_wire(wire.event_to_wire(m)) == m
-    lost = wire.Event(3.0, wire.EventKind.AGENT_LOST, ((1, 2),), ((1,),), 2)
+    lost = Event(3.0, EventKind.AGENT_LOST, ((1, 2),), ((1,),), 2)
     assert wire.event_from_wire(wire.event_to_wire(lost)) == lost
 
 
 def test_keys_parse_every_key():
-    k = wire.Keys("paper")
+    k = Keys("paper")
     assert k.parse(k.state(3)) == ("agent", 3, "state")
     assert k.parse(k.cmd(10)) == ("agent", 10, "cmd")
     assert k.beacon((-3, 4), 1) == "swarm/paper/cell/-3_4/agent/1/beacon"
@@ -132,7 +135,7 @@ def test_keys_parse_every_key():
     for bad in ("swarm/other/clock", "swarm/paper/agent/x/state", "swarm/paper/agent/-1/cmd", "swarm/paper/zzz",
                 "swarm/paper/agent/99999999999/cmd", "swarm/paper/cell/1-2/agent/1/beacon",
                 "swarm/paper/cell/1_2/agent/1/cmd", "swarm/paper/cell/x_2/agent/1/beacon"):
-        with pytest.raises(wire.WireError):
+        with pytest.raises(WireError):
             k.parse(bad)
 
 
@@ -156,40 +159,40 @@ def _good_beacon() -> dict:
 def test_beacon_rejections(mutate, why):
     o = _good_beacon()
     mutate(o)
-    with pytest.raises(wire.WireError, match=why):
+    with pytest.raises(WireError, match=why):
         wire.beacon_from_wire(msgpack.packb(o), 3)
 
 
 @pytest.mark.parametrize("payload", [b"", b"\xc1", b"\x93\x01\x02\x03", b"\xff" * 64, msgpack.packb([1, 2]),
                                      msgpack.packb("text"), msgpack.packb({1: 2}),
-                                     b"\x00" * (wire.MAX_PAYLOAD_BYTES + 1)])
+                                     b"\x00" * (MAX_PAYLOAD_BYTES + 1)])
 def test_garbage_is_rejected_by_every_decoder(payload):
     for decode in (wire.state_from_wire, wire.scan_from_wire, wire.cmd_from_wire, wire.beacon_from_wire,
                    wire.obstacles_from_wire):
-        with pytest.raises(wire.WireError):
+        with pytest.raises(WireError):
             decode(payload, 1)
     for decode0 in (wire.clock_from_wire, wire.event_from_wire, wire.truth_from_wire):
-        with pytest.raises(wire.WireError):
+        with pytest.raises(WireError):
             decode0(payload)
 
 
 def test_structural_rejections():
     scan = {"v": 1, "id": 1, "k": 0, "t": 0.0, "points": [[1.0, 2.0]]}
-    with pytest.raises(wire.WireError, match="each point"):
+    with pytest.raises(WireError, match="each point"):
         wire.scan_from_wire(msgpack.packb(scan), 1)
     obs = {"v": 1, "id": 1, "k": 0, "rev": 1, "obstacles": {"a": [[1.0, math.nan]]}}
-    with pytest.raises(wire.WireError, match="not finite"):
+    with pytest.raises(WireError, match="not finite"):
         wire.obstacles_from_wire(msgpack.packb(obs), 1)
     obs["obstacles"] = {"a": []}
-    with pytest.raises(wire.WireError, match="vertices"):
+    with pytest.raises(WireError, match="vertices"):
         wire.obstacles_from_wire(msgpack.packb(obs), 1)
     clock = {"v": 1, "k": 0, "t": 0.0, "alive": [1, "2"]}
-    with pytest.raises(wire.WireError):
+    with pytest.raises(WireError):
         wire.clock_from_wire(msgpack.packb(clock))
     clock = {"v": 1, "k": 0, "t": 0.0, "alive": [1], "mode": "warp"}
-    with pytest.raises(wire.WireError, match="mode"):
+    with pytest.raises(WireError, match="mode"):
         wire.clock_from_wire(msgpack.packb(clock))
     truth = {"v": 1, "k": 0, "t": 0.0, "ids": [1, 2], "x": [0.0], "y": [0.0, 1.0], "theta": [0.0, 0.0],
              "px": [0.0, 0.0], "py": [0.0, 0.0]}
-    with pytest.raises(wire.WireError, match="expected 2 numbers"):
+    with pytest.raises(WireError, match="expected 2 numbers"):
         wire.truth_from_wire(msgpack.packb(truth))

@@ -11,7 +11,8 @@ import msgpack
 import pytest
 
 from reconswarm.net import wire
-from reconswarm.net.wire import MAX_AGENT_ID
+from reconswarm.net.keys import WireError
+from reconswarm.scenario.wire_limits import MAX_AGENT_ID
 
 
 def pack(**fields: Any) -> bytes:
@@ -21,7 +22,7 @@ def pack(**fields: Any) -> bytes:
 def test_a_command_claiming_another_agent_on_an_agents_key_is_refused() -> None:
     payload = pack(id=4, k=1, v_mps=1.0, omega_radps=0.0)
     assert wire.cmd_from_wire(payload, 4) == wire.Cmd(4, 1, 1.0, 0.0)
-    with pytest.raises(wire.WireError, match="claims agent 4 on agent 2's key"):
+    with pytest.raises(WireError, match="claims agent 4 on agent 2's key"):
         wire.cmd_from_wire(payload, 2)
 
 
@@ -33,7 +34,7 @@ def test_a_beacon_revision_is_optional_zero_and_at_most_2_to_the_53() -> None:
     assert wire.beacon_from_wire(pack(**_beacon()), 3).rev == 0  # senders before revisions: rev 0
     assert wire.beacon_from_wire(pack(**_beacon(rev=2**53)), 3).rev == 2**53
     for bad in (2**53 + 1, -1, 1.5, None):
-        with pytest.raises(wire.WireError, match="'rev'"):
+        with pytest.raises(WireError, match="'rev'"):
             wire.beacon_from_wire(pack(**_beacon(rev=bad)), 3)
 
 
@@ -46,10 +47,10 @@ def _truth(ids: Any, n: int | None = None) -> bytes:
 def test_truth_ids_are_a_list_of_agent_ids_within_range() -> None:
     assert wire.truth_from_wire(_truth([0, MAX_AGENT_ID])).ids == (0, MAX_AGENT_ID)
     for ids, n in ((5, 0), ("ab", 2), ({"a": 1}, 1)):
-        with pytest.raises(wire.WireError, match="'ids'"):
+        with pytest.raises(WireError, match="'ids'"):
             wire.truth_from_wire(_truth(ids, n))
     for bad in (MAX_AGENT_ID + 1, -1):
-        with pytest.raises(wire.WireError, match="out of range"):
+        with pytest.raises(WireError, match="out of range"):
             wire.truth_from_wire(_truth([1, bad]))
 
 
@@ -76,7 +77,7 @@ def test_an_event_decodes_as_recorded_with_agent_ids_from_0_to_the_bound() -> No
     ({"kind": "agent_lost", "agent": "3"}, "integer"), ({"kind": ""}, "'kind'"), ({"kind": 7}, "'kind'"),
 ])
 def test_a_malformed_event_is_a_wire_error(fields: dict[str, Any], why: str) -> None:
-    with pytest.raises(wire.WireError, match=why):
+    with pytest.raises(WireError, match=why):
         wire.event_from_wire(_event(**fields))
 
 

@@ -17,8 +17,9 @@ from agent.messages import Invalid
 from agent.node import AgentNode
 from reconswarm.net import wire
 from reconswarm.net.gate import Gate
+from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.session import Rejections, ZenohOptions
-from reconswarm.scenario import load
+from reconswarm.scenario.model import load
 from tests.support import PAPER, free_port
 
 BAD = [math.nan, math.inf, -math.inf]
@@ -35,9 +36,9 @@ def test_a_non_finite_scan_point_is_refused_in_a_scan_and_in_a_state(bad: float,
     points: list[list[Any]] = [[130.0, 0.0, "diamond"], [131.0, 1.0, "diamond"], [132.0, 2.0, "diamond"]]
     points[at][where] = bad
     scan = {"id": 1, "k": 0, "t": 0.0, "points": points}
-    with pytest.raises(wire.WireError, match=f"point {'xy'[where]}: not finite"):
+    with pytest.raises(WireError, match=f"point {'xy'[where]}: not finite"):
         wire.scan_from_wire(wire._pack(scan), 1)
-    with pytest.raises(wire.WireError, match=f"point {'xy'[where]}: not finite"):
+    with pytest.raises(WireError, match=f"point {'xy'[where]}: not finite"):
         wire.state_from_wire(wire._pack(_state_fields(points)), 1)
 
 
@@ -45,9 +46,9 @@ def test_non_finite_points_of_both_coordinates_and_integers_are_told_apart() -> 
     """Integers are numbers (msgpack may carry 130.0 as 130); NaN in both coordinates names x first."""
     ok = wire.scan_from_wire(wire._pack({"id": 1, "k": 0, "t": 0.0, "points": [[130, -2, "a"]]}), 1)
     assert ok.points == ((130.0, -2.0, "a"),) and all(type(v) is float for v in ok.points[0][:2])
-    with pytest.raises(wire.WireError, match="point x: not finite"):
+    with pytest.raises(WireError, match="point x: not finite"):
         wire.scan_from_wire(wire._pack({"id": 1, "k": 0, "t": 0.0, "points": [[math.nan, math.inf, "a"]]}), 1)
-    with pytest.raises(wire.WireError, match="point y: expected a number"):
+    with pytest.raises(WireError, match="point y: expected a number"):
         wire.scan_from_wire(wire._pack({"id": 1, "k": 0, "t": 0.0, "points": [[1.0, None, "a"]]}), 1)
 
 
@@ -65,7 +66,7 @@ def link() -> Any:
     port = free_port()
     z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{port}",), "peer").config())  # alone: nothing to connect to
     node = AgentNode(S1, A, 0.0)
-    lk = AgentLink(node, wire.Keys("nan-test"), z, Rejections(f"agent-{A}"), Gate(S1, f"agent-{A}"))
+    lk = AgentLink(node, Keys("nan-test"), z, Rejections(f"agent-{A}"), Gate(S1, f"agent-{A}"))
     try:
         yield lk
     finally:

@@ -9,10 +9,11 @@ import pytest
 
 from reconswarm.errors import ProcessFailure
 from reconswarm.net import wire
+from reconswarm.net.keys import WireError
 from reconswarm.net.timing import Timing
 from reconswarm.net.wire import ClockMode
-from reconswarm.scenario import load
-from reconswarm.sim import unicycle
+from reconswarm.plant import unicycle
+from reconswarm.scenario.model import load
 from simworld.world import Phase, Step, WorldNode
 from tests.support import PAPER
 
@@ -164,7 +165,7 @@ def test_late_commands_count_as_the_latest() -> None:
 
 def test_unknown_agent_command_is_refused() -> None:
     node = started()
-    with pytest.raises(wire.WireError):
+    with pytest.raises(WireError):
         node.command(wire.Cmd(999, 0, 0.0, 0.0), 0.0)
     node.agent_up(999, True)
     assert 999 not in node.alive

@@ -24,6 +24,7 @@ from typing import Any
 import zenoh
 
 from reconswarm.net import wire
+from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions
 from tests.support import ROOT, assert_all_gone, free_port, launcher_cmd, paper_with, read_run_id, tick_count
 
@@ -36,7 +37,7 @@ class Stamper:
 
     def __init__(self, endpoint: str, run: str) -> None:
         self.z: Any = zenoh.open(ZenohOptions.build([endpoint], None, "client", None).config())
-        self.keys = wire.Keys(run)
+        self.keys = Keys(run)
         self.lock = threading.Lock()
         self.ids: dict[str, Any] = {}  # "world" | "agent 2" -> the ZenohId its samples carry
         self.clock: wire.Clock | None = None

@@ -26,10 +26,11 @@ import zenoh
 
 from reconswarm.net import wire
 from reconswarm.net.cells import CellGrid
+from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions
+from reconswarm.plant.unicycle import inputs
 from reconswarm.record.store import RunRecord
-from reconswarm.scenario import load
-from reconswarm.sim.unicycle import inputs
+from reconswarm.scenario.model import load
 from tests.support import PAPER, ROOT, assert_all_gone, events, free_port, launcher_cmd, read_run_id, tick_count
 
 KILL_AT_S = 90.0
@@ -41,7 +42,7 @@ class Attacker:
     def __init__(self, endpoint: str, run: str) -> None:
         self.z: Any = zenoh.open(ZenohOptions.build([endpoint], None, "client", None).config())
         self.zid = str(self.z.zid())
-        self.keys = wire.Keys(run)
+        self.keys = Keys(run)
         self.lock = threading.Lock()
         self.truth: wire.Truth | None = None
         self.clock: wire.Clock | None = None

@@ -21,6 +21,7 @@ import pytest
 import zenoh
 
 from reconswarm.net import ros2, wire
+from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions
 from tests.support import PAPER, ROOT, assert_all_gone, free_port, launcher_cmd, paper_with, read_run_id, tick_count
 from tests.system.faults.test_intrusions import refused_from
@@ -39,7 +40,7 @@ class Outsider:
     def __init__(self, endpoint: str, run: str) -> None:
         self.z: Any = zenoh.open(ZenohOptions.build([endpoint], None, "client", None).config())
         self.zid = str(self.z.zid())
-        self.keys = wire.Keys(run)
+        self.keys = Keys(run)
         self.gid, self.seq = bytes(range(16)), 0
         self.lock = threading.Lock()
         self.truth: wire.Truth | None = None

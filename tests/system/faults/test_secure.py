@@ -24,7 +24,7 @@ import zenoh
 from zenoh import ext
 
 from reconswarm.net import wire
-from reconswarm.scenario import load
+from reconswarm.scenario.model import load
 from reconswarm_bringup import secure
 from tests.support import (
     PAPER,

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from reconswarm.net import wire
+from reconswarm.net.keys import Keys
 from tests.support import ROOT, assert_all_gone, free_port, reconswarm
 
 from .test_secure import Catch, _anonymous_config, _open
@@ -73,7 +73,7 @@ agents = [6, 7, 8, 9, 10]
 
 def test_what_a_process_may_say_crosses_hosts_and_nothing_else(two: Two) -> None:
     """Listeners and speakers are separate sessions (a session hears its own puts whatever the routers say)."""
-    keys = wire.Keys(RUN)
+    keys = Keys(RUN)
     a1, a2, world = (_open(two.cfg("A", n)) for n in ("agent-1", "agent-2", "simworld"))  # host A
     b6, b7 = (_open(two.cfg("B", n)) for n in ("agent-6", "agent-7"))  # host B
     try:
@@ -104,7 +104,7 @@ def test_what_a_process_may_say_crosses_hosts_and_nothing_else(two: Two) -> None
 def test_a_router_admits_only_its_own_hosts_processes(two: Two) -> None:
     """Agent 1's credential (host A's) is valid for the CA but names nothing on B's router: connected there, it
     hears nothing and says nothing."""
-    keys = wire.Keys(RUN)
+    keys = Keys(RUN)
     a1_conf = zenoh.Config.from_file(str(two.cfg("A", "agent-1")))
     a1_conf.insert_json5("connect/endpoints", f'["tls/localhost:{two.ports[1]}"]')
     stray, b6, b7 = zenoh.open(a1_conf), _open(two.cfg("B", "agent-6")), _open(two.cfg("B", "agent-7"))
@@ -160,7 +160,7 @@ def test_secure_two_hosts_converge_through_a_partition_and_refuse_outsiders(tmp_
     import json
     import signal
 
-    from reconswarm.scenario import load
+    from reconswarm.scenario.model import load
     from tests.support import events, launcher_cmd, paper_with, read_run_id, tick_count
 
     from .test_partition import need_network_namespaces

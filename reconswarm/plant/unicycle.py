@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import norm2
+from reconswarm.geometry.plane import norm2
 
 Array = NDArray[np.float64]
 SUBSTEPS = 10

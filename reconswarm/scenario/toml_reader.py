@@ -7,8 +7,8 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from reconswarm import limits
 from reconswarm.errors import BadInput
+from reconswarm.scenario import limits
 
 
 class TableReader:

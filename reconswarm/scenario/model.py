@@ -13,17 +13,17 @@ from typing import Any
 
 import numpy as np
 
-from reconswarm import limits
-from reconswarm import wire_limits as wire
 from reconswarm.errors import BadInput
-from reconswarm.geometry import (
+from reconswarm.geometry.pairs import pairs_within
+from reconswarm.geometry.plane import (
     distance_to_polygon,
     is_strictly_convex,
     norm2,
     polygon_area,
 )
-from reconswarm.pairs import pairs_within
-from reconswarm.toml_reader import TableReader
+from reconswarm.scenario import limits
+from reconswarm.scenario.toml_reader import TableReader
+from reconswarm.scenario.wire_limits import MAX_AGENT_ID
 
 
 class PlannerKind(StrEnum):
@@ -232,7 +232,7 @@ def _build(data: dict[str, Any], src: str) -> tuple[Scenario, None]:
     agents = _agents(r, data["agents"])
     obstacles = _obstacles(r, data.get("obstacles", []))
     scen = Scenario(meta, planner, world, target, agents, obstacles, source=src)
-    # Magnitudes, stability, memory and what the wire can carry (reconswarm/limits.py), first problem found.
+    # Magnitudes, stability, memory and what the wire can carry (reconswarm/scenario/limits.py), first problem found.
     agent_path = {int(a["id"]): f"agents[{k}]" for k, a in enumerate(data["agents"])}
     obstacle_path = {str(o["id"]): f"obstacles[{k}]" for k, o in enumerate(data.get("obstacles", []))}
     for path, msg in limits.problems(scen, agent_path, obstacle_path):
@@ -251,8 +251,8 @@ def _agents(r: TableReader, raw: Any) -> tuple[AgentSpec, ...]:
         a = r.table(a, path)
         r.keys(a, path, {"id", "start_m", "radius_m", "offset_m"}, {"heading_rad", "head_offset_m"})
         aid = r.integer(a, path, "id")
-        if aid < 0 or aid > wire.MAX_AGENT_ID:
-            raise r.fail(f"{path}.id", f"must be in [0, {wire.MAX_AGENT_ID}] (the wire's agent ids), got {aid}")
+        if aid < 0 or aid > MAX_AGENT_ID:
+            raise r.fail(f"{path}.id", f"must be in [0, {MAX_AGENT_ID}] (the wire's agent ids), got {aid}")
         if aid in seen:
             raise r.fail(f"{path}.id", f"duplicate agent id {aid} (also agents[{seen[aid]}])")
         seen[aid] = k

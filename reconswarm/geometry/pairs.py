@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import norm2, rows_where
+from reconswarm.geometry.plane import norm2, rows_where
 
 Array = NDArray[np.float64]
 

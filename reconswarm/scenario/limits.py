@@ -3,7 +3,7 @@
 Refusals (the loader raises them as `FILE: field.path: what is wrong`, exit 2), each for a reason:
 
 - **The wire must carry every message the run can produce.** Counts, lengths and ids against the wire's
-  limits (reconswarm/wire_limits.py, which reconswarm/net/wire.py's decoders enforce), and the encoded
+  limits (reconswarm/scenario/wire_limits.py, which reconswarm/net/wire.py's decoders enforce), and the encoded
   size of the largest message of each kind this scenario can produce (tests check these sizes against
   the wire's own encoder, byte for byte): whatever the wire would drop in the distributed run is refused
   here first.
@@ -25,10 +25,19 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm import wire_limits as W
-from reconswarm.geometry import SAMPLE_SPACING_M, edge_sample_counts, norm2
+from reconswarm.geometry.plane import SAMPLE_SPACING_M, edge_sample_counts, norm2
+from reconswarm.scenario.wire_limits import (
+    MAX_IDS,
+    MAX_OBSTACLES,
+    MAX_PAYLOAD_BYTES,
+    MAX_POINTS,
+    MAX_REASON,
+    MAX_STATS,
+    MAX_STR,
+    MAX_VERTICES,
+)
 
-# reconswarm.scenario's Scenario and ObstacleSpec: not imported, as the loader in that module calls this one.
+# reconswarm.scenario.model's Scenario and ObstacleSpec: not imported, as the loader in that module calls this one.
 Scenario = Any
 ObstacleSpec = Any
 
@@ -138,34 +147,34 @@ def _memory(s: Scenario, obstacle_path: dict[str, str]) -> Iterator[Problem]:
 
 def _wire(s: Scenario, obstacle_path: dict[str, str]) -> Iterator[Problem]:
     n = len(s.agents)
-    if n > W.MAX_IDS:
-        yield "agents", f"{n} agents, more than the wire's {W.MAX_IDS} per message"
+    if n > MAX_IDS:
+        yield "agents", f"{n} agents, more than the wire's {MAX_IDS} per message"
         return
     for o in s.obstacles:
-        if len(o.id) > W.MAX_STR:
-            yield f"{obstacle_path[o.id]}.id", (f"{len(o.id)} characters, more than the wire's {W.MAX_STR} "
+        if len(o.id) > MAX_STR:
+            yield f"{obstacle_path[o.id]}.id", (f"{len(o.id)} characters, more than the wire's {MAX_STR} "
                                                 f"(every scan point and shared hull carries the id)")
             return
-    if len(s.obstacles) > W.MAX_OBSTACLES:
-        yield "obstacles", f"{len(s.obstacles)} obstacles, more than the wire's {W.MAX_OBSTACLES} per obstacle set"
+    if len(s.obstacles) > MAX_OBSTACLES:
+        yield "obstacles", f"{len(s.obstacles)} obstacles, more than the wire's {MAX_OBSTACLES} per obstacle set"
         return
     hull = {o.id: hull_vertices_max(o) for o in s.obstacles}
     for o in s.obstacles:
-        if hull[o.id] > W.MAX_VERTICES:
+        if hull[o.id] > MAX_VERTICES:
             yield f"{obstacle_path[o.id]}.vertices_m", (
                 f"an agent's hull of this obstacle can have up to {hull[o.id]} vertices (its contour samples), "
-                f"more than the wire's {W.MAX_VERTICES}")
+                f"more than the wire's {MAX_VERTICES}")
             return
     r_v = s.planner.sensing_range_m
     scan = {o.id: scan_points_max(o, r_v) for o in s.obstacles}
-    if sum(scan.values()) > W.MAX_POINTS:
+    if sum(scan.values()) > MAX_POINTS:
         yield "planner.sensing_range_m", (f"a scan within {r_v:g} m can hold up to {sum(scan.values())} contour "
-                                          f"points of these obstacles, more than the wire's {W.MAX_POINTS}")
+                                          f"points of these obstacles, more than the wire's {MAX_POINTS}")
         return
     for path, what, size in largest_messages(s, scan, hull):
-        if size > W.MAX_PAYLOAD_BYTES:
+        if size > MAX_PAYLOAD_BYTES:
             yield path, (f"the largest {what} message of this scenario would be {size:,} bytes, over the wire's "
-                         f"limit of {W.MAX_PAYLOAD_BYTES:,}")
+                         f"limit of {MAX_PAYLOAD_BYTES:,}")
             return
 
 
@@ -207,12 +216,12 @@ def largest_messages(s: Scenario, scan: dict[str, int], hull: dict[str, int]) ->
     truth = (_keys("k", "t", "ids", "x", "y", "theta", "px", "py") + k + _FLOAT + _container(n) + id_bytes
              + 5 * (_container(n) + n * _FLOAT))
     clock = (_keys("k", "t", "alive", "mode", "speed", "end", "reason", "rejected", "stats") + k + _FLOAT
-             + _container(n) + id_bytes + _strlen(len("realtime")) + _FLOAT + 1 + _strlen(W.MAX_REASON) + counter
-             + _container(W.MAX_STATS) + W.MAX_STATS * (_strlen(W.MAX_STR) + _FLOAT))
+             + _container(n) + id_bytes + _strlen(len("realtime")) + _FLOAT + 1 + _strlen(MAX_REASON) + counter
+             + _container(MAX_STATS) + MAX_STATS * (_strlen(MAX_STR) + _FLOAT))
     # kind and cause at most MAX_STR characters; t_confirmed, duration_s, wall_unix floats
     event = (_keys("t", "kind", "before", "after", "agent", "cause", "t_confirmed", "duration_s", "wall_unix")
-             + _FLOAT + _strlen(W.MAX_STR) + _container(1) + _container(n) + id_bytes + _container(n)
-             + n * _container(1) + id_bytes + _uint(a_max) + _strlen(W.MAX_STR) + 3 * _FLOAT)
+             + _FLOAT + _strlen(MAX_STR) + _container(1) + _container(n) + id_bytes + _container(n)
+             + n * _container(1) + id_bytes + _uint(a_max) + _strlen(MAX_STR) + 3 * _FLOAT)
     # An agent's state with its scan: every contour point in range, every other robot held nearby.
     points, others = sum(scan.values()), [i for i in ids if i != a_max]
     state_b = (_keys("id", "k", "t", "x", "y", "theta", "px", "py", "points", *(["bodies"] if others else []))

@@ -24,7 +24,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.scenario import (
+from reconswarm.scenario.model import (
     AgentSpec,
     ObstacleSpec,
     PlannerConfig,

@@ -13,8 +13,8 @@ from typing import cast
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry import SAMPLE_SPACING_M, Edges, norm2, sample_boundary, signed_distance, tile_edges
-from reconswarm.scenario import Scenario
+from reconswarm.geometry.plane import SAMPLE_SPACING_M, Edges, norm2, sample_boundary, signed_distance, tile_edges
+from reconswarm.scenario.model import Scenario
 
 Array = NDArray[np.float64]
 
