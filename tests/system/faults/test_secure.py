@@ -321,6 +321,24 @@ def test_agent_credentials_cannot_impersonate_another_agent(live: Live) -> None:
     assert len(clock) > 10
 
 
+def test_the_docs_example_of_joining_as_a_role_receives(live: Live) -> None:
+    """docs/security.md's example, run as it is written (its paths pointed at this run): the observer's
+    credentials hear the clock, agent 3's hear the beacons (the README once sent readers to subscribe to
+    beacons with the monitor's credentials, which the rules deny: it received nothing, silently)."""
+    doc = (ROOT / "docs" / "security.md").read_text()
+    block = next(b.split("```", 1)[0] for b in doc.split("```python\n")[1:] if "observer.json5" in b)
+    heard: list[str] = []
+    scope: dict[str, Any] = {"print": lambda *a: heard.append(" ".join(map(str, a)))}
+    exec(compile(block.replace("runs/latest", str(live.out)), "docs/security.md", "exec"), scope)
+    try:
+        time.sleep(SETTLE_S + 2.0)
+    finally:
+        for z in (scope["obs"], scope["a3"]):
+            z.close()
+    assert any(h.endswith("/clock") for h in heard), heard[:5]
+    assert any(h.endswith("/beacon") for h in heard), heard[:5]
+
+
 def test_secure_run_stops_on_sigint(live: Live) -> None:
     live.proc.send_signal(signal.SIGINT)
     assert live.proc.wait(timeout=30) == 130
