@@ -36,8 +36,9 @@ from agent.messages import Exit, Input, Reconnect
 from agent.neighbours import Cells
 from reconswarm.net import wire
 from reconswarm.net.cells import Cell, chunk_cell
+from reconswarm.net.inbox import Inbox, Item, to_item
 from reconswarm.net.keys import Keys
-from reconswarm.net.session import Inbox, Item, StartMark, Stopper, to_item
+from reconswarm.net.lifecycle import StartMark, Stopper
 
 log = logging.getLogger("reconswarm.agent")
 RECONNECT = -1  # AgentHost.run's answer when the session must be opened again
@@ -47,8 +48,8 @@ Tag = tuple[str, Any]  # ALL | ("own", agent id) | ("cell", cell or None): the s
 
 class TaggedInbox:
     """Samples from zenoh with the subscription they came through, held raw until the loop takes them all at
-    once (session.Inbox's rules: an urgent sample, or `want` of them, wake the loop; nothing blocks or calls
-    zenoh in a callback); counted in session.Inbox's process totals."""
+    once (inbox.Inbox's rules: an urgent sample, or `want` of them, wake the loop; nothing blocks or calls
+    zenoh in a callback); counted in inbox.Inbox's process totals."""
 
     def __init__(self) -> None:
         self._samples: deque[tuple[Tag, Any, float]] = deque()

@@ -23,9 +23,10 @@ from agent.ros2_io import AgentRos2
 from reconswarm.net import wire
 from reconswarm.net.cells import Cell
 from reconswarm.net.gate import Gate
+from reconswarm.net.inbox import Rejections
 from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.report import report_to_wire
-from reconswarm.net.session import Member, Rejections
+from reconswarm.net.session import Member
 
 log = logging.getLogger("reconswarm.agent")
 Decoded = Input | None  # what a sample decodes to (None: a key no agent reads)

@@ -19,8 +19,9 @@ from agent.link import AgentLink
 from agent.node import AgentNode
 from reconswarm.errors import BadInput
 from reconswarm.net.gate import Gate
+from reconswarm.net.inbox import Rejections
 from reconswarm.net.keys import Keys
-from reconswarm.net.session import Rejections, ZenohOptions, serving
+from reconswarm.net.session import ZenohOptions, serving
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.scenario.model import load
 

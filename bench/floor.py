@@ -2,7 +2,7 @@
 
 A router, one world process and N agent processes, each a zenoh client session connected to the router
 (the launcher's ZENOH_RUNTIME in the non-router processes, BLOCK congestion control, samples through
-reconswarm.net.session.Inbox with the same wake-ups), with msgpack payloads of the real messages' shapes
+reconswarm.net.inbox.Inbox with the same wake-ups), with msgpack payloads of the real messages' shapes
 and sizes; no planning, no admission, no record, no monitor. The robots stay at the grid scenario's
 starts (bench/grid.py). Per tick:
 
@@ -44,8 +44,9 @@ from _common import machine, median
 from grid import grid_scenario
 
 from reconswarm.net.cells import CellGrid
+from reconswarm.net.inbox import Inbox
 from reconswarm.net.keys import Keys
-from reconswarm.net.session import Inbox, ZenohOptions, open_session
+from reconswarm.net.session import ZenohOptions, open_session
 from reconswarm.net.wire import VERSION
 from reconswarm.scenario.model import Scenario
 

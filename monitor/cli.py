@@ -231,7 +231,8 @@ def record_cmd(
     membership changes and the topology events (it does not hear the agents' beacons)."""
     try:
         from monitor.process import MonitorConfig, run
-        from reconswarm.net.session import ZenohOptions, bind_to_parent, setup_logging
+        from reconswarm.net.lifecycle import bind_to_parent, setup_logging
+        from reconswarm.net.session import ZenohOptions
 
         setup_logging()
         bind_to_parent()

@@ -37,8 +37,8 @@ from zenoh import ext
 from monitor import scene
 from reconswarm.errors import BadInput
 from reconswarm.net import wire
+from reconswarm.net.inbox import Inbox, Rejections
 from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.session import Inbox, Rejections
 from reconswarm.paper.events import Event
 from reconswarm.paper.topology import labels
 from reconswarm.scenario.model import Scenario

@@ -27,10 +27,12 @@ from reconswarm.errors import ProcessFailure
 from reconswarm.net import wire
 from reconswarm.net.admission import Intrusion, IntrusionKind
 from reconswarm.net.gate import Gate
+from reconswarm.net.inbox import Inbox, Rejections
 from reconswarm.net.keys import Keys, WireError
+from reconswarm.net.lifecycle import StartMark, Stopper
 from reconswarm.net.membership import Membership
 from reconswarm.net.report import report_from_wire
-from reconswarm.net.session import Inbox, Member, Rejections, StartMark, Stopper, ZenohOptions, serving
+from reconswarm.net.session import Member, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
 from reconswarm.net.uplink import LinkChange, Uplink
 from reconswarm.record.store import RunWriter

@@ -26,8 +26,9 @@ from reconswarm.cli import outputs
 from reconswarm.errors import BadInput
 from reconswarm.net import wire
 from reconswarm.net.admission import Admission
+from reconswarm.net.inbox import sample_source
 from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions, open_session, sample_source
+from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions, open_session
 from reconswarm.net.timing import TIMING
 from reconswarm.paper.events import Event
 from reconswarm.scenario.generate import generate

@@ -19,10 +19,12 @@ from zenoh import ext
 from reconswarm.errors import BadInput
 from reconswarm.net import ros2, wire
 from reconswarm.net.gate import Gate
+from reconswarm.net.inbox import Inbox, Rejections
 from reconswarm.net.keys import Keys, WireError
+from reconswarm.net.lifecycle import StartMark, Stopper
 from reconswarm.net.membership import Membership
 from reconswarm.net.report import report_to_wire
-from reconswarm.net.session import Inbox, Member, Rejections, StartMark, Stopper, ZenohOptions, serving
+from reconswarm.net.session import Member, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
 from reconswarm.net.uplink import LinkChange, Uplink
 from reconswarm.net.wire import ClockMode

@@ -22,7 +22,7 @@ which the receiver drops, counts (`IntrusionTally`) and logs. The rules:
   data keeps coming; a token anyone can declare decides nothing alone.
 
 Sources are the publishers' zenoh session ids as their samples carry them: the id in the sample's
-timestamp (`session.sample_source`), which every session of the run stamps (timestamping is on in all of
+timestamp (`inbox.sample_source`), which every session of the run stamps (timestamping is on in all of
 them; a router stamps what arrives unstamped with its own id). zenoh-python 1.10.2 also offers
 `SourceInfo`, but only when the publisher sets it on each put (an unstable API that the advanced publisher
 of obstacle sets does not take), and it is no harder to forge. In open mode any client on the port can

@@ -1,6 +1,6 @@
 """A process's gate: admission of decoded messages, the tally of intrusions, their log and reports.
 
-Pure (no zenoh): the adapter decodes a sample, passes it here with its source (`session.sample_source`),
+Pure (no zenoh): the adapter decodes a sample, passes it here with its source (`inbox.sample_source`),
 and delivers it to its node only if `admit` says so. Refusals are counted per (kind, source), logged (the
 first of each kind and source at once, then at most one line a second), and summed up in a `Report` that
 the adapter publishes on `swarm/<run>/report/<process>` at most once a second when it changed (an

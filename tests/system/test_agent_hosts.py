@@ -18,8 +18,9 @@ import pytest
 import zenoh
 
 from reconswarm.net import wire
+from reconswarm.net.inbox import sample_source
 from reconswarm.net.keys import Keys
-from reconswarm.net.session import ZenohOptions, sample_source
+from reconswarm.net.session import ZenohOptions
 from tests.support import (
     PAPER,
     ROOT,

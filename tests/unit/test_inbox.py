@@ -7,7 +7,7 @@ import threading
 import time
 from dataclasses import dataclass
 
-from reconswarm.net.session import Inbox
+from reconswarm.net.inbox import Inbox
 
 
 @dataclass
