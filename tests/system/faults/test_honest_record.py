@@ -65,7 +65,8 @@ class Stamper:
             time.sleep(0.02)
 
     def put_as(self, zid: Any, key: str, payload: bytes) -> None:
-        self.z.put(key, payload, timestamp=zenoh.Timestamp(datetime.datetime.now(datetime.UTC), zid))
+        self.z.put(key, payload, timestamp=zenoh.Timestamp(datetime.datetime.now(datetime.UTC), zid),
+                   congestion_control=zenoh.CongestionControl.BLOCK)  # (DROP could lose what we count as sent)
 
     def close(self) -> None:
         self.z.close()
@@ -95,7 +96,8 @@ def test_the_record_does_not_lie_about_commands_ends_or_the_dead(tmp_path: Path)
                 break
             a.put_as(agent2, a.keys.cmd(2), wire.cmd_to_wire(wire.Cmd(2, c.k, -0.7, 0.3)))  # not agent 2's command
             sent["cmd"] += 1
-            a.z.put(a.keys.clock, wire.clock_to_wire(wire.Clock(c.k + 1, c.t + dt, c.alive)))  # our own session's
+            a.z.put(a.keys.clock, wire.clock_to_wire(wire.Clock(c.k + 1, c.t + dt, c.alive)),  # our own session's
+                    congestion_control=zenoh.CongestionControl.BLOCK)
             sent["clock"] += 1
             if sent["end"] == 0 and c.t >= 3.0:
                 a.put_as(world, a.keys.clock, wire.clock_to_wire(wire.Clock(c.k + 1, c.t + dt, c.alive, end=True,
