@@ -110,13 +110,14 @@ def export_cmd(
         from monitor.csv_export import export_csv
 
         rec = _open(db)
+        ticks = rec.ticks()  # a damaged record: one line, exit 2, before -o FILE is created or stdout written
         stream = sys.stdout if out is None else _open_out(out)
     except ReconswarmError as exc:
         fail(exc)
         return
     try:
         with _progress_bar(f"exporting {db}") as progress:
-            rows = export_csv(rec, stream, progress)
+            rows = export_csv(rec, stream, progress, ticks)
     finally:
         rec.close()
         if out is not None:

@@ -9,14 +9,16 @@ from typing import TextIO
 
 import numpy as np
 
-from reconswarm.record.store import RunRecord
+from reconswarm.record.store import RunRecord, Ticks
 
 HEADER = ("t_s", "agent", "px_m", "py_m", "theta_rad")
 
 
-def export_csv(rec: RunRecord, stream: TextIO, progress: Callable[[int, int], None] | None = None) -> int:
-    """Write the trajectories to stream; return the number of rows. progress(done, total ticks) now and then."""
-    tk = rec.ticks()
+def export_csv(rec: RunRecord, stream: TextIO, progress: Callable[[int, int], None] | None = None,
+               ticks: Ticks | None = None) -> int:
+    """Write the trajectories to stream; return the number of rows. progress(done, total ticks) now and then.
+    ticks: rec.ticks() when the caller read them already (a damaged record refused before anything is written)."""
+    tk = rec.ticks() if ticks is None else ticks
     ids = [int(a) for a in rec.ids]
     w = csv.writer(stream, lineterminator="\n")
     w.writerow(HEADER)
