@@ -32,13 +32,14 @@ import zenoh
 from zenoh import ext
 
 from agent.link import AgentLink, Decoded, decode_sample
-from agent.messages import Exit, Input, Reconnect
+from agent.messages import Input, Reconnect
 from agent.neighbours import Cells
 from reconswarm.net import wire
 from reconswarm.net.cells import Cell, chunk_cell
 from reconswarm.net.inbox import Inbox, Item, to_item
 from reconswarm.net.keys import Keys
 from reconswarm.net.lifecycle import StartMark, Stopper
+from reconswarm.net.node import Exit
 
 log = logging.getLogger("reconswarm.agent")
 RECONNECT = -1  # AgentHost.run's answer when the session must be opened again

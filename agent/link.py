@@ -16,7 +16,7 @@ from typing import Any
 import zenoh
 from zenoh import ext
 
-from agent.messages import Input, Invalid, Joined, Left, Output, WorldToken
+from agent.messages import Input, Output
 from agent.neighbours import Cells
 from agent.node import AgentNode
 from agent.ros2_io import AgentRos2
@@ -25,6 +25,7 @@ from reconswarm.net.cells import Cell
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Rejections
 from reconswarm.net.keys import Keys, WireError
+from reconswarm.net.node import Invalid, Role, Token
 from reconswarm.net.report import report_to_wire
 from reconswarm.net.session import Member
 
@@ -39,8 +40,8 @@ def decode_sample(keys: Keys, key: str, payload: bytes, kind: str) -> Decoded:
         what, aid, leaf = keys.parse(key)
         if what == "alive":
             if leaf == "agent" and aid is not None:
-                return Left(aid) if kind == "DELETE" else Joined(aid)
-            return WorldToken(kind != "DELETE") if leaf == "simworld" else None
+                return Token(Role.AGENT, kind != "DELETE", aid)
+            return Token(Role.WORLD, kind != "DELETE") if leaf == "simworld" else None
         if what == "clock":
             return wire.clock_from_wire(payload)
         if what != "agent" or aid is None:
@@ -128,7 +129,7 @@ class AgentLink(Member):
 
     def take(self, m: Decoded, key: str, source: str) -> Input | None:
         """A decoded sample, as this agent takes it: ours to act on, counted as invalid, or refused."""
-        if m is None or isinstance(m, Joined | Left | WorldToken):
+        if m is None or isinstance(m, Token):
             return m
         if isinstance(m, Invalid):
             self.rej.reject(key, m.reason)

@@ -1,5 +1,5 @@
-"""What an agent's node takes in and gives out: the wire dataclasses plus membership and the adapter's
-own verdicts (agent/node.py is the state machine over them)."""
+"""What an agent's node takes in and gives out (the node contract, reconswarm/net/node.py): the wire dataclasses
+plus tokens and the runtime's verdicts in; messages to put, the cells to listen to, and what to do out."""
 
 from __future__ import annotations
 
@@ -7,52 +7,17 @@ from dataclasses import dataclass
 
 from agent.neighbours import Cells
 from reconswarm.net import wire
+from reconswarm.net.node import Exit, Invalid, Token
 
-
-# ------------------------------------------------------------------------------------------ inputs
-@dataclass(frozen=True)
-class Joined:
-    """An agent's liveliness token appeared."""
-
-    agent: int
-
-
-@dataclass(frozen=True)
-class Left:
-    """An agent's liveliness token went away."""
-
-    agent: int
-
-
-@dataclass(frozen=True)
-class WorldToken:
-    """The world's liveliness token appeared (up) or went away (its process stopped, or froze past its lease)."""
-
-    up: bool
-
-
-@dataclass(frozen=True)
-class Invalid:
-    """A message the adapter dropped (undecodable, or on our own key from another session): counted."""
-
-    key: str
-    reason: str
-
-
-Input = wire.State | wire.Scan | wire.Clock | wire.Beacon | wire.ObstacleSet | Joined | Left | WorldToken | Invalid
+# inputs: the wire messages an agent reads, plus the runtime's (reconswarm/net/node.py): a peer's or the world's
+# token (Token with Role.AGENT and its id, or Role.WORLD), and a message dropped as invalid
+Input = wire.State | wire.Scan | wire.Clock | wire.Beacon | wire.ObstacleSet | Token | Invalid
 
 
 # ----------------------------------------------------------------------------------------- outputs
 @dataclass(frozen=True)
 class Reconnect:
     """No command for `resubscribe_s` though the mission goes on: open a new session (keep this node)."""
-
-
-@dataclass(frozen=True)
-class Exit:
-    """Leave the loop with this exit code (0: the world ended the mission; 3: the world went silent)."""
-
-    code: int
 
 
 Output = Cells | wire.Beacon | wire.ObstacleSet | wire.Cmd | Reconnect | Exit

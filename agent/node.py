@@ -24,10 +24,11 @@ from collections.abc import Iterable
 import numpy as np
 
 from agent.brain import AgentBrain, Peer
-from agent.messages import Exit, Input, Invalid, Joined, Left, Output, Reconnect, WorldToken
+from agent.messages import Input, Output, Reconnect
 from agent.neighbours import Neighbourhood
 from agent.sets import PeerSets, own_set, scan_sets
 from reconswarm.net import wire
+from reconswarm.net.node import Exit, Invalid, Role, Token
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.scenario.model import Scenario
 
@@ -117,15 +118,13 @@ class AgentNode:
     # ----------------------------------------------------------------------------------------- input
 
     def _take(self, m: Input, now: float) -> None:
-        if isinstance(m, Joined):
-            self.alive.add(m.agent)
-            self.gone.discard(m.agent)
-            self.heard.setdefault(m.agent, now)
-            self.nb.peer_joined(m.agent, self.k >= 0)
-        elif isinstance(m, Left):
-            self.alive.discard(m.agent)
-            self.gone.add(m.agent)
-        elif isinstance(m, WorldToken):
+        if isinstance(m, Token) and m.role is Role.AGENT and m.agent is not None:
+            (self.alive.add if m.up else self.alive.discard)(m.agent)
+            (self.gone.discard if m.up else self.gone.add)(m.agent)
+            if m.up:
+                self.heard.setdefault(m.agent, now)
+                self.nb.peer_joined(m.agent, self.k >= 0)
+        elif isinstance(m, Token) and m.role is Role.WORLD:
             if m.up:
                 self._world_back(now)
             else:

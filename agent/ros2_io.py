@@ -13,8 +13,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from agent.messages import Invalid
 from reconswarm.net import ros2, wire
+from reconswarm.net.node import Invalid
 from reconswarm.net.ros2_node import Ros2Node
 
 

@@ -14,13 +14,13 @@ import zenoh
 
 from agent.host import AgentHost, TaggedInbox
 from agent.link import AgentLink
-from agent.messages import Invalid
 from agent.neighbours import Cells
 from agent.node import AgentNode
 from reconswarm.net import wire
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Rejections
 from reconswarm.net.keys import Keys
+from reconswarm.net.node import Invalid
 from reconswarm.net.session import ZenohOptions
 from reconswarm.scenario.model import load
 from tests.support import PAPER, free_port

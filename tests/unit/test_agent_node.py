@@ -13,13 +13,27 @@ import numpy as np
 import pytest
 
 from agent.brain import AgentBrain, Peer
-from agent.messages import Exit, Invalid, Joined, Left, Output, Reconnect, WorldToken
+from agent.messages import Output, Reconnect
 from agent.neighbours import REALTIME_SILENT_S, Cells
 from agent.node import AgentNode
 from reconswarm.net import wire
+from reconswarm.net.node import Exit, Invalid, Role, Token
 from reconswarm.net.timing import Timing
 from reconswarm.scenario.model import PlannerKind, Scenario, load
 from tests.support import PAPER
+
+
+def joined(agent: int) -> Token:
+    return Token(Role.AGENT, True, agent)
+
+
+def left(agent: int) -> Token:
+    return Token(Role.AGENT, False, agent)
+
+
+def world_token(up: bool) -> Token:
+    return Token(Role.WORLD, up)
+
 
 A, B, C = 1, 2, 3  # the node under test and two peers
 HEAD = {A: (100.0, 0.0), B: (110.0, 0.0), C: (120.0, 0.0)}  # where their head points start (tick 0)
@@ -67,7 +81,7 @@ def reference(k: int, p: tuple[float, float], peers: list[Peer], brain: AgentBra
 
 def started(node_s: Scenario = S, peers: tuple[int, ...] = (B, C), timing: Timing = T) -> AgentNode:
     node = AgentNode(node_s, A, 0.0, timing)
-    node.step([Joined(A), *(Joined(p) for p in peers)], 0.0)
+    node.step([joined(A), *(joined(p) for p in peers)], 0.0)
     return node
 
 
@@ -136,7 +150,7 @@ def test_a_peer_the_clock_counts_is_waited_for_though_its_token_comes_later() ->
     assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(0, *want)]
     assert node.guessed_k == -1  # nothing was guessed: the command is the in-process engine's
     # A token we saw go is not waited for, though the clock (of the world's view a moment ago) still counts it.
-    node.step([Joined(B), Left(B)], 0.02)
+    node.step([joined(B), left(B)], 0.02)
     node.step([clock(1), state(1, 100.05, 0.0), beacon(C, 1, 120.0, 0.0)], 0.05)
     assert node.k == 1 and node.guessed_k == -1
 
@@ -177,7 +191,7 @@ def test_a_stuck_tick_announces_beacon_and_obstacle_set_again() -> None:
 def test_a_lost_peer_is_not_waited_for_and_stays_a_static_obstacle() -> None:
     node = started(peers=(B,))
     node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 108.0, 0.0)], 0.0)
-    node.step([Left(B)], 0.01)  # B's token went away
+    node.step([left(B)], 0.01)  # B's token went away
     out = node.step([clock(1, (A,)), state(1, 100.05, 0.0)], 0.05)  # acts at once: B is not waited for
     ref = AgentBrain(S, A)
     reference(0, (100.0, 0.0), [Peer(B, 108.0, 0.0, RADIUS[B])], brain=ref)
@@ -214,8 +228,8 @@ def test_after_a_world_stall_a_peer_is_silent_only_counting_from_the_worlds_retu
     """Nobody has a state to announce while the world is frozen: B's beacon 10 s ago is not silence."""
     node = started(peers=(B,))
     node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 140.0, 0.0)], 0.0)
-    node.step([WorldToken(False)], 2.0)
-    node.step([WorldToken(True), clock(1, (A, B)), state(1, 100.05, 0.0)], 10.0)
+    node.step([world_token(False)], 2.0)
+    node.step([world_token(True), clock(1, (A, B)), state(1, 100.05, 0.0)], 10.0)
     assert node.k == 0 and node.awaiting(10.0) == 1  # B's beacon for tick 1 is waited for
     node.step([], 10.0 + T.peer_silent_s - 0.01)
     assert node.k == 0
@@ -242,7 +256,7 @@ def test_after_a_new_session_a_dead_peer_is_still_an_obstacle_at_its_last_positi
     Its dead peer must still be avoided where it was last seen (issue 11: agent 10 hit dead robot 3)."""
     node = started()
     node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 400.0, 0.0), beacon(C, 0, 109.0, 0.0)], 0.0)
-    node.step([Left(C)], 0.5)  # C is killed
+    node.step([left(C)], 0.5)  # C is killed
     node.step([clock(1, (A, B)), state(1, 100.05, 0.0), beacon(B, 1, 400.0, 0.0)], 0.6)
     assert node.k == 1
     # The world stalls: no state for resubscribe_s, so the node asks for a new session, once.
@@ -251,7 +265,7 @@ def test_after_a_new_session_a_dead_peer_is_still_an_obstacle_at_its_last_positi
     node.reconnected(0.6 + T.resubscribe_s + 0.02)
     # The new session's liveliness history names the live agents only; then the world goes on.
     now = 0.6 + T.resubscribe_s + 0.1
-    out = node.step([Joined(A), Joined(B), clock(2, (A, B)), state(2, 100.1, 0.0), beacon(B, 2, 400.0, 0.0)], now)
+    out = node.step([joined(A), joined(B), clock(2, (A, B)), state(2, 100.1, 0.0), beacon(B, 2, 400.0, 0.0)], now)
     ref = AgentBrain(S, A)
     peers = [Peer(B, 400.0, 0.0, RADIUS[B]), Peer(C, 109.0, 0.0, RADIUS[C])]
     for k, px in ((0, 100.0), (1, 100.05)):
@@ -269,17 +283,17 @@ def test_a_stalled_world_is_waited_for_not_answered_with_a_new_session() -> None
     node = started(peers=())
     node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
     assert node.k == 0
-    node.step([WorldToken(False)], 1.0)
+    node.step([world_token(False)], 1.0)
     assert node.step([], T.resubscribe_s + 0.5) == []
     assert node.step([], T.resubscribe_world_gone_s - 0.01) == []
     assert node.step([], T.resubscribe_world_gone_s + 0.01) == [Reconnect()]
     node.reconnected(T.resubscribe_world_gone_s + 0.02)
     # The world is back (its token): the wait for a command counts from its return, by resubscribe_s.
-    assert node.step([WorldToken(True)], 16.0) == []  # 1 s after the new session, but the world just came back
+    assert node.step([world_token(True)], 16.0) == []  # 1 s after the new session, but the world just came back
     assert node.step([], 16.0 + T.resubscribe_s - 0.01) == []
     assert node.step([], 16.0 + T.resubscribe_s + 0.01) == [Reconnect()]
     node.reconnected(21.1)
-    node.step([WorldToken(False), clock(1, (A,))], 22.0)  # a clock after the token went: not stalled
+    node.step([world_token(False), clock(1, (A,))], 22.0)  # a clock after the token went: not stalled
     assert node.world_gone is False
     assert node.step([], 22.0 + T.resubscribe_s - 0.01) == []
     assert node.step([], 22.0 + T.resubscribe_s + 0.01) == [Reconnect()]
@@ -398,7 +412,7 @@ def test_world_silence_exits_3_and_the_end_of_mission_exits_0() -> None:
     node = started(peers=())
     assert node.step([], 1000.0) == []  # before the first clock nothing is watched
     assert node.step([clock(0, (A,), end=True, reason="converged")], 1000.1) == []  # the world's end, once
-    assert node.step([WorldToken(False)], 1000.3) == [Exit(0)]  # its token goes after it (it closed its session)
+    assert node.step([world_token(False)], 1000.3) == [Exit(0)]  # its token goes after it (it closed its session)
 
 
 def test_an_end_the_worlds_next_clock_contradicts_is_not_the_end() -> None:
@@ -437,7 +451,7 @@ def test_a_robot_lost_out_of_hearing_is_an_obstacle_once_the_worlds_scan_reports
     """With cells an agent hears only its neighbourhood: a peer lost far away was never heard. When its held
     robot comes within range, the world's scan reports it, and from then on it is a static obstacle."""
     node = started(peers=(B, C))
-    node.step([Left(C)], 0.0)  # C's agent is gone; we never had a beacon of it
+    node.step([left(C)], 0.0)  # C's agent is gone; we never had a beacon of it
     held = wire.Scan(A, 0, 0.0, (), ((C, 104.0, 0.0),))
     out = node.step([clock(0, (A, B)), state(0, 100.0, 0.0, scan=held), beacon(B, 0, 110.0, 0.0)], 0.01)
     ref = AgentBrain(S, A)
@@ -456,7 +470,7 @@ def test_a_dead_peer_kept_alive_by_a_forged_token_is_still_an_obstacle() -> None
     world's report of the held robot both keep it an obstacle; it is not waited for."""
     node = started(peers=(B, C))
     node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 110.0, 0.0), beacon(C, 0, 104.0, 0.0)], 0.0)
-    # C's agent dies; a token for C stays (forged), so no Left(C). The world's clock of tick 1 lacks C.
+    # C's agent dies; a token for C stays (forged), so no left(C). The world's clock of tick 1 lacks C.
     held = wire.Scan(A, 1, DT, (), ((C, 104.0, 0.0),))
     out = node.step([clock(1, (A, B)), state(1, 100.05, 0.0, scan=held), beacon(B, 1, 110.0, 0.0)], 0.06)
     ref = AgentBrain(S, A)

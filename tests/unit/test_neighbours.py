@@ -15,13 +15,27 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.brain import AgentBrain, Peer
-from agent.messages import Joined, Left, Output
+from agent.messages import Output
 from agent.neighbours import Cells, Neighbourhood
 from agent.node import AgentNode
 from reconswarm.net import wire
 from reconswarm.net.cells import CellGrid
+from reconswarm.net.node import Role, Token
 from reconswarm.scenario.model import PlannerKind, load
 from tests.support import PAPER
+
+
+def joined(agent: int) -> Token:
+    return Token(Role.AGENT, True, agent)
+
+
+def left(agent: int) -> Token:
+    return Token(Role.AGENT, False, agent)
+
+
+def world_token(up: bool) -> Token:
+    return Token(Role.WORLD, up)
+
 
 A, B, C = 1, 2, 3
 HEAD = {A: (0.0, 0.0), B: (30.0, 0.0), C: (200.0, 0.0)}  # head points at tick 0 (heading 0, l = 0.5)
@@ -49,7 +63,7 @@ def clock(k: int, alive: tuple[int, ...] = ALIVE) -> wire.Clock:
 
 def node_with(*peers: int) -> AgentNode:
     node = AgentNode(S, A, 0.0)
-    node.step([Joined(A), *(Joined(p) for p in peers)], 0.0)
+    node.step([joined(A), *(joined(p) for p in peers)], 0.0)
     return node
 
 
@@ -172,7 +186,7 @@ def test_a_live_peer_that_left_is_neither_waited_for_nor_planned_with_at_its_sta
 def test_a_lost_peer_stays_an_obstacle_where_it_stopped() -> None:
     node = node_with(B)
     node.step([clock(0), state(0, *HEAD[A]), beacon(B, 0, *HEAD[B])], 0.0)
-    node.step([Left(B), clock(1, (A, C)), state(1, 20.0, 0.0)], 0.05)
+    node.step([left(B), clock(1, (A, C)), state(1, 20.0, 0.0)], 0.05)
     assert node.k == 1
     out = node.step([clock(2, (A, C)), state(2, 25.0, 0.0)], 0.1)
     assert [(c.v_mps, c.omega_radps) for c in cmds(out)] == [alone(2, (25.0, 0.0), [Peer(B, *HEAD[B], RADIUS[B])])]
