@@ -166,7 +166,7 @@ class AgentNode:
                             self.nb.unexpected(m))
             if m.id not in self.last_seen or m.k >= self.last_seen[m.id].k:
                 self.last_seen[m.id] = m
-        else:  # wire.ObstacleSet
+        elif isinstance(m, wire.ObstacleSet):
             self.peer_sets.add(m)
 
     def _world_back(self, now: float) -> None:
