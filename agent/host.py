@@ -25,7 +25,7 @@ import math
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import zenoh
@@ -38,8 +38,9 @@ from reconswarm.net import wire
 from reconswarm.net.cells import Cell, chunk_cell
 from reconswarm.net.inbox import Inbox, Item, to_item
 from reconswarm.net.keys import Keys
-from reconswarm.net.lifecycle import StartMark, Stopper
+from reconswarm.net.lifecycle import Stopper
 from reconswarm.net.node import Exit
+from reconswarm.net.runtime import Runtime
 
 log = logging.getLogger("reconswarm.agent")
 RECONNECT = -1  # AgentHost.run's answer when the session must be opened again
@@ -104,7 +105,7 @@ class AgentHost:
         self.listening: dict[int, frozenset[Cell] | None] = {}  # agent -> the cells it listens to (None: all)
         self.cell_subs: dict[Cell | None, tuple[Any, Any]] = {}  # the host's subscriptions (None: every cell)
         self.sets: dict[int, Item] = {}  # agent -> the newest obstacle set heard from it (with its cell in its key)
-        self.pending: list[tuple[int, Item]] = []  # (agent, obstacle set) for that agent alone (replayed)
+        self.replay: list[tuple[int, Item]] = []  # (agent, obstacle set) for that agent alone (replayed)
         self._cells: dict[str, Cell | None] = {}  # key -> the cell in it (None: not a cell key)
         self.known = {a.id for a in next(iter(links.values())).node.s.agents}
         self.max_set_bytes = next(iter(links.values())).gate.adm.max_set_bytes
@@ -133,7 +134,7 @@ class AgentHost:
         if aid in self.listening and old == c.listen:
             return
         self.listening[aid] = c.listen
-        self.pending += [(aid, item) for item in self.sets.values()
+        self.replay += [(aid, item) for item in self.sets.values()
                          if self._hears(c.listen, self._cell(item[0])) and not self._hears(old, self._cell(item[0]))]
         want: set[Cell | None] = set().union(*({None} if ls is None else ls for ls in self.listening.values()))
         for cell in want - self.cell_subs.keys():
@@ -167,12 +168,12 @@ class AgentHost:
 
     # ---------------------------------------------------------------------------------------- input
 
-    def route(self, items: list[tuple[Tag, Item]]) -> dict[int, list[Input]]:
+    def route(self, items: Sequence[tuple[Tag, Item]], now_s: float = 0.0) -> dict[int, list[Input]]:
         """Each hosted agent's batch: every sample decoded once, taken by each agent it is for. A beacon or set is
         for the agents that listen to the cell it was published in, whichever of the host's subscriptions it
         came through (one just replaced, or every cell's), once."""
         batches: dict[int, list[Input]] = {aid: [] for aid in self.active}
-        pending, self.pending = self.pending, []
+        pending, self.replay = self.replay, []
         for aid, item in pending:
             self._deliver(("cell", None), item, batches, aid)
         local, self.local = self.local, []
@@ -186,6 +187,9 @@ class AgentHost:
                     continue
                 seen.add(once)
             self._deliver(tag, item, batches, None)
+        for aid, link in self.active.items():
+            if link.ros2 is not None:
+                batches[aid] += link.ros2.take_invalid()
         return batches
 
     def _deliver(self, tag: Tag, item: Item, batches: dict[int, list[Input]], only: int | None) -> None:
@@ -221,54 +225,46 @@ class AgentHost:
             if got is not None:
                 batches[aid].append(got)
 
-    # ----------------------------------------------------------------------------------------- loop
+    # ------------------------------------------------------------------------------ the runtime's port
 
-    def run(self, stop: Stopper) -> int:
-        """Feed the nodes until all exited (the largest exit code) or one asks for a new session (RECONNECT), or
-        a signal stops us (0)."""
-        mark, codes = StartMark(), []
-        poll_s = min(link.node.timing.agent_poll_s for link in self.links.values())
-        while not stop.stopped and self.active:
-            nodes = [link.node for link in self.active.values()]
-            mark(any(n.started for n in nodes))
-            now = time.monotonic()
-            needs = [w for w in (n.awaiting(now) for n in nodes) if w is not None]
-            wakes = [w for w in (n.wake_at_s() for n in nodes) if w is not None]
-            timeout = 0.0 if self.local else poll_s if not wakes else min(poll_s, max(0.0, min(wakes) - now))
-            batches = self.route(self.inbox.take(min(needs) if needs else None, timeout))
-            for aid, link in list(self.active.items()):
-                batch = batches[aid]
-                if link.ros2 is not None:
-                    batch += link.ros2.take_invalid()
-                now, wake = time.monotonic(), link.node.wake_at_s()
-                if not batch and now - self.stepped.get(aid, -math.inf) < poll_s and (wake is None or now < wake):
-                    continue  # nothing new for it, and none of its timers due
-                self.stepped[aid] = now
-                for out in link.node.step(batch, now):
-                    if isinstance(out, Exit):
-                        link.report(final=True)
-                        codes.append(out.code)
-                        del self.active[aid]
-                        if out.code != 0 and self.active:  # it stops; its co-hosted agents go on
-                            self.listen(aid, Cells(link.home or (0, 0), frozenset()))
-                            self.listening.pop(aid)
-                            link.close()
-                        break
-                    if isinstance(out, Reconnect):
-                        return RECONNECT
-                    if isinstance(out, Cells):
-                        self.listen(aid, out)
-                    put = link.publish(out)
-                    if put is not None and len(self.links) > 1:
-                        item = (put[0], put[1], "PUT", self.source, now)
-                        self.local.append((("local", aid), item))
-                        if isinstance(out, wire.ObstacleSet):
-                            self.sets[aid] = item  # (for an agent that starts listening to its cell later)
-                else:
-                    link.report()
-        for link in self.active.values():
-            link.report(final=True)
-        return max(codes, default=0)
+    def run(self, stop: Stopper, who: str) -> int:
+        """Feed the nodes (reconswarm/net/runtime.py) until all exited (the largest exit code) or one asks for a new
+        session (RECONNECT); a signal stops each (0)."""
+        nodes = {aid: link.node for aid, link in self.links.items()}
+        poll_s = min(n.timing.agent_poll_s for n in nodes.values())
+        rt = Runtime(self.z, who, stop, self.inbox, poll_s)
+        exits = rt.run(nodes, self, started=lambda: any(n.started for n in nodes.values()))
+        return RECONNECT if rt.interrupted else max((e.code for e in exits.values()), default=0)
+
+    def pending(self) -> bool:
+        return bool(self.local)
+
+    def idle(self, who: int, now_s: float) -> None:
+        self.links[who].report()
+
+    def exited(self, who: int, code: Exit, now_s: float) -> None:
+        aid = who
+        link = self.links[aid]
+        link.report(final=True)
+        del self.active[aid]
+        if code.code != 0 and self.active:  # it stops; its co-hosted agents go on
+            self.listen(aid, Cells(link.home or (0, 0), frozenset()))
+            self.listening.pop(aid)
+            link.close()
+
+    def act(self, who: int, out: Any, now_s: float) -> bool:
+        aid = who
+        if isinstance(out, Reconnect):
+            return True
+        if isinstance(out, Cells):
+            self.listen(aid, out)
+        put = self.links[aid].publish(out)
+        if put is not None and len(self.links) > 1:
+            item = (put[0], put[1], "PUT", self.source, now_s)
+            self.local.append((("local", aid), item))
+            if isinstance(out, wire.ObstacleSet):
+                self.sets[aid] = item  # (for an agent that starts listening to its cell later)
+        return False
 
     def close(self) -> None:
         for link in self.links.values():

@@ -25,7 +25,7 @@ from reconswarm.net.cells import Cell
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Rejections
 from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.node import Invalid, Role, Token
+from reconswarm.net.node import Invalid, Role, RouterLink, Stop, Token
 from reconswarm.net.report import report_to_wire
 from reconswarm.net.session import Member
 
@@ -129,7 +129,7 @@ class AgentLink(Member):
 
     def take(self, m: Decoded, key: str, source: str) -> Input | None:
         """A decoded sample, as this agent takes it: ours to act on, counted as invalid, or refused."""
-        if m is None or isinstance(m, Token):
+        if m is None or isinstance(m, Token | RouterLink | Stop):
             return m
         if isinstance(m, Invalid):
             self.rej.reject(key, m.reason)

@@ -7,11 +7,11 @@ from dataclasses import dataclass
 
 from agent.neighbours import Cells
 from reconswarm.net import wire
-from reconswarm.net.node import Exit, Invalid, Token
+from reconswarm.net.node import Exit, Invalid, RouterLink, Stop, Token
 
 # inputs: the wire messages an agent reads, plus the runtime's (reconswarm/net/node.py): a peer's or the world's
-# token (Token with Role.AGENT and its id, or Role.WORLD), and a message dropped as invalid
-Input = wire.State | wire.Scan | wire.Clock | wire.Beacon | wire.ObstacleSet | Token | Invalid
+# token (Token with Role.AGENT and its id, or Role.WORLD), a message dropped as invalid, our router link, a signal
+Input = wire.State | wire.Scan | wire.Clock | wire.Beacon | wire.ObstacleSet | Token | Invalid | RouterLink | Stop
 
 
 # ----------------------------------------------------------------------------------------- outputs

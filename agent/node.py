@@ -28,7 +28,7 @@ from agent.messages import Input, Output, Reconnect
 from agent.neighbours import Neighbourhood
 from agent.sets import PeerSets, own_set, scan_sets
 from reconswarm.net import wire
-from reconswarm.net.node import Exit, Invalid, Role, Token
+from reconswarm.net.node import Exit, Invalid, Role, Stop, Token
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.scenario.model import Scenario
 
@@ -81,6 +81,8 @@ class AgentNode:
             self._announce_set = False
             self._out.append(self._obstacle_set(max(self.k, 0)))
         for m in batch:
+            if isinstance(m, Stop):  # (a signal: we leave at once, our report says what happened)
+                return [Exit(0, "stopped")]
             self._take(m, now_s)
         self._advance(now_s)
         self._watch(now_s)

@@ -82,7 +82,7 @@ def run(cfg: AgentConfig) -> int:
                                   inbox.callback(("own", a), urgent=True)) for a in ids}
             host = AgentHost(session, keys, links, inbox)
             log.info("%s up (run %s)", who, keys.run)
-            code = host.run(stop)
+            code = host.run(stop, who)
             if any(n.ended for n in nodes.values()) and not stop.stopped:
                 time.sleep(cfg.timing.agent_end_linger_s)  # let the monitor see the end before our tokens go
             host.close()

@@ -1,0 +1,112 @@
+"""A process's runtime: one zenoh session, one inbox, the nodes it hosts (one or many) stepped with what arrived.
+
+Every process of a run is this loop (the agent host, the world, the monitor), around nodes that keep the
+node contract (reconswarm/net/node.py) and a `Port`, the role's declarations: its subscriptions feed the
+inbox, `route` turns a batch of raw samples into each node's inputs (the table from key to codec to input,
+with admission and rejection counting: what a node is given is believed), `act` does what a node returned
+(put a message on the wire under its key or ROS 2 topic, hand rows to the record). The runtime owns the rest:
+
+- one wake-up per batch: it sleeps until the nodes' count of what they still need is in (`awaiting`), an
+  urgent sample comes, the nearest node timer is due (`wake_at_s`), or `poll_s` passed;
+- a node is stepped when it has inputs, when its timer is due, or every `poll_s` (its timers);
+- our own session's router link going or coming back reaches every node as `RouterLink` (net/uplink.py);
+- SIGINT/SIGTERM (the `Stopper`) reach every node as `Stop`: each winds down and says what happened (its
+  `Exit`); a node's `Exit` takes it out of the loop, the others go on;
+- the `usage at start` mark once the mission started (benchmarks take CPU per tick from it).
+
+Signals, the parent watch and logging are set up once by `net/session.serving`, which opens the session.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any, Protocol
+
+from reconswarm.net.lifecycle import StartMark, Stopper
+from reconswarm.net.node import Exit, Node, RouterLink, Stop
+from reconswarm.net.uplink import LinkChange, Uplink
+
+
+class Batches(Protocol):
+    """An inbox: `take` every sample waiting once `want` of them (None: only an urgent one) are in, an urgent one
+    came, or `timeout` seconds passed (net/inbox.Inbox; agent/host.TaggedInbox, which tags each sample with
+    the subscription it came through)."""
+
+    def take(self, want: int | None, timeout: float | None) -> Sequence[Any]: ...
+
+
+class Port(Protocol):
+    """A role's declarations around the nodes a process hosts (keyed by any hashable: an agent's id, 0)."""
+
+    def route(self, items: Sequence[Any], now_s: float) -> Mapping[Any, list[Any]]:
+        """Each node's inputs from a batch of samples: decoded once, admitted, malformed ones counted."""
+        ...
+
+    def act(self, who: Any, out: Any, now_s: float) -> bool:
+        """Do what node `who` returned; True: stop the whole loop now (e.g. its session must be replaced)."""
+        ...
+
+    def idle(self, who: Any, now_s: float) -> None:
+        """After node `who`'s step: its periodic chores (its report, the record's commit)."""
+        ...
+
+    def exited(self, who: Any, code: Exit, now_s: float) -> None:
+        """Node `who` left the loop with `code` (the others go on)."""
+        ...
+
+    def pending(self) -> bool:
+        """Whether something is waiting that needs no sample to arrive (what co-hosted nodes published)."""
+        ...
+
+
+class Runtime:
+    """The loop around the nodes of one process, on one session (see the module's notes)."""
+
+    def __init__(self, session: Any, who: str, stop: Stopper, inbox: Batches, poll_s: float) -> None:
+        self.uplink = Uplink(session, who)
+        self.stop, self.inbox, self.poll_s = stop, inbox, poll_s
+        self.exits: dict[Any, Exit] = {}  # node -> how it left
+        self.interrupted = False  # a port's act asked the whole loop to stop
+
+    def run(self, nodes: Mapping[Any, Node[Any, Any]], port: Port,
+            started: Any = lambda: True) -> dict[Any, Exit]:
+        """Step the nodes until each has exited (or a port's `act` stops the loop); how each left."""
+        active = dict(nodes)
+        stepped: dict[Any, float] = {}
+        mark, stopping = StartMark(), False
+        while active:
+            mark(started())
+            now = time.monotonic()
+            needs = [w for w in (n.awaiting(now) for n in active.values()) if w is not None]
+            wakes = [w for w in (n.wake_at_s() for n in active.values()) if w is not None]
+            timeout = 0.0 if port.pending() else self.poll_s if not wakes else min(
+                self.poll_s, max(0.0, min(wakes) - now))
+            items = self.inbox.take(min(needs) if needs else None, timeout)
+            now = time.monotonic()
+            shared: list[Any] = []
+            if (change := self.uplink.poll()) is not None:
+                shared.append(RouterLink(change is LinkChange.UP))
+            if self.stop.stopped and not stopping:
+                stopping = True
+                shared.append(Stop())
+            batches = port.route(items, now)
+            for who, node in list(active.items()):
+                batch = [*shared, *batches.get(who, ())]
+                now, wake = time.monotonic(), node.wake_at_s()
+                if not batch and now - stepped.get(who, -math.inf) < self.poll_s and (wake is None or now < wake):
+                    continue  # nothing new for it, and none of its timers due
+                stepped[who] = now
+                for out in node.step(batch, now):
+                    if isinstance(out, Exit):
+                        self.exits[who] = out
+                        del active[who]
+                        port.exited(who, out, now)
+                        break
+                    if port.act(who, out, now):
+                        self.interrupted = True
+                        return self.exits
+                else:
+                    port.idle(who, now)
+        return self.exits
