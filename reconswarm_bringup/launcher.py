@@ -150,7 +150,8 @@ def run(cfg: LaunchConfig) -> int:
         routers = [fleet.start("router", ident, args, prefix) for ident, args, prefix in net.routers]
         net.wait_router(lambda: all(r.popen.poll() is None for r in routers))
         if cfg.ros_domain_id is not None:
-            outcome.ros2_notice(net.watch.connect[0], cfg.ros_domain_id)
+            secrets = (cfg.out / "secrets").resolve() if cfg.secure else None
+            outcome.ros2_notice(net.watch.connect[0], cfg.ros_domain_id, secrets)
         prefix, zargs = net.zopt("monitor")
         live = [] if cfg.foxglove_port is None else ["--foxglove", str(cfg.foxglove_port)]
         mon = fleet.start("monitor", "-", ["monitor", "record", "--scenario", str(scen_path), "--db",

@@ -40,12 +40,20 @@ class LiveViewNotice:
                      self.port)
 
 
-def ros2_notice(endpoint: str, domain: int) -> None:
-    """Where ROS 2 tools find the run's topics (rmw_zenoh reads ZENOH_CONFIG_OVERRIDE)."""
+def ros2_notice(endpoint: str, domain: int, secrets: Path | None = None) -> None:
+    """Where ROS 2 tools find the run's topics (rmw_zenoh reads ZENOH_CONFIG_OVERRIDE or, for a whole
+    configuration, ZENOH_SESSION_CONFIG_URI); under --secure (`secrets`: the run's credentials) a plain
+    connection cannot open: a tool joins with a role's configuration."""
     log.info("ROS 2: topics /robot_<i>/odom and /robot_<i>/cmd_vel in domain %d on the Zenoh router %s", domain,
              endpoint)
-    log.info("ROS 2 tools: export RMW_IMPLEMENTATION=rmw_zenoh_cpp ROS_DOMAIN_ID=%d "
-             "ZENOH_CONFIG_OVERRIDE='connect/endpoints=[\"%s\"]'; ros2 topic list", domain, endpoint)
+    if secrets is None:
+        log.info("ROS 2 tools: export RMW_IMPLEMENTATION=rmw_zenoh_cpp ROS_DOMAIN_ID=%d "
+                 "ZENOH_CONFIG_OVERRIDE='connect/endpoints=[\"%s\"]'; ros2 topic list", domain, endpoint)
+        return
+    log.info("ROS 2 tools (--secure: TLS with a certificate, a plain connection is refused): export "
+             "RMW_IMPLEMENTATION=rmw_zenoh_cpp ROS_DOMAIN_ID=%d ZENOH_SESSION_CONFIG_URI=%s; ros2 topic list "
+             "(a role's rights: the observer's are the clock and events, no robot topic; docs/security.md)",
+             domain, secrets / "observer.json5")
 
 
 def last_line(path: Path) -> str:
