@@ -103,6 +103,7 @@ class AgentHost:
         self.local: list[tuple[Tag, Item]] = []  # what co-hosted agents published since the last round
         self.stepped: dict[int, float] = {}  # agent -> wall time its node was last stepped
         self.listening: dict[int, frozenset[Cell] | None] = {}  # agent -> the cells it listens to (None: all)
+        self.by_cell: dict[Cell | None, set[int]] = {}  # cell -> the agents listening to it (None: to all)
         self.cell_subs: dict[Cell | None, tuple[Any, Any]] = {}  # the host's subscriptions (None: every cell)
         self.sets: dict[int, Item] = {}  # agent -> the newest obstacle set heard from it (with its cell in its key)
         self.replay: list[tuple[int, Item]] = []  # (agent, obstacle set) for that agent alone (replayed)
@@ -134,6 +135,10 @@ class AgentHost:
         if aid in self.listening and old == c.listen:
             return
         self.listening[aid] = c.listen
+        for cell in {None} if old is None else old:  # (the index: who listens to a cell; None: to every cell)
+            self.by_cell.get(cell, set()).discard(aid)
+        for cell in {None} if c.listen is None else c.listen:
+            self.by_cell.setdefault(cell, set()).add(aid)
         self.replay += [(aid, item) for item in self.sets.values()
                          if self._hears(c.listen, self._cell(item[0])) and not self._hears(old, self._cell(item[0]))]
         want: set[Cell | None] = set().union(*({None} if ls is None else ls for ls in self.listening.values()))
@@ -148,6 +153,12 @@ class AgentHost:
         for cell in self.cell_subs.keys() - want:
             for sub in self.cell_subs.pop(cell):
                 sub.undeclare()
+
+    def _listeners(self, cell: Cell | None) -> list[int]:
+        """The running agents that listen to `cell` (a valid one; None: nobody but those listening to every cell),
+        in id order."""
+        got = self.by_cell.get(cell, set()) if cell is not None else set()
+        return sorted(a for a in got | self.by_cell.get(None, set()) if a in self.active)
 
     @staticmethod
     def _hears(listen: frozenset[Cell] | None, cell: Cell | None) -> bool:
@@ -203,12 +214,10 @@ class AgentHost:
         if tag == ALL:
             who = list(self.active)
         elif tag[0] == "local":  # a co-hosted agent's: for the others that hear its cell
-            cell = self._cell(key)
-            who = [a for a in self.active if a != tag[1] and self._hears(self.listening.get(a, frozenset()), cell)]
+            who = [a for a in self._listeners(self._cell(key)) if a != tag[1]]
         else:  # (a key with no valid cell: those the subscription it came through was for, to count it)
             cell = self._cell(key)
-            who = [a for a in self.active if self._hears(self.listening.get(a, frozenset()), tag[1] if cell is None
-                                                         else cell)]
+            who = self._listeners(tag[1] if cell is None else cell)
         if only is not None:
             who = [a for a in who if a == only]
         if not who:
