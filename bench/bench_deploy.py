@@ -13,6 +13,10 @@
    the same scenario, the largest difference of any head point or heading at any tick, optionally with
    --equal-load busy processes running meanwhile (other work on the machine); --equal-paper: the paper
    mission likewise, until it converges.
+5. large swarms (--large-agents 400): the grid in lockstep until its duration: finished, sim/wall, collisions,
+   agents lost, the peak RSS of the run's processes summed and over N;
+6. the paper at --clock realtime --speed X (--paper-realtime X): converged, missed-deadline ratio, collisions,
+   plain, with kill:agent:3@60 and with flood@30.
 `--agents-per-process K ...` (default 1) measures each row with K agents per process (agent hosts; `auto`
 too), side by side; an agent host's CPU, messages and wake-ups count a K-th to each of its agents.
 `--checkout DIR` (repeatable) measures another checkout (a git worktree of an older commit with its own
@@ -20,6 +24,8 @@ too), side by side; an agent host's CPU, messages and wake-ups count a K-th to e
 
     .venv/bin/python bench/bench_deploy.py --paper
     .venv/bin/python bench/bench_deploy.py --paper --equal-paper --agents-per-process 1 5 10 --grid-agents
+    .venv/bin/python bench/bench_deploy.py --grid-agents --realtime-agents --large-agents 400 --agents-per-process auto
+    .venv/bin/python bench/bench_deploy.py --grid-agents --realtime-agents --paper-realtime 10 --agents-per-process 5
     .venv/bin/python bench/bench_deploy.py --quick
 """
 
@@ -79,6 +85,13 @@ def role_usage(out: Path) -> dict[str, list[dict[str, float]]]:
             share = {key: (v if key == "max_rss_mb" else v / k) for key, v in use.items()}
             roles.setdefault(role, []).extend([share] * k)
     return roles
+
+
+def peak_rss_mb(out: Path) -> tuple[float, int]:
+    """The sum over the run's processes of each one's peak RSS (its exit line), and how many processes logged one."""
+    rss = [ast.literal_eval(m[-1]).get("max_rss_mb", 0.0) for log in (out / "logs").glob("*.log")
+           if (m := re.findall(r"usage: (\{.*\})", log.read_text(errors="replace")))]
+    return float(sum(rss)), len(rss)
 
 
 def launcher_cmd(checkout: Path | None) -> tuple[list[str], Path]:
@@ -190,6 +203,11 @@ def main() -> int:
     ap.add_argument("--equal-sim-s", type=float, default=10.0)
     ap.add_argument("--equal-paper", action="store_true", help="lockstep = in-process on the paper mission")
     ap.add_argument("--equal-load", type=int, default=0, help="busy processes running meanwhile")
+    ap.add_argument("--large-agents", type=int, nargs="*", default=[], help="lockstep on the grid: completes, "
+                    "sim/wall, peak RSS per agent (e.g. 400 with --agents-per-process auto)")
+    ap.add_argument("--large-sim-s", type=float, default=10.0)
+    ap.add_argument("--paper-realtime", type=float, default=None, metavar="SPEED",
+                    help="the paper at --clock realtime --speed SPEED: plain, with kill:agent:3@60, with flood@30")
     ap.add_argument("--agents-per-process", nargs="*", default=["1"], metavar="K",
                     help="each row with K agents per process (agent hosts), side by side: 1 5 auto ...")
     ap.add_argument("--quick", action="store_true")
@@ -230,6 +248,33 @@ def main() -> int:
                 s = launch(tmp / f"paper-{i}", PAPER, free_port(), *extra, launcher=launcher_cmd(co))
                 print(f"{name[-12:]:>12s} converged {s['converged']} at {s['convergence_time_s']} s in "
                       f"{s['wall_time_s']:.1f} s wall: sim/wall {s['duration_s'] / s['wall_time_s']:.2f}", flush=True)
+        if args.large_agents:
+            print(f"\n## large swarms in lockstep on the grid, {args.large_sim_s:g} s simulated")
+            print(f"{'version':>12s} {'N':>4s} {'finished':>8s} {'sim/wall':>8s} {'collisions':>10s} {'lost':>5s} "
+                  f"{'RSS MB':>8s} {'MB/agent':>8s} {'procs':>5s}")
+            for n in args.large_agents:
+                scen = tmp / f"large{n}.toml"
+                scen.write_text(to_toml(grid_scenario(n, args.large_sim_s)))
+                for i, (name, co, extra) in enumerate(versions):
+                    out = tmp / f"large{n}-{i}"
+                    s = launch(out, scen, free_port(), *extra, launcher=launcher_cmd(co))
+                    rss, procs = peak_rss_mb(out)
+                    print(f"{name[-12:]:>12s} {n:4d} {s['finished']!s:>8s} "
+                          f"{s['duration_s'] / s['wall_time_s']:8.2f} {s['collisions']:10d} {len(s['agents_lost']):5d} "
+                          f"{rss:8.0f} {rss / n:8.2f} {procs:5d}", flush=True)
+        if args.paper_realtime is not None:
+            print(f"\n## the paper at --clock realtime --speed {args.paper_realtime:g}")
+            print(f"{'version':>12s} {'fault':>18s} {'converged':>9s} {'t (s)':>7s} {'missed':>7s} {'collisions':>10s} "
+                  f"{'lost':>5s}")
+            for fault in ("", "kill:agent:3@60", "flood@30"):
+                for i, (name, co, extra) in enumerate(versions):
+                    more = ("--fault", fault) if fault else ()
+                    s = launch(tmp / f"paper-rt-{i}-{fault.replace(':', '_')}", PAPER, free_port(), "--clock",
+                               "realtime", "--speed", f"{args.paper_realtime:g}", *more, *extra,
+                               launcher=launcher_cmd(co))
+                    print(f"{name[-12:]:>12s} {fault or '-':>18s} {s['converged']!s:>9s} "
+                          f"{s['convergence_time_s'] or float('nan'):7.2f} {s.get('missed_deadline_ratio', 0):7.2%} "
+                          f"{s['collisions']:10d} {len(s['agents_lost']):5d}", flush=True)
         if args.realtime_agents:
             print(f"\n## realtime at --speed 1 (20 Hz) on the grid, {args.realtime_sim_s:g} s per run")
             print(f"{'version':>12s} {'N':>4s} {'missed':>7s} {'ratio':>7s} {'lat p50 ms':>10s} {'lat p99 ms':>10s}")
