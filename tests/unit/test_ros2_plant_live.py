@@ -13,20 +13,30 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
 from monitor.live import knowledge_update
 from monitor.scene import GROUP_RGB
+from reconswarm.net import wire
+from reconswarm.net.node import Role, Token
 from reconswarm.net.wire import ClockMode
 from reconswarm.scenario.model import load
 from reconswarm_bringup.cli_launch import FOXGLOVE_PORT, optional_values
 from simworld.ros2_io import Ros2World
+from simworld.world import Command
 from tests.support import PAPER
 
 
 def _started(world: Ros2World) -> float:
-    for a in world.ids:
-        world.agent_up(a, True)
-    world.monitor_up(True)
     now = 100.0
-    world.step(now)  # the readiness barrier passes
+    world.step([*(Token(Role.AGENT, True, a) for a in world.ids), Token(Role.MONITOR, True)], now)
+    assert world.started  # the readiness barrier passed
     return now
+
+
+def _twist(agent_id: int, v: float, w: float, at_s: float) -> Command:
+    """A cmd_vel as the port hands it over (a Twist has no tick: the one given is ignored)."""
+    return Command(wire.Cmd(agent_id, -1, v, w), at_s)
+
+
+def _states(out: list) -> list[wire.State]:
+    return [m for m in out if isinstance(m, wire.State)]
 
 
 def test_twist_is_held_over_the_step_on_the_exact_arc():
@@ -35,16 +45,17 @@ def test_twist_is_held_over_the_step_on_the_exact_arc():
     assert world.clock == ClockMode.REALTIME
     now = _started(world)
     dt, l_m = s.meta.dt_s, s.head_offsets
-    st = world.step(now)  # publishes tick 0
-    assert st.out and st.out[0].clock.k == 0
-    s0 = np.array([[m.x, m.y] for m in st.out[0].states])
-    th0 = np.array([m.theta for m in st.out[0].states])
+    out = world.step([], now)  # publishes tick 0
+    assert isinstance(out[0], wire.Clock) and out[0].k == 0
+    s0 = np.array([[m.x, m.y] for m in _states(out)])
+    th0 = np.array([m.theta for m in _states(out)])
     v, w = 3.0, 0.8
-    world.twist(world.ids[2], v, w, now)  # robot 3 only; the others get no command and stay put
-    st = world.step(now + 0.01)  # the tick is due (a period is dt / speed = 5 ms): apply and advance
-    st = world.step(now + 0.01)  # publish tick 1
-    s1 = np.array([[m.x, m.y] for m in st.out[0].states])
-    th1 = np.array([m.theta for m in st.out[0].states])
+    # robot 3 only; the others get no command and stay put. The tick is due (a period is dt / speed = 5 ms):
+    # apply and advance
+    world.step([_twist(world.ids[2], v, w, now)], now + 0.01)
+    out = world.step([], now + 0.01)  # publish tick 1
+    s1 = np.array([[m.x, m.y] for m in _states(out)])
+    th1 = np.array([m.theta for m in _states(out)])
     # eq. (1) with (v, ω) constant over dt: θ += ω dt; s moves by (v/ω)(sin θ1 - sin θ0, cos θ0 - cos θ1)
     exp_x = s0[2, 0] + v / w * (math.sin(th0[2] + w * dt) - math.sin(th0[2]))
     exp_y = s0[2, 1] + v / w * (math.cos(th0[2]) - math.cos(th0[2] + w * dt))
@@ -52,9 +63,9 @@ def test_twist_is_held_over_the_step_on_the_exact_arc():
     assert abs(math.remainder(th1[2] - th0[2] - w * dt, 2 * math.pi)) < 1e-12
     others = [i for i in range(len(world.ids)) if i != 2]
     assert np.array_equal(s1[others], s0[others]) and np.array_equal(th1[others], th0[others])
-    assert tuple(world.vw[2]) == (v, w) and not world.vw[others].any()
+    assert tuple(world.base.vw[2]) == (v, w) and not world.base.vw[others].any()
     # the head point is the body point plus l [cos θ, sin θ]
-    p1 = np.array([[m.px, m.py] for m in st.out[0].states])
+    p1 = np.array([[m.px, m.py] for m in _states(out)])
     assert np.allclose(p1 - s1, l_m[:, None] * np.stack([np.cos(th1), np.sin(th1)], axis=1), atol=1e-12)
 
 
@@ -62,22 +73,23 @@ def test_a_robot_without_cmd_vel_for_hold_time_stops():
     s = load(PAPER)
     world = Ros2World(s, speed=10.0)
     now = _started(world)
-    world.step(now)
-    world.twist(world.ids[0], 2.0, 0.0, now)
+    world.step([], now)
+    world.step([_twist(world.ids[0], 2.0, 0.0, now)], now)
     hold_ticks = round(world.timing.hold_sim_s / s.meta.dt_s)
     moving = []
     for _ in range(hold_ticks + 3):
         now += 0.01
-        world.step(now)  # apply tick k
-        world.step(now)  # publish tick k + 1
-        moving.append(bool(world.vw[0, 0]))
+        world.step([], now)  # apply tick k
+        world.step([], now)  # publish tick k + 1
+        moving.append(bool(world.base.vw[0, 0]))
     assert moving == [True] * (hold_ticks + 1) + [False] * 2  # held for hold_sim_s, then stopped
 
 
 def test_twist_from_an_unknown_robot_is_refused():
     world = Ros2World(load(PAPER), speed=10.0)
-    with pytest.raises(ValueError, match="not in the scenario"):
-        world.twist(99, 1.0, 0.0, 0.0)
+    now = _started(world)
+    world.step([_twist(99, 1.0, 0.0, now)], now)
+    assert world.rejected == 1 and not world.plant.cmds
 
 
 def _decoded(msg: SceneUpdate) -> Any:

@@ -11,11 +11,12 @@ import time
 import zenoh
 
 from reconswarm.net.membership import Membership
+from reconswarm.net.node import RouterLink
 from reconswarm.net.session import ZenohOptions
 from reconswarm.net.uplink import LinkChange, Uplink
 from reconswarm.net.wire import ClockMode
 from tests.support import ROOT, free_port
-from tests.unit.test_world_node import IDS, S, T, advance, command_all, started
+from tests.unit.test_world_node import IDS, S, T, advance, commands, ended, started, ticks, tokens
 
 
 def _members() -> Membership:
@@ -116,25 +117,23 @@ def test_a_peer_session_is_not_followed() -> None:
 
 
 def test_the_world_holds_while_its_own_link_is_gone_and_steps_nobody_uncommanded() -> None:
-    """Lockstep: the router dies while tick 3 waits for commands (two are in). The world neither times the step
-    out nor holds a robot: it waits for its link, publishes tick 3 again once back, and goes on."""
+    """Lockstep: the router dies while tick 3 waits for commands (two are in), taking every token with it a
+    moment before our session sees its link go. The world neither times the step out nor holds a robot nor
+    loses anybody: it waits for its link, publishes tick 3 again once back, and goes on."""
     node = started()
     now = 0.0
     for k in range(3):
-        node.step(now)
-        command_all(node, k, (1.0, 0.0), now)
-        node.step(now)
-    node.step(now)  # tick 3 published
-    command_all(node, 3, (1.0, 0.0), now, skip=tuple(IDS[2:]))
-    node.link(False, now)
-    step = advance(node, now, now + 4 * T.step_timeout_s)  # 20 s without a router
+        node.step([], now)
+        node.step(commands(k, (1.0, 0.0), now), now)
+    node.step([], now)  # tick 3 published
+    node.step([*commands(3, (1.0, 0.0), now, skip=tuple(IDS[2:])), *tokens(up=False)], now)
+    out = advance(node, now, now + 4 * T.step_timeout_s, every_s=0.1, inputs=[RouterLink(False)])  # 12 s
     now += 4 * T.step_timeout_s
-    assert node.k == 3 and step.ended is None and node.strikes == {} and node.uncommanded_k == -1
-    node.link(True, now)
-    again = node.step(now)
-    assert [o.clock.k for o in again.out] == [3]  # tick 3 again, for the agents whose state went nowhere
-    command_all(node, 3, (1.0, 0.0), now, skip=tuple(IDS[:2]))  # (the first two were kept)
-    node.step(now)
+    assert node.k == 3 and not ended(out) and node.strikes == {} and node.uncommanded_k == -1
+    assert node.alive == set(IDS)
+    again = node.step([RouterLink(True), *tokens()], now)
+    assert [t.clock.k for t in ticks(again)] == [3]  # tick 3 again, for the agents whose state went nowhere
+    node.step(commands(3, (1.0, 0.0), now, skip=tuple(IDS[:2])), now)  # (the first two were kept)
     assert node.k == 4 and node.uncommanded_k == -1
 
 
@@ -143,13 +142,10 @@ def test_a_realtime_world_resumes_its_schedule_after_the_link_and_ends_if_it_nev
     advance(node, 0.0, 1.0, every_s=0.01)
     k = node.k
     assert k > 0
-    node.link(False, 1.0)
-    advance(node, 1.0, 11.0, every_s=0.01)
+    advance(node, 1.0, 11.0, every_s=0.01, inputs=[RouterLink(False)])
     assert node.k == k  # held: no tick while nobody is reachable
-    node.link(True, 11.0)
-    advance(node, 11.0, 11.5, every_s=0.01)
+    advance(node, 11.0, 11.5, every_s=0.01, inputs=[RouterLink(True)])
     period = S.meta.dt_s / 10.0
     assert node.k - k <= round(0.5 / period) + 2  # the schedule moved on by the hold: no burst of ticks
-    node.link(False, 11.5)
-    end = advance(node, 11.5, 11.5 + T.no_agents_grace_s + 1.0, every_s=0.5)
-    assert end.ended == "no agents"
+    end = advance(node, 11.5, 11.5 + T.no_agents_grace_s + 1.0, every_s=0.5, inputs=[RouterLink(False)])
+    assert ended(end) == "no agents"
