@@ -39,6 +39,7 @@ from reconswarm.errors import BadInput
 from reconswarm.net import wire
 from reconswarm.net.inbox import Inbox, Rejections
 from reconswarm.net.keys import Keys, WireError
+from reconswarm.net.node import Invalid
 from reconswarm.paper.events import Event
 from reconswarm.paper.topology import labels
 from reconswarm.scenario.model import Scenario
@@ -191,7 +192,9 @@ class LiveFeed:
         self.sub = ext.declare_advanced_subscriber(session, keys.cell_agents(None, "obstacles"), self.inbox.handler(),
                                                    history=ext.HistoryConfig(detect_late_publishers=True))
 
-    def poll(self) -> None:
+    def poll(self) -> list[Invalid]:
+        """Take the sets that came; the malformed ones (logged) for the monitor's node to count."""
+        bad = []
         for key, payload, _kind, _source, _at in self.inbox.drain():
             try:
                 _, aid, _ = self.keys.parse(key)
@@ -200,6 +203,8 @@ class LiveFeed:
                 self.view.obstacle_set(wire.obstacles_from_wire(payload, aid))
             except WireError as exc:
                 self.rej.reject(key, str(exc))
+                bad.append(Invalid(key, str(exc)))
+        return bad
 
     def close(self) -> None:
         self.sub.undeclare()

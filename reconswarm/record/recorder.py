@@ -3,23 +3,38 @@ metrics, the swarm graph's split / merge events and the row of run.db."""
 
 from __future__ import annotations
 
+from typing import Protocol
+
 import numpy as np
 from numpy.typing import NDArray
 
 from reconswarm.paper.events import Event
 from reconswarm.paper.topology import TopologyTracker
 from reconswarm.plant.sensing import ContourField
-from reconswarm.record.safety import SafetyMonitor
-from reconswarm.record.store import RunWriter
+from reconswarm.record.safety import Episode, SafetyMonitor
 from reconswarm.scenario.model import Scenario
 
 Array = NDArray[np.float64]
 
 
+class Rows(Protocol):
+    """Where the recorder's rows go: the record itself (store.RunWriter, the engine's), or the monitor's node's
+    outputs, which its process hands to the record (monitor/rows.py)."""
+
+    def tick(self, k: int, t: float, p: Array, theta: Array, alive: NDArray[np.bool_], max_error_m: float,
+             min_agent_gap_m: float, min_obstacle_gap_m: float, groups: int) -> None: ...
+
+    def event(self, ev: Event) -> None: ...
+
+    def episode(self, e: Episode) -> None: ...
+
+    def episode_end(self, key: tuple[str, str, str], t: float) -> None: ...
+
+
 class Recorder:
     """Truth-side bookkeeping shared by the engine and the monitor process: safety, topology, run.db."""
 
-    def __init__(self, s: Scenario, writer: RunWriter | None) -> None:
+    def __init__(self, s: Scenario, writer: Rows | None) -> None:
         self.s = s
         self.writer = writer
         self.ids = s.ids

@@ -9,15 +9,13 @@ from pathlib import Path
 
 import pytest
 
-from monitor.node import MonitorNode
 from reconswarm.net import wire
 from reconswarm.net.admission import Admission, IntrusionKind, Pins
 from reconswarm.net.keys import Keys
-from reconswarm.net.timing import Timing
 from reconswarm.paper.events import EventKind
-from reconswarm.record.store import RunWriter
 from reconswarm.scenario.model import load
 from tests.support import PAPER
+from tests.unit.monitor_run import DT, IDS, started, token, tokens
 
 S = load(PAPER)
 KEYS = Keys("pins-0a1b2c")
@@ -55,48 +53,26 @@ def test_a_forged_command_long_after_the_first_pin_is_impersonation_while_the_ag
 
 # -------------------------------------------------------------------------------- the network split rule
 
-T = Timing(burst_s=1.0, end_grace_s=3.0, commit_sim_s=0.5, world_stall_s=2.0)
-IDS = [a.id for a in S.agents]
-
-
-def _node(tmp_path: Path) -> MonitorNode:
-    node = MonitorNode(S, RunWriter(tmp_path / "run.db", S, "lockstep"), None, T, unix_offset_s=1000.0)
-    for a in IDS:
-        node.agent_up(a, True, 0.0)
-    return node
-
-
-def _tick(node: MonitorNode, k: int, now: float) -> None:
-    p = S.starts
-    node.clock(wire.Clock(k, k * S.meta.dt_s, tuple(IDS)), now)
-    node.truth(wire.Truth(k, k * S.meta.dt_s, tuple(IDS), tuple(p[:, 0]), tuple(p[:, 1]), tuple(S.headings),
-                          tuple(p[:, 0]), tuple(p[:, 1])))
-    assert node.poll(now) is False
-
-
 @pytest.mark.parametrize("n_lost", [1, 2, 3])
 def test_two_agents_lost_together_are_a_network_split_one_is_not(tmp_path: Path, n_lost: int) -> None:
-    node = _node(tmp_path)
-    _tick(node, 0, 0.0)
+    run = started(tmp_path)
+    run.tick(0, 0.0)
     gone = IDS[3:3 + n_lost]
     for j, a in enumerate(gone):
-        node.agent_up(a, False, 0.1 + 0.3 * j)
-    _tick(node, 1, 0.95)  # the burst (1 s from the first loss) is still open
-    assert [e.kind for e in node.take_events()] == [EventKind.AGENT_LOST] * n_lost
-    _tick(node, 2, 1.2)
-    out = node.take_events()
+        run.step(0.1 + 0.1 * j, token(a, False))
+    run.tick(1, 0.95, quiet=tuple(gone))  # their tokens' ends confirmed: lost; the burst is open for 1 s
+    assert [e.kind for e in run.events] == [EventKind.AGENT_LOST] * n_lost
+    assert run.tick(2, 1.2, quiet=tuple(gone)) == []
+    out = run.tick(3, 2.0, quiet=tuple(gone))
     if n_lost == 1:
         assert out == []  # a single loss stays agent_lost only
         return
     (split,) = out
     rest = sorted(set(IDS) - set(gone))
-    assert split.kind == EventKind.SPLIT and split.cause == "network" and split.t == pytest.approx(0.0)
+    assert split.kind == EventKind.SPLIT and split.cause == "network" and split.t == pytest.approx(DT)
     assert split.before == (tuple(IDS),) and set(split.after) == {tuple(rest), tuple(gone)}
-    for a in gone:  # both back: the merge
-        node.agent_up(a, True, 3.0)
-    _tick(node, 3, 3.1)
-    node.take_events()  # (their joins)
-    _tick(node, 4, 4.1)
-    (merge,) = node.take_events()
+    run.step(3.0, *tokens(True, gone))  # both back (their joins): the merge
+    assert run.tick(4, 3.1) == []
+    (merge,) = run.tick(5, 4.1)
     assert merge.kind == EventKind.MERGE and merge.cause == "network" and merge.after == (tuple(IDS),)
     assert set(merge.before) == {tuple(rest), tuple(gone)}
