@@ -289,13 +289,19 @@ def test_a_world_stalled_itself_waits_afresh_keeps_flapping_tokens_and_stays_in_
 
 
 def test_after_its_own_stall_a_token_that_stays_gone_is_let_go_once_settled() -> None:
-    node = started()
+    """Settled (peer_silent_s) before the tick's fresh wait ends (step_timeout_s): the agent is gone, yet the tick
+    it was waited for at waits for it to the end (its token may still be on its way back), then holds it."""
+    tm = replace(T, step_timeout_s=5.0)
+    node = started(timing=tm)
     node.step([], 0.0)
     node.step(tokens(IDS[:1], up=False), 5.0)  # stalled 5 s; agent IDS[0]'s token goes
-    advance(node, 5.0, 5.0 + T.peer_silent_s - 0.5, inputs=commands(0, (0.5, 0.0), 5.0, skip=(IDS[0],)))
+    advance(node, 5.0, 5.0 + tm.peer_silent_s - 0.5, inputs=commands(0, (0.5, 0.0), 5.0, skip=(IDS[0],)))
     assert IDS[0] in node.alive  # kept while the sessions settle (peer_silent_s)
-    out = advance(node, 5.0 + T.peer_silent_s - 0.5, 5.0 + T.peer_silent_s + 0.5)
-    assert IDS[0] not in node.alive and [t.clock.alive for t in ticks(out)][-1] == tuple(sorted(IDS[1:]))
+    advance(node, 5.0 + tm.peer_silent_s - 0.5, 5.0 + tm.step_timeout_s - 0.5)
+    assert IDS[0] not in node.alive and node.k == 0 and node.missing() == [IDS[0]]
+    out = advance(node, 5.0 + tm.step_timeout_s - 0.5, 5.0 + tm.step_timeout_s + 0.5)
+    assert node.k == 1 and node.strikes == {IDS[0]: 1}
+    assert [t.clock.alive for t in ticks(out)][-1] == tuple(sorted(IDS[1:]))
 
 
 def test_while_its_own_router_link_is_gone_the_world_holds_and_nobody_is_lost() -> None:
