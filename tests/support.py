@@ -11,7 +11,9 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -137,6 +139,17 @@ def tick_count(db: Path) -> int:
             return int(c.execute("SELECT COUNT(*) FROM ticks").fetchone()[0])
     except sqlite3.Error:
         return 0
+
+
+def wait_for_ticks(db: Path, n: int, launch: subprocess.Popen[Any] | None, timeout_s: float,
+                   why: Callable[[], str] | str = "") -> None:
+    """Wait until the run record at db holds n ticks; fail the test if the launch exits first or timeout_s
+    passes (the message: `why`, e.g. the launch's stderr so far)."""
+    deadline = time.monotonic() + timeout_s
+    while tick_count(db) < n:
+        if (launch is not None and launch.poll() is not None) or time.monotonic() > deadline:
+            raise AssertionError((why() if callable(why) else why) or f"the run did not record {n} ticks in {db}")
+        time.sleep(0.2)
 
 
 def restart_and_rejoin(out: Path, agent: int, at_s: float, after_s: float) -> list[str]:

@@ -8,12 +8,11 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
-from tests.support import ROOT, assert_all_gone, free_port, tick_count
+from tests.support import ROOT, assert_all_gone, free_port, wait_for_ticks
 
 
 def _launch(out: Path, router: str, *args: str) -> list[str]:
@@ -28,9 +27,7 @@ def test_localhost_is_refused_while_127_0_0_1_runs(tmp_path: Path) -> None:
     a = subprocess.Popen(_launch(tmp_path / "a", f"tcp/127.0.0.1:{port}", "--clock", "realtime", "--speed", "1"),
                          cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 60
-        while tick_count(tmp_path / "a" / "run.db") < 1 and time.monotonic() < deadline:
-            time.sleep(0.2)
+        wait_for_ticks(tmp_path / "a" / "run.db", 1, a, 60)
         b = subprocess.run(_launch(tmp_path / "b", f"tcp/localhost:{port}"), cwd=ROOT, capture_output=True, text=True,
                            timeout=60)
         assert b.returncode == 2, b.stderr
@@ -60,9 +57,7 @@ def test_ipv6_loopback_router_runs_the_mission(out: Path) -> None:
     proc = subprocess.Popen(_launch(out, f"tcp/[::1]:{port}", "--json"), cwd=ROOT, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 90
-        while tick_count(out / "run.db") < 100 and time.monotonic() < deadline and proc.poll() is None:
-            time.sleep(0.2)
+        wait_for_ticks(out / "run.db", 100, proc, 90)
         proc.send_signal(signal.SIGINT)
         stdout, stderr = proc.communicate(timeout=60)
     finally:

@@ -7,12 +7,11 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
-import time
 from pathlib import Path
 
 import pytest
 
-from tests.support import ROOT, free_port, launcher_cmd, summary, tick_count
+from tests.support import ROOT, free_port, launcher_cmd, summary, wait_for_ticks
 
 
 def _stop_mid_run(out: Path, sig: signal.Signals, *args: str) -> subprocess.CompletedProcess[str]:
@@ -20,10 +19,7 @@ def _stop_mid_run(out: Path, sig: signal.Signals, *args: str) -> subprocess.Comp
     proc = subprocess.Popen(launcher_cmd(out, "-n", "3", *args, port=port), cwd=ROOT, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 60
-        while tick_count(out / "run.db") < 20 and time.monotonic() < deadline and proc.poll() is None:
-            time.sleep(0.2)
-        assert tick_count(out / "run.db") >= 20, "the run did not start"
+        wait_for_ticks(out / "run.db", 20, proc, 60, "the run did not start")
         proc.send_signal(sig)
         stdout, stderr = proc.communicate(timeout=60)
     finally:
@@ -61,9 +57,7 @@ def test_ros2_prints_the_router_and_the_domain(out: Path) -> None:
     proc = subprocess.Popen(launcher_cmd(out, "-n", "3", "--ros2", "--ros-domain-id", "17", port=port), cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 60
-        while tick_count(out / "run.db") < 5 and time.monotonic() < deadline and proc.poll() is None:
-            time.sleep(0.2)
+        wait_for_ticks(out / "run.db", 5, proc, 60)
         proc.send_signal(signal.SIGINT)
         stdout, stderr = proc.communicate(timeout=60)
     finally:

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import time
 from pathlib import Path
 
 import pytest
@@ -20,7 +19,7 @@ import pytest
 from reconswarm.scenario.generate import generate
 from reconswarm.scenario.model import to_toml
 from reconswarm_bringup.outdir import RecordClaim
-from tests.support import ROOT, launcher_cmd, reconswarm, summary, tick_count
+from tests.support import ROOT, launcher_cmd, reconswarm, summary, tick_count, wait_for_ticks
 
 
 @pytest.fixture(scope="module")
@@ -76,10 +75,7 @@ def test_sim_refuses_a_live_launch_dir_and_its_record(tiny: tuple[Path, Path], o
     launch = subprocess.Popen(launcher_cmd(out, "-s", str(path), "--clock", "realtime", "--speed", "4", "--json"),
                               cwd=ROOT, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
-        deadline = time.monotonic() + 120
-        while tick_count(out / "run.db") < 5:
-            assert launch.poll() is None and time.monotonic() < deadline, "the launch did not start recording"
-            time.sleep(0.2)
+        wait_for_ticks(out / "run.db", 5, launch, 120, "the launch did not start recording")
         r = reconswarm("sim", str(path), "-o", str(out))
         _refused(r, "run is writing its record there")  # (the launch's claim on the directory)
         # a second launch into the same directory (on its own router) neither starts nor deletes the record

@@ -30,7 +30,7 @@ from tests.support import (
     pids,
     read_run_id,
     reconswarm,
-    tick_count,
+    wait_for_ticks,
 )
 
 
@@ -116,10 +116,7 @@ def test_second_launch_20s_later_is_refused_and_run_id_names_the_keys(tmp_path: 
     first = _launch(a, port)
     session: Any = None
     try:
-        deadline = t0 + 180
-        while tick_count(a / "run.db") < 20:
-            assert first.poll() is None and time.monotonic() < deadline, "the first run did not start"
-            time.sleep(0.2)
+        wait_for_ticks(a / "run.db", 20, first, t0 + 180 - time.monotonic(), "the first run did not start")
         run = read_run_id(a)
         assert run.startswith("paper-") and len(run) == len("paper-") + 6
         # An outside session hears the clock on swarm/<run id>/clock, and nothing on the scenario's name.

@@ -26,7 +26,15 @@ import zenoh
 from reconswarm.net import wire
 from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions
-from tests.support import ROOT, assert_all_gone, free_port, launcher_cmd, paper_with, read_run_id, tick_count
+from tests.support import (
+    ROOT,
+    assert_all_gone,
+    free_port,
+    launcher_cmd,
+    paper_with,
+    read_run_id,
+    wait_for_ticks,
+)
 
 DURATION_S = 20.0
 KILL_AT_S = 8.0
@@ -83,10 +91,7 @@ def test_the_record_does_not_lie_about_commands_ends_or_the_dead(tmp_path: Path)
     a: Stamper | None = None
     sent = {"cmd": 0, "clock": 0, "end": 0}
     try:
-        deadline = time.monotonic() + 120
-        while tick_count(out / "run.db") < 20:
-            assert proc.poll() is None and time.monotonic() < deadline, err.read_text()[-2000:]
-            time.sleep(0.1)
+        wait_for_ticks(out / "run.db", 20, proc, 120, lambda: err.read_text()[-2000:])
         a = Stamper(f"tcp/127.0.0.1:{port}", read_run_id(out))
         token = a.z.liveliness().declare_token(a.keys.alive_agent(3))  # held for agent 3 (killed at KILL_AT_S)
         dt = 0.05

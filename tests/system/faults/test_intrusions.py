@@ -31,7 +31,16 @@ from reconswarm.net.session import ZenohOptions
 from reconswarm.plant.unicycle import inputs
 from reconswarm.record.store import RunRecord
 from reconswarm.scenario.model import load
-from tests.support import PAPER, ROOT, assert_all_gone, events, free_port, launcher_cmd, read_run_id, tick_count
+from tests.support import (
+    PAPER,
+    ROOT,
+    assert_all_gone,
+    events,
+    free_port,
+    launcher_cmd,
+    read_run_id,
+    wait_for_ticks,
+)
 
 KILL_AT_S = 90.0
 
@@ -130,10 +139,7 @@ def test_outside_client_cannot_steer_phantom_end_or_hide_a_death(tmp_path: Path)
                                 cwd=ROOT, stdout=subprocess.PIPE, stderr=fh)
     attacker: Attacker | None = None
     try:
-        deadline = time.monotonic() + 180
-        while tick_count(out / "run.db") < 20:
-            assert proc.poll() is None and time.monotonic() < deadline, err.read_text()[-2000:]
-            time.sleep(0.2)
+        wait_for_ticks(out / "run.db", 20, proc, 180, lambda: err.read_text()[-2000:])
         attacker = Attacker(f"tcp/127.0.0.1:{port}", read_run_id(out))
         zid = attacker.zid
         sent = _attack(attacker, KILL_AT_S + 20.0)  # from t ~ 1 s to 20 s past agent 3's death
