@@ -1,9 +1,6 @@
-"""One agent's protocol logic as a pure state machine: decoded messages and `now` in, what to publish out.
-
-No transport and no clock of its own: `AgentNode.step(batch, now_s)` takes the messages that arrived
-(wire dataclasses and membership changes) and the adapter's wall time, and returns what to publish (a
-beacon, an obstacle set, a command) or to do (open a new session, exit). The AgentBrain is the math it
-calls. agent/process.py moves the bytes between zenoh and this class.
+"""One agent's protocol logic as a pure state machine (the node contract, reconswarm/net/node.py): `step(batch,
+now_s)` takes the messages that arrived and the runtime's wall time, returns what to publish (a beacon, an obstacle
+set, a command) or to do (listen to other cells, open a new session, exit). AgentBrain is the math it calls.
 
 Lockstep (the clock says so): at tick k the agent waits for its state (its scan inside), announces its beacon
 (with the revision of its obstacle set at k-1), waits for the beacons of the live agents that may matter
@@ -348,9 +345,12 @@ class AgentNode:
             for kk in [x for x in store if x < k - 2]:
                 del store[kk]
         self.nb.prune(k)
-        p = (self.states[k].px, self.states[k].py)
-        for a in [a for a, b in self.last_seen.items() if a in self.alive and not self.nb.audible(p, b)]:
-            del self.last_seen[a]  # out of our cells: we no longer hear it, its position would go stale
+        # Stale: out of our cells, or alive by the world's clock (commanding) yet unheard peer_silent_s of ticks.
+        p, stale_k = (self.states[k].px, self.states[k].py), k - round(self.timing.peer_silent_s / self.s.meta.dt_s)
+        living = self._living(self.clocks.get(k)) if self.mode == "lockstep" else set()
+        for a in [a for a, b in self.last_seen.items()
+                  if a in self.alive and (not self.nb.audible(p, b) or (a in living and b.k < stale_k))]:
+            del self.last_seen[a]
         self.peer_sets.prune(self.brain.leader is not None)
 
     def _advance(self, now: float) -> None:

@@ -481,3 +481,37 @@ def test_a_dead_peer_kept_alive_by_a_forged_token_is_still_an_obstacle() -> None
     want = reference(2, (100.1, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 104.0, 0.0, RADIUS[C])], brain=ref)
     assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(2, *want)]
     assert node.guessed_k == -1  # gone by the world's count: not a guess
+
+
+def test_lockstep_a_live_peer_that_left_our_cells_while_we_were_frozen_is_not_a_ghost() -> None:
+    """Lockstep: frozen (SIGSTOP) while the swarm moved on, we come back with our peers' last beacons from before.
+    A peer the world's clock still counts alive (it commands) whose beacon we have not heard for peer_silent_s
+    of ticks left the cells we listen to (a near peer beacons every tick): its old position is dropped, not
+    planned with for ever (seen: two agents of a frozen host stood still for 210 s beside ghosts)."""
+    node, ref = started(peers=(B, C)), AgentBrain(S, A)
+    node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 104.0, 0.0), beacon(C, 0, 110.0, 0.0)], 0.0)
+    reference(0, (100.0, 0.0), [Peer(B, 104.0, 0.0, RADIUS[B]), Peer(C, 110.0, 0.0, RADIUS[C])], brain=ref)
+    k, now = 80, 20.0  # back 20 s later: the world went on without us; C said nothing since tick 0
+    out = node.step([clock(k), state(k, 100.0, 0.0), beacon(B, k, 104.0, 0.0)], now)
+    ghost = [Peer(B, 104.0, 0.0, RADIUS[B]), Peer(C, 110.0, 0.0, RADIUS[C])]
+    assert [c.k for c in cmds(out)] == [k]  # (acting without C at once: silent for longer than peer_silent_s)
+    reference(k, (100.0, 0.0), ghost, brain=ref)  # (this tick still plans with C's last position: a guess)
+    out = node.step([clock(k + 1), state(k + 1, 100.0, 0.0), beacon(B, k + 1, 104.0, 0.0)], now + 0.05)
+    want = reference(k + 1, (100.0, 0.0), [Peer(B, 104.0, 0.0, RADIUS[B])], brain=ref)
+    assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(k + 1, *want)]
+    assert C not in node.last_seen
+    assert want != reference(k + 1, (100.0, 0.0), ghost, brain=AgentBrain(S, A))  # (C's old place would push us)
+
+
+def test_lockstep_a_live_peer_silent_for_fewer_ticks_is_still_where_last_heard() -> None:
+    """The same peer silent for fewer than peer_silent_s of ticks keeps its last position (a late beacon, not a
+    peer gone from our cells); one the world no longer counts alive stays where last seen as a lost robot."""
+    node = started(peers=(B, C))
+    node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 104.0, 0.0), beacon(C, 0, 110.0, 0.0)], 0.0)
+    k = 40  # (a prune tick; 40 ticks < peer_silent_s / dt)
+    node.step([clock(k), state(k, 100.0, 0.0), beacon(B, k, 104.0, 0.0)], 20.0)
+    assert C in node.last_seen
+    node = started(peers=(B, C))
+    node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 104.0, 0.0), beacon(C, 0, 110.0, 0.0)], 0.0)
+    node.step([clock(80, (A, B)), state(80, 100.0, 0.0), beacon(B, 80, 104.0, 0.0)], 20.0)  # C not counted: lost
+    assert node.last_seen[C].px == 110.0
