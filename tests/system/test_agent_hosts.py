@@ -190,3 +190,15 @@ def test_restarting_a_hosted_agent_restarts_its_host_and_all_its_agents_rejoin(o
     log = (out / "logs" / "agent-1-5.log").read_text()
     assert sorted(int(ln.split("agent ")[1].split(":")[0]) for ln in log.splitlines() if "joining at tick" in ln) \
         == list(IDS[:5])
+
+
+def test_a_frozen_host_rejoins_and_its_agents_do_not_plan_with_ghosts(out: Path) -> None:
+    """Freezing a host of 5 for 15 s: the others go on without them; back, each of the 5 drops the old places of
+    peers that left its cells meanwhile (alive, commanding, unheard) and the mission converges. Planning with
+    those ghosts, two of them stood still from t = 80 s to the end of the mission."""
+    p = run_launcher(out, "--agents-per-process", "5", "--fault", "freeze:agent:3@50+15", "--json")
+    assert p.returncode == 0, p.stderr[-3000:]
+    s = json.loads(p.stdout)
+    assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == [], s
+    ev = [(e["kind"], e["agent"]) for e in events(out / "run.db") if e["kind"] in ("agent_lost", "agent_joined")]
+    assert sorted(ev) == sorted([("agent_lost", a) for a in IDS[:5]] + [("agent_joined", a) for a in IDS[:5]])
