@@ -251,7 +251,11 @@ def test_refusals_name_the_sender_the_key_and_the_reason() -> None:
     assert refused(adm.check_world_source(X, skey), K.NOT_FROM_WORLD, X, skey,
                    "the world speaks from session world-zid")
     fresh = Admission(PAPER_S)
-    assert refused(fresh.check_world_source(UNATTRIBUTED, skey), K.NOT_FROM_WORLD, UNATTRIBUTED, skey, "(none yet)")
+    got = fresh.check_world_source(UNATTRIBUTED, skey)
+    assert refused(got, K.NOT_FROM_WORLD, UNATTRIBUTED, skey)
+    assert got is not None and got.detail == "the world speaks from session (none yet)"
+    tick = wire.Clock(3, 3 * PAPER_S.meta.dt_s, ())
+    assert refused(adm.check_clock(tick, X, KEYS.clock), K.NOT_FROM_WORLD, X, KEYS.clock, "world-zid")
     end = wire.Clock(3, 3 * PAPER_S.meta.dt_s, (), end=True, reason="converged")
     assert refused(adm.check_clock(end, X, KEYS.clock), K.NOT_FROM_WORLD, X, KEYS.clock, "world-zid",
                    "claims the end: 'converged'")
@@ -330,6 +334,8 @@ def test_odometry_from_the_world_within_reach_of_the_last_pose() -> None:
     assert adm.check_odometry(odom(1, x0 + 0.6 * step, y0 + 0.8 * step), WORLD, key) is None
     got = adm.check_odometry(odom(2, x0 + 0.6 * step, y0 + 0.8 * step + 1.02 * (u * dt + 1.0)), WORLD, key)
     assert refused(got, K.POSITION, WORLD, key, "odometry moved", f"in {dt:.6g} s")
+    got = adm.check_odometry(odom(2, x0 + 0.6 * step + 1.02 * (u * dt + 1.0), y0 + 0.8 * step), WORLD, key)
+    assert refused(got, K.POSITION, WORLD, key, "odometry moved")  # along x only
     assert refused(adm.check_odometry(odom(2, x0, y0), X, key), K.NOT_FROM_WORLD, X, key)
     assert refused(adm.check_odometry(odom(2, 1e8, y0), WORLD, key), K.POSITION, WORLD, key, "outside the reachable")
     assert adm.last_odom[2] == (dt, x0 + 0.6 * step, y0 + 0.8 * step)  # refused poses are not remembered
@@ -343,5 +349,6 @@ def test_reports_come_from_the_agent_or_the_world_they_name() -> None:
     assert refused(got, K.IMPERSONATION, X, KEYS.report("agent-2"), "agent 2 speaks from session agent2-zid")
     got = adm.check_report(99, X, KEYS.report("agent-99"), 0.1)
     assert refused(got, K.UNKNOWN_AGENT, X, KEYS.report("agent-99"))
-    assert refused(Admission(PAPER_S).check_report(None, X, KEYS.report("simworld"), 0.0), K.IMPERSONATION, X,
-                   KEYS.report("simworld"), "(none yet)")
+    got = Admission(PAPER_S).check_report(None, X, KEYS.report("simworld"), 0.0)
+    assert refused(got, K.IMPERSONATION, X, KEYS.report("simworld"))
+    assert got is not None and got.detail == "simworld speaks from session (none yet)"
