@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from zenoh import ext
 
 from monitor import scene
+from monitor.node import MonitorNode
 from reconswarm.errors import BadInput
 from reconswarm.net import wire
 from reconswarm.net.inbox import Inbox, Rejections
@@ -188,6 +189,7 @@ class LiveFeed:
 
     def __init__(self, view: LiveView, keys: Keys, session: Any, rej: Rejections) -> None:
         self.view, self.keys, self.rej = view, keys, rej
+        self.k = -1  # the newest tick sent
         self.inbox = Inbox()
         self.sub = ext.declare_advanced_subscriber(session, keys.cell_agents(None, "obstacles"), self.inbox.handler(),
                                                    history=ext.HistoryConfig(detect_late_publishers=True))
@@ -206,6 +208,25 @@ class LiveFeed:
                 bad.append(Invalid(key, str(exc)))
         return bad
 
+    def follow(self, n: MonitorNode, now_s: float) -> None:
+        """A scene of the newest tick the node recorded, if it is new and one is due."""
+        if n.written >= 0 and n.written != self.k and self.view.due(now_s):
+            self.k = n.written
+            self.view.tick(now_s, n.t, n.p, n.theta, n.alive, n.rec.topology.edges, n.rec.max_error_m,
+                           *n.rec.gaps_m)
+
     def close(self) -> None:
         self.sub.undeclare()
         self.view.close()
+
+
+def status_table(n: MonitorNode, run: str) -> Any:
+    """The terminal's live table (`monitor record --live`)."""
+    from rich.table import Table
+
+    table = Table(title=f"reconswarm monitor — run {run}")
+    for col in ("t (s)", "groups", "smallest gap (m)", "agents alive", "max |e| (m)", "rejected"):
+        table.add_column(col)
+    table.add_row(f"{n.t:.2f}", str(n.rec.topology.n_groups), f"{n.min_gap:.2f}", f"{int(n.alive.sum())}/{len(n.ids)}",
+                  f"{n.rec.max_error_m:.2f}", str(sum(v for p, v in n.counts.items() if p != "monitor") + n.invalid))
+    return table

@@ -9,10 +9,10 @@ and `Exit` once the mission's end is recorded or it was told to stop.
 
 Who is alive is decided once, by the node's `Presence` (monitor/presence.py): a token AND the agent's own
 reports (its heartbeat); our own session losing its router is nobody's loss (`RouterLink`); losses, returns
-and network splits are its events. The world: its clock silent for `world_stall_s` (or its token gone) is a stall;
-while it lasts, agents that come and go are not judged (they reconnect when nothing moves) until `burst_s`
-after the world is back; the stall is one `world_stalled` event (with its wall duration), ticks that never
-arrived a `gaps` row, and a world that never comes back `world_lost` when the monitor finishes.
+and network splits are its events. The world: its clock silent for `world_stall_s` (or its token gone) is a
+stall; while it lasts, agents that come and go are not judged (they reconnect when nothing moves) until
+`burst_s` after the world is back; the stall is one `world_stalled` event (with its wall duration), ticks that
+never arrived a `gaps` row, and a world that never comes back `world_lost` when the monitor finishes.
 """
 
 from __future__ import annotations

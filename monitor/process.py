@@ -24,7 +24,7 @@ from typing import Any
 import zenoh
 from zenoh import ext
 
-from monitor.live import LiveFeed, LiveView
+from monitor.live import LiveFeed, LiveView, status_table
 from monitor.messages import ClockFrom, Input, Output, RefusedEnd
 from monitor.node import MonitorNode
 from monitor.rows import Close, Commit, Resume, write
@@ -74,7 +74,7 @@ class MonitorPort(Member):
         self.feed: LiveFeed | None = None
         self.live: Any = None  # the rich table (--live)
         self.node: MonitorNode | None = None  # (read for the live views only)
-        self.live_k, self.chores_at = -1, time.monotonic()
+        self.chores_at = time.monotonic()
         k = self.keys
         self.pub_event = session.declare_publisher(k.event, congestion_control=zenoh.CongestionControl.BLOCK)
         # Everything arrives in the inbox, taken in one batch per tick: the world's truth wakes the loop, the
@@ -140,13 +140,16 @@ class MonitorPort(Member):
 
     def idle(self, who: int, now_s: float) -> None:
         """The live view; every `commit_wall_s`: our own tally, a commit, the rich table."""
-        self.feed_live(now_s)
+        node = self.node
+        assert node is not None
+        if self.feed is not None:
+            self.feed.follow(node, now_s)
         if now_s - self.chores_at > TIMING.commit_wall_s:
             self.chores_at = now_s
             self.writer.intrusions("monitor", self.gate.tally.as_rows())
             self.writer.maybe_commit()
             if self.live is not None:
-                self.live.update(self.live_view())
+                self.live.update(status_table(node, self.keys.run))
 
     def exited(self, who: int, code: Exit, now_s: float) -> None:
         log.info("monitor: %s", code.reason)
@@ -160,28 +163,6 @@ class MonitorPort(Member):
         """Also serve the run live (--foxglove): the ticks recorded, the events, the agents' obstacle sets."""
         self.feed = LiveFeed(view, self.keys, self.z, self.rej)
 
-    def feed_live(self, now: float) -> None:
-        n = self.node
-        if self.feed is None or n is None:
-            return
-        view = self.feed.view
-        if n.written >= 0 and n.written != self.live_k and view.due(now):
-            self.live_k = n.written
-            view.tick(now, n.t, n.p, n.theta, n.alive, n.rec.topology.edges, n.rec.max_error_m, *n.rec.gaps_m)
-
-    def live_view(self) -> Any:
-        from rich.table import Table
-
-        n = self.node
-        assert n is not None
-        table = Table(title=f"reconswarm monitor — run {self.keys.run}")
-        for col in ("t (s)", "groups", "smallest gap (m)", "agents alive", "max |e| (m)", "rejected"):
-            table.add_column(col)
-        table.add_row(f"{n.t:.2f}", str(n.rec.topology.n_groups), f"{n.min_gap:.2f}",
-                      f"{int(n.alive.sum())}/{len(n.ids)}", f"{n.rec.max_error_m:.2f}",
-                      str(sum(v for p, v in n.counts.items() if p != "monitor") + n.invalid))
-        return table
-
     # ------------------------------------------------------------------------------------ the loop
 
     def run(self, node: MonitorNode, stop: Stopper, live_on: bool) -> int:
@@ -190,7 +171,7 @@ class MonitorPort(Member):
         if live_on:
             from rich.live import Live
 
-            self.live = Live(self.live_view(), refresh_per_second=4, transient=False)
+            self.live = Live(status_table(node, self.keys.run), refresh_per_second=4, transient=False)
             self.live.start()
         try:
             rt = Runtime(self.z, "monitor", stop, self.inbox, node.timing.monitor_wake_s)
@@ -203,7 +184,7 @@ class MonitorPort(Member):
                                  f"what was committed, up to t = {self.committed_t:.2f} s") from None
         finally:
             if self.live is not None:
-                self.live.update(self.live_view())
+                self.live.update(status_table(node, self.keys.run))
                 self.live.stop()
         return exits[0].code if 0 in exits else 0
 
