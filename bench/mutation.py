@@ -29,12 +29,13 @@ PACKAGES = ("reconswarm", "agent", "simworld", "monitor", "reconswarm_bringup")
 
 # The core modules and the unit tests that hold them (unit tests only: no processes, seconds each).
 CORE: dict[str, tuple[str, ...]] = {
-    "reconswarm/paper/planner.py": ("test_planner.py", "test_admission.py", "test_engine.py"),
+    "reconswarm/paper/planner.py": ("test_planner.py", "test_admission.py", "test_engine.py", "test_planner_cases.py"),
     "reconswarm/plant/unicycle.py": ("test_unicycle.py", "test_unicycle_vw.py", "test_unicycle_limits.py"),
     "reconswarm/paper/topology.py": ("test_topology_metrics.py", "test_summary_counts.py", "test_topology_cases.py"),
     "reconswarm/net/wire.py": ("test_wire.py", "test_wire_points.py", "test_wire_fields.py"),
     "reconswarm/net/admission.py": ("test_admission.py", "test_membership_rules.py", "test_admission_cases.py"),
-    "reconswarm/record/summary.py": ("test_summary_counts.py", "test_monitor_node.py", "test_run_store.py"),
+    "reconswarm/record/summary.py": ("test_summary_counts.py", "test_monitor_node.py", "test_run_store.py",
+                                     "test_summary_fields.py"),
     "reconswarm/record/safety.py": ("test_safety_episodes.py", "test_summary_counts.py", "test_topology_metrics.py"),
     "agent/node.py": ("test_agent_node.py",),
     "simworld/world.py": ("test_world_node.py",),
