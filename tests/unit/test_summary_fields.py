@@ -80,7 +80,7 @@ def write(tmp_path: Path, mode: str = "inprocess", **meta: object) -> Path:
     for k in range(4):
         p = base.copy()
         p[0] += k * np.array([3.0, 4.0])
-        p[1, 0] += 2.0 * k
+        p[1, 0] += 1.2367 * k
         if k == 2:
             p[1] = np.nan
         err = [9.0, 9.0, 0.3, 0.2][k]
@@ -90,7 +90,14 @@ def write(tmp_path: Path, mode: str = "inprocess", **meta: object) -> Path:
     w.event(Event(0.05, EventKind.AGENT_LOST, agent=ids[0]))
     w.event(Event(0.07, EventKind.AGENT_LOST, agent=ids[1]))
     w.event(Event(0.1, EventKind.AGENT_JOINED, agent=ids[1]))
+    g = (tuple(ids),)
+    w.event(Event(0.02, EventKind.SPLIT, before=g, after=((ids[0],), tuple(ids[1:]))))
+    w.event(Event(0.03, EventKind.SPLIT, before=g, after=((ids[0], ids[1]), (ids[2],))))
+    w.event(Event(0.04, EventKind.MERGE, before=((ids[0],), tuple(ids[1:])), after=g))
     w.counters({"simworld": 2, "agent-1": 0, "monitor": 3})
+    w.intrusions("monitor", [("not_from_world", "x", 7, 0.1)])
+    w.intrusions("agent-1", [("not_from_world", "x", 5, 0.2), ("impersonation", "y", 2, 0.3)])
+    w.note_gap(0.05, 0.1, "a stall")
     w.close(**meta)
     return db
 
@@ -109,13 +116,49 @@ def test_summary_fields_of_a_hand_made_record(tmp_path: Path) -> None:
     assert s["agents_lost"] == [ids[0]]
     assert s["messages_rejected"] == 5 and s["messages_rejected_by_process"] == {"simworld": 2, "agent-1": 0,
                                                                               "monitor": 3}
-    # agent 0: three 5 m steps; agent 1: 2 m, then unknown (two steps skipped); agent 2: still.
-    assert s["path_length_m"] == {str(ids[0]): 15.0, str(ids[1]): 2.0, str(ids[2]): 0.0}
+    # agent 0: three 5 m steps; agent 1: 1.2367 m, then unknown (two steps skipped); agent 2: still.
+    assert s["path_length_m"] == {str(ids[0]): 15.0, str(ids[1]): 1.24, str(ids[2]): 0.0}
+    assert (s["splits"], s["merges"]) == (2, 1)
+    assert (s["intrusions"], s["intrusions_by_kind"]) == (9, {"not_from_world": 7, "impersonation": 2})
+    assert s["intrusions_by_process"] == {"monitor": 7, "agent-1": 7} and s["intrusion_sources"] == ["x", "y"]
+    assert s["record_gaps"] == [{"t_from": 0.05, "t_to": 0.1, "note": "a stall"}]
+    assert (s["scenario"], s["planner"], s["agents"], s["seed"]) == (S.meta.name, "reconfigurable", 3, S.meta.seed)
+    assert s["determinism_lost_at_s"] is None
     assert s["wall_time_s"] == 12.346
     assert s["deterministic"] is True and s["mode"] == "inprocess"
     assert s["world_overruns"] == 3 and isinstance(s["world_overruns"], int)  # a count is whole
     assert s["stalls"] == 0 and isinstance(s["stalls"], int)
     assert s["latency_samples"] == 2.5 and s["note"] == 1.0 and isinstance(s["note"], float)  # not a count
+
+
+def test_a_record_of_no_tick_and_one_of_two_ticks(tmp_path: Path) -> None:
+    db = tmp_path / "none.db"
+    RunWriter(db, S, "lockstep").close()
+    with RunRecord(db) as rec:
+        s = summarize(rec)
+    assert (s["duration_s"], s["final_max_error_m"], s["converged"], s["ticks"]) == (0.0, None, False, 0)
+    assert set(s["path_length_m"].values()) == {0.0}
+    db = tmp_path / "two.db"
+    w = RunWriter(db, S, "lockstep")
+    n = len(S.agents)
+    for k in range(2):
+        p = S.starts + np.array([3.0, 4.0]) * k
+        w.tick(k, 0.05 * k, p, S.headings.copy(), np.ones(n, dtype=bool), 1.0, 2.0, 3.0, 1)
+    w.close()
+    with RunRecord(db) as rec:
+        s = summarize(rec)
+    assert set(s["path_length_m"].values()) == {5.0}
+
+
+def test_the_records_own_names_come_before_the_scenarios(tmp_path: Path) -> None:
+    """run.db's meta names the scenario and planner as launched (a sweep's file, a --planner override)."""
+    db = tmp_path / "run.db"
+    w = RunWriter(db, S, "lockstep")
+    w.set_meta(scenario="sweep/g-3.toml", planner="virtual-leader")
+    w.close()
+    with RunRecord(db) as rec:
+        s = summarize(rec)
+    assert (s["scenario"], s["planner"]) == ("sweep/g-3.toml", "virtual-leader")
 
 
 def test_a_record_of_one_tick_has_zero_paths_and_no_wall_time(tmp_path: Path) -> None:
@@ -142,12 +185,14 @@ def table_text(summary: dict) -> str:
 def test_the_table_condenses_paths_drops_empty_rows_and_says_yes_or_no(tmp_path: Path) -> None:
     with RunRecord(write(tmp_path, wall_time_s="3.0", finished="1")) as rec:
         s = summarize(rec)
+    s["intrusions_by_kind"], s["record_gaps"] = {}, []  # (as in a run without any)
     text = table_text(s)
     lines = {ln.split("│")[1].strip(): ln.split("│")[2].strip() for ln in text.splitlines() if ln.count("│") >= 3}
-    assert lines["path_length_m"] == "min 0.0, mean 5.7, max 15.0 m"
+    assert lines["path_length_m"] == "min 0.0, mean 5.4, max 15.0 m"
     assert lines["messages_rejected_by_process"] == "{'simworld': 2, 'monitor': 3}"  # zero counts left out
     assert lines["finished"] == "yes" and lines["converged"] == "yes" and lines["convergence_time_s"] == "0.1"
     assert "intrusions_by_kind" not in lines and "record_gaps" not in lines  # empty: no row
+    assert lines["intrusion_sources"] == "['x', 'y']"
     assert "determinism_lost_at_s" not in lines  # nothing lost
     assert lines["min_obstacle_gap_m"] == "-"
     assert f"reconswarm run: {s['scenario']} (reconfigurable, inprocess)" in text
