@@ -1,7 +1,8 @@
 """Corners of the control law (reconswarm/paper/planner.py) against its equations: the virtual leader's
 containment wall (eq. 11's form on d = R_c - ‖p - c‖, pushing toward the centre) near and at the centre of a
 small disk; an obstacle the agent does not know does not repel it, however close; the neighbour tables'
-shared arrays are read-only."""
+shared arrays are read-only, and one builder reused over changing neighbours gives fresh tables; coincident
+centres and a disk smaller than a metre."""
 
 from __future__ import annotations
 
@@ -11,7 +12,14 @@ import numpy as np
 import pytest
 
 from reconswarm.geometry.pairs import pairs_within
-from reconswarm.paper.planner import NeighbourTables, containment, obstacle_repulsion
+from reconswarm.paper.planner import (
+    NeighbourTables,
+    agent_repulsion,
+    attraction,
+    containment,
+    neighbour_table,
+    obstacle_repulsion,
+)
 
 D_SAFE, D_MAX, PSI = 2.0, 10.0, -65.0
 
@@ -66,3 +74,41 @@ def test_neighbour_tables_share_read_only_radii_and_masks() -> None:
         a.r[0, 0] = 9.0
     with pytest.raises(ValueError):
         a.valid[0, 0] = False
+
+
+def test_coincident_centres_push_along_plus_x_at_the_contact_value() -> None:
+    """Two agents on the same point: eq. (11) has no direction there; the push is along +x with the contact
+    magnitude |Ψ| d_max / (d_max - d_safe) (never NaN)."""
+    p = np.array([[4.0, -3.0]])
+    got = agent_repulsion(p, np.array([1.0]), p[:, None, :].copy(), np.array([[2.0]]), np.array([[True]]),
+                          D_SAFE, D_MAX, PSI)
+    np.testing.assert_allclose(got, [[-PSI * D_MAX / (D_MAX - D_SAFE), 0.0]], rtol=1e-12)
+
+
+def test_attraction_outside_a_disk_smaller_than_a_metre() -> None:
+    """Outside B(p*, R_c) the pull is R_c k_att toward p*, whatever R_c (here 0.5 m, the agent 0.8 m away)."""
+    c = np.array([10.0, 10.0])
+    e = np.array([0.6, -0.8])
+    got = attraction((c + 0.8 * e)[None], c, np.zeros((1, 2)), 0.1, 0.5)[0]
+    np.testing.assert_allclose(got, -0.5 * 0.1 * e, rtol=1e-12)
+
+
+def test_one_table_builder_over_changing_neighbours_equals_a_fresh_one_each_time() -> None:
+    """NeighbourTables keeps its layout while the pairs within d_max,ij stay the same; when they change (here
+    every few steps, including a single pair and none) it must give what a fresh table gives."""
+    rng = np.random.default_rng(5)
+    r = np.array([1.0, 1.5, 2.0, 1.0, 0.5])
+    tables = NeighbourTables()
+    for step in range(12):
+        if step in (3, 4):  # a single pair: agents 0 and 1 close, the rest far apart
+            p = np.array([[0.0, 0.0], [4.0, 0.0], [100.0, 0.0], [200.0, 0.0], [300.0, 0.0]])
+        elif step == 5:
+            p = np.array([[0.0, 0.0], [100.0, 0.0], [200.0, 0.0], [300.0, 0.0], [400.0, 0.0]])
+        else:
+            p = rng.uniform(0.0, 25.0, (5, 2))
+        pairs = pairs_within(p, 40.0)
+        got, want = tables(p, r, pairs, D_MAX), neighbour_table(p, r, pairs, D_MAX)
+        assert got.p.tolist() == want.p.tolist() and got.r.tolist() == want.r.tolist(), step
+        assert got.valid.tolist() == want.valid.tolist(), step
+        if step in (3, 4):
+            assert got.valid.sum() == 2 and got.r[0, 0] == 1.5 and got.r[1, 0] == 1.0
