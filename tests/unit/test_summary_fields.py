@@ -206,3 +206,31 @@ def test_the_table_of_a_realtime_run_claims_no_determinism(tmp_path: Path) -> No
              for ln in table_text(s).splitlines() if ln.count("│") >= 3}
     assert lines["deterministic"] == "not claimed (realtime runs on wall time)"
     assert lines["determinism_lost_at_s"] == "12.5"
+
+
+def test_a_process_that_refused_nothing_of_a_kind_adds_nothing() -> None:
+    by_kind, by_process = distinct_intrusions([{"process": "agent-1", "kind": "command", "source": "x", "count": 0}])
+    assert by_kind == {"command": 0} and by_process == {"agent-1": 0}
+
+
+def test_the_table_has_a_header_folds_long_values_and_shows_every_row(tmp_path: Path) -> None:
+    with RunRecord(write(tmp_path)) as rec:
+        s = summarize(rec)
+    s["converged"] = False  # (a run that did not converge reads "no")
+    s["messages_rejected_by_process"] = {}
+    s["intrusions_by_process"], s["intrusion_sources"] = {}, []
+    long_value = "session-" + "0123456789" * 12
+    s["world_overruns"] = long_value  # a field after determinism_lost_at_s (the world's extras come last)
+    con = Console(width=70, record=True, color_system=None)
+    con.print(render(s))
+    text = con.export_text()
+    header = next(ln for ln in text.splitlines() if "┃" in ln)
+    assert [c.strip() for c in header.split("┃")[1:3]] == ["field", "value"]
+    lines = {ln.split("│")[1].strip(): ln.split("│")[2].strip() for ln in text.splitlines() if ln.count("│") >= 3}
+    assert lines["converged"] == "no" and lines["finished"] == "no"
+    for empty in ("messages_rejected_by_process", "intrusions_by_process", "intrusion_sources"):
+        assert empty not in lines
+    assert "world_overruns" in lines  # shown, although determinism_lost_at_s (None) before it is not
+    folded = "".join(ln.split("│")[2].strip() for ln in text.splitlines() if ln.count("│") >= 3
+                     and (ln.split("│")[1].strip() in ("world_overruns", "")))
+    assert long_value in folded  # folded over several lines, not cut
