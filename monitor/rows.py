@@ -3,7 +3,8 @@ writes them (`write`, on `store.RunWriter`).
 
 The node owns no writer: it returns these rows in the order the record takes them, its process hands each to the
 record as it comes (a full disk is the process's: exit 3). The events are outputs of their own (an `Event` is
-recorded, then published on the event key: the same object). The schema is INTERFACES.md's, unchanged.
+recorded, then published on the event key: the same object). The schema is the record's, unchanged
+(reconswarm/record/store.py).
 """
 
 from __future__ import annotations
