@@ -37,7 +37,7 @@ CORE: dict[str, tuple[str, ...]] = {
     "reconswarm/record/summary.py": ("test_summary_counts.py", "test_monitor_node.py", "test_run_store.py",
                                      "test_summary_fields.py"),
     "reconswarm/record/safety.py": ("test_safety_episodes.py", "test_summary_counts.py", "test_topology_metrics.py"),
-    "agent/node.py": ("test_agent_node.py",),
+    "agent/node.py": ("test_agent_node.py", "test_agent_node_waits.py"),
     "simworld/world.py": ("test_world_node.py",),
     "monitor/node.py": ("test_monitor_node.py", "test_membership_rules.py"),
 }
