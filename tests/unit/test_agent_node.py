@@ -17,7 +17,7 @@ from agent.messages import Output, Reconnect
 from agent.neighbours import REALTIME_SILENT_S, Cells
 from agent.node import AgentNode
 from reconswarm.net import wire
-from reconswarm.net.node import Exit, Invalid, Role, Token
+from reconswarm.net.node import Exit, Invalid, Role, Stop, Token
 from reconswarm.net.timing import Timing
 from reconswarm.scenario.model import PlannerKind, Scenario, load
 from tests.support import PAPER
@@ -515,3 +515,11 @@ def test_lockstep_a_live_peer_silent_for_fewer_ticks_is_still_where_last_heard()
     node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 104.0, 0.0), beacon(C, 0, 110.0, 0.0)], 0.0)
     node.step([clock(80, (A, B)), state(80, 100.0, 0.0), beacon(B, 80, 104.0, 0.0)], 20.0)  # C not counted: lost
     assert node.last_seen[C].px == 110.0
+
+
+def test_a_stop_leaves_at_once_with_exit_0_whatever_else_came() -> None:
+    """A signal (the runtime's Stop) ends the node's loop cleanly: exit 0, said to be a stop, and nothing of the
+    batch after it is acted on (no beacon, no command)."""
+    node = started()
+    assert node.step([Stop(), clock(0), state(0, 100.0, 0.0)], 0.0) == [Exit(0, "stopped")]
+    assert node.k == -1 and node.beacon_sent == -1
