@@ -39,7 +39,9 @@ CORE: dict[str, tuple[str, ...]] = {
     "reconswarm/record/safety.py": ("test_safety_episodes.py", "test_summary_counts.py", "test_topology_metrics.py"),
     "agent/node.py": ("test_agent_node.py", "test_agent_node_waits.py"),
     "simworld/world.py": ("test_world_node.py",),
+    "simworld/plant.py": ("test_world_node.py", "test_ros2_plant_live.py"),
     "monitor/node.py": ("test_monitor_node.py", "test_membership_rules.py"),
+    "monitor/presence.py": ("test_monitor_node.py", "test_membership_rules.py"),
 }
 
 # mutmut's exit codes (mutmut.stats.status_by_exit_code): 1 and 3 killed, 0 survived, the rest neither.
