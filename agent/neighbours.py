@@ -179,7 +179,7 @@ class Neighbourhood:
     def also_heard(self, alive: set[int], prev: Mapping[int, wire.Beacon], fresh: Mapping[int, wire.Beacon],
                    waited: set[int]) -> int:
         """How many beacons of this tick will come from peers we do not wait for (they published the tick
-        before in a cell we listen to): the adapter sleeps until they are in too, instead of waking early."""
+        before in a cell we listen to): the runtime sleeps until they are in too, instead of waking early."""
         cells = self.listen
         return sum(1 for a, b in prev.items() if a in alive and a not in waited and a not in fresh
                    and (cells is None or self.grid.cell_of(b.px, b.py) in cells))

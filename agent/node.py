@@ -9,7 +9,7 @@ leader) and the obstacle sets of those within link range (all for the virtual le
 commands. Realtime: it acts shortly after each new state on whatever it has (latest beacons, sets). A lost
 peer stays where last seen or where the world's scan reports it held; a live one out of our cells is dropped.
 
-The node outlives the adapter's zenoh sessions: after a new session (`reconnected`) it still knows its
+The node outlives its process's zenoh sessions: after a new session (`reconnected`) it still knows its
 peers' last positions and radii, lost peers, its knowledge, revisions and escape state.
 """
 
@@ -87,13 +87,13 @@ class AgentNode:
         return out
 
     def reconnected(self, now_s: float) -> None:
-        """The adapter opened a new session: give it `resubscribe_s` to bring the commands back; put our obstacle
+        """The process opened a new session: give it `resubscribe_s` to bring the commands back; put our obstacle
         set in the new session's cache (for peers that join later) at the next step."""
         self.last_act = now_s
         self._announce_set = self.brain.rev > 0
 
     def awaiting(self, now_s: float) -> int | None:
-        """How many more messages the next tick needs at least (the adapter sleeps until that many are in, or
+        """How many more messages the next tick needs at least (the runtime sleeps until that many are in, or
         its own state, or a timeout); None: nothing but our own state will let us act."""
         newest, self.now = max(self.states, default=-1), now_s
         k = self.k + 1 if self.mode != "realtime" and self.k >= 0 and (self.k + 1) in self.states else newest

@@ -21,7 +21,7 @@ from reconswarm.net.ros2_node import Ros2Node
 class AgentRos2:
     def __init__(self, session: Any, domain_id: int, agent_id: int, head_offset_m: float, dt_s: float,
                  callback: Any) -> None:
-        """callback(sample): where odometry samples go (the adapter's inbox)."""
+        """callback(sample): where odometry samples go (the host's inbox)."""
         self.id, self.l, self.dt = agent_id, head_offset_m, dt_s
         self.node = Ros2Node(session, domain_id, f"agent_{agent_id}")
         self.odom_key = ros2.odom_key(domain_id, agent_id)

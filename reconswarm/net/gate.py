@@ -1,9 +1,9 @@
 """A process's gate: admission of decoded messages, the tally of intrusions, their log and reports.
 
-Pure (no zenoh): the adapter decodes a sample, passes it here with its source (`inbox.sample_source`),
+Pure (no zenoh): a process's port decodes a sample, passes it here with its source (`inbox.sample_source`),
 and delivers it to its node only if `admit` says so. Refusals are counted per (kind, source), logged (the
 first of each kind and source at once, then at most one line a second), and summed up in a `Report` that
-the adapter publishes on `swarm/<run>/report/<process>` at most once a second when it changed (an
+the port publishes on `swarm/<run>/report/<process>` at most once a second when it changed (an
 agent's report is also its heartbeat, with its counters: reconswarm/net/report.py).
 """
 

@@ -1,6 +1,6 @@
 """Every protocol timing constant of the three roles (agent, simworld, monitor), in one place.
 
-All of them are wall-clock durations (the adapters measure them with `time.monotonic()`), except where
+All of them are wall-clock durations (the processes measure them with `time.monotonic()`), except where
 the name says simulated time (`_sim_s`) or a fraction of the realtime period. The defaults are the values
 the processes have always used; a test can build a `Timing` with shorter ones.
 """

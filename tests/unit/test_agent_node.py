@@ -58,7 +58,7 @@ def beacon(aid: int, k: int, px: float, py: float, rev: int = 0) -> wire.Beacon:
 
 
 def no_cells(out: list[Output]) -> list[Output]:
-    """What goes on the wire (the cells to listen to are the adapter's business: tests/unit/test_neighbours.py)."""
+    """What goes on the wire (the cells to listen to are the host's business: tests/unit/test_neighbours.py)."""
     return [o for o in out if not isinstance(o, Cells)]
 
 
@@ -89,10 +89,10 @@ def started(node_s: Scenario = S, peers: tuple[int, ...] = (B, C), timing: Timin
 
 def test_lockstep_waits_for_every_live_peer_then_acts_once() -> None:
     node = started()
-    assert node.awaiting(0.0) is None  # before our state nothing can let us act: the adapter sleeps on it
+    assert node.awaiting(0.0) is None  # before our state nothing can let us act: the runtime sleeps on it
     out = node.step([clock(0), state(0, 100.0, 0.0)], 0.01)
     assert beacons(out) == [wire.Beacon(A, 0, 0.0, 100.0, 0.0, RADIUS[A], 0)] and not cmds(out)
-    assert node.awaiting(0.01) == 2  # the beacons of B and C: the adapter wakes once both could be in
+    assert node.awaiting(0.01) == 2  # the beacons of B and C: the runtime wakes once both could be in
     assert not cmds(node.step([beacon(B, 0, 200.0, 0.0)], 0.02))  # C is still missing
     assert node.awaiting(0.02) == 1
     assert "beacons of [3]" in node.waiting_for()
@@ -443,7 +443,7 @@ def test_while_waiting_the_node_logs_what_it_lacks(caplog: pytest.LogCaptureFixt
 def test_dropped_messages_are_counted_for_the_report_not_the_beacon() -> None:
     node = started(peers=())
     out = node.step([Invalid("k", "bad"), Invalid("k", "bad"), clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
-    assert node.rejected == 2  # (the adapter's report carries it: reconswarm/net/gate.py)
+    assert node.rejected == 2  # (the link's report carries it: reconswarm/net/gate.py)
     assert beacons(out) == [wire.Beacon(A, 0, 0.0, 100.0, 0.0, RADIUS[A], 0)]  # no telemetry on the beacon
 
 
