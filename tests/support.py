@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from reconswarm.geometry.plane import Edges
+from reconswarm.net.node import Role, Token
 from reconswarm.paper.knowledge import obstacle_view
 from reconswarm.paper.planner import ObstacleView
 
@@ -181,3 +182,18 @@ def read_run_id(out: Path) -> str:
 def run_keys(out: Path) -> str:
     """`swarm/<run id>` of a launch."""
     return f"swarm/{read_run_id(out)}"
+
+
+def joined(agent: int) -> Token:
+    """Agent `agent`'s liveliness token appeared (a node input)."""
+    return Token(Role.AGENT, True, agent)
+
+
+def left(agent: int) -> Token:
+    """Agent `agent`'s liveliness token went away."""
+    return Token(Role.AGENT, False, agent)
+
+
+def world_token(up: bool) -> Token:
+    """The world's liveliness token appeared (up) or went away."""
+    return Token(Role.WORLD, up)

@@ -17,23 +17,10 @@ from agent.messages import Output, Reconnect
 from agent.neighbours import REALTIME_SILENT_S, Cells
 from agent.node import AgentNode
 from reconswarm.net import wire
-from reconswarm.net.node import Exit, Invalid, Role, Stop, Token
+from reconswarm.net.node import Exit, Invalid, Stop
 from reconswarm.net.timing import Timing
 from reconswarm.scenario.model import PlannerKind, Scenario, load
-from tests.support import PAPER
-
-
-def joined(agent: int) -> Token:
-    return Token(Role.AGENT, True, agent)
-
-
-def left(agent: int) -> Token:
-    return Token(Role.AGENT, False, agent)
-
-
-def world_token(up: bool) -> Token:
-    return Token(Role.WORLD, up)
-
+from tests.support import PAPER, joined, left, world_token
 
 A, B, C = 1, 2, 3  # the node under test and two peers
 HEAD = {A: (100.0, 0.0), B: (110.0, 0.0), C: (120.0, 0.0)}  # where their head points start (tick 0)

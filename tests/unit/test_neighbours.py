@@ -20,22 +20,8 @@ from agent.neighbours import Cells, Neighbourhood
 from agent.node import AgentNode
 from reconswarm.net import wire
 from reconswarm.net.cells import CellGrid
-from reconswarm.net.node import Role, Token
 from reconswarm.scenario.model import PlannerKind, load
-from tests.support import PAPER
-
-
-def joined(agent: int) -> Token:
-    return Token(Role.AGENT, True, agent)
-
-
-def left(agent: int) -> Token:
-    return Token(Role.AGENT, False, agent)
-
-
-def world_token(up: bool) -> Token:
-    return Token(Role.WORLD, up)
-
+from tests.support import PAPER, joined, left
 
 A, B, C = 1, 2, 3
 HEAD = {A: (0.0, 0.0), B: (30.0, 0.0), C: (200.0, 0.0)}  # head points at tick 0 (heading 0, l = 0.5)
