@@ -101,7 +101,6 @@ class AgentHost:
         self.locality = zenoh.Locality.REMOTE  # (co-hosted agents' samples are handed over in the process)
         self.source = str(session.info.zid())  # the source of what co-hosted agents hand each other
         self.local: list[tuple[Tag, Item]] = []  # what co-hosted agents published since the last round
-        self.stepped: dict[int, float] = {}  # agent -> wall time its node was last stepped
         self.listening: dict[int, frozenset[Cell] | None] = {}  # agent -> the cells it listens to (None: all)
         self.by_cell: dict[Cell | None, set[int]] = {}  # cell -> the agents listening to it (None: to all)
         self.cell_subs: dict[Cell | None, tuple[Any, Any]] = {}  # the host's subscriptions (None: every cell)
@@ -251,8 +250,7 @@ class AgentHost:
     def idle(self, who: int, now_s: float) -> None:
         self.links[who].report()
 
-    def exited(self, who: int, code: Exit, now_s: float) -> None:
-        aid = who
+    def exited(self, aid: int, code: Exit, now_s: float) -> None:
         link = self.links[aid]
         link.report(final=True)
         del self.active[aid]
@@ -261,8 +259,7 @@ class AgentHost:
             self.listening.pop(aid)
             link.close()
 
-    def act(self, who: int, out: Any, now_s: float) -> bool:
-        aid = who
+    def act(self, aid: int, out: Any, now_s: float) -> bool:
         if isinstance(out, Reconnect):
             return True
         if isinstance(out, Cells):
