@@ -63,8 +63,7 @@ class AgentNode:
         self.last_act = now_s  # wall time of our latest command (or of the latest new session)
         self.state_at: dict[int, float] = {}  # wall time each tick's state arrived (while waiting for the rest)
         self._linked: tuple[int, dict[int, int]] = (-1, {})  # (tick, linked peer -> its set's revision)
-        self.beacon_again, self._again_n = 0.0, 0  # when to announce again; how often we did on this tick
-        self.told_waiting = 0.0
+        self.beacon_again, self._again_n, self.told_waiting = 0.0, 0, 0.0  # announce again at; how often; logged
         self._out: list[Output] = []
         self._announce_set = False  # after a new session: publish our obstacle set again (its cache is new)
 
@@ -141,8 +140,9 @@ class AgentNode:
         elif isinstance(m, wire.State):
             if m.id != self.id:
                 return
-            if m.k == self.k and self.last_cmd is not None:  # the world missed our command: again
-                self._out.append(self.last_cmd)
+            if m.k == self.k and self.last_cmd is not None:  # the world missed a command: ours again (our session
+                self._out.append(self.last_cmd)          # hears the world, so no new session for a slow swarm)
+                self.last_act = now
                 return
             self.states[m.k] = m
             if m.scan is not None:

@@ -22,8 +22,9 @@ class Timing:
     peer_silent_s: float = 3.0
     # Lockstep: while stuck on a tick, announce the beacon (and obstacle set) again this often.
     beacon_again_s: float = 0.5
-    # No command for this long (though the world re-sends a waiting tick every `republish_s`): the agent
-    # opens a new zenoh session (its node, and so its knowledge and peers, are kept).
+    # No command for this long (each time the world re-sends the tick we commanded, every `republish_s` while it
+    # waits for someone's command, we command it again): the agent opens a new zenoh session (its node, and so
+    # its knowledge and peers, are kept).
     resubscribe_s: float = 5.0
     # ... but this long while the world's own token is gone and no clock came since: the world stalled (frozen,
     # starved), and new sessions of every agent at once would only make its return harder (new session ids,

@@ -286,6 +286,23 @@ def test_a_stalled_world_is_waited_for_not_answered_with_a_new_session() -> None
     assert node.step([], 22.0 + T.resubscribe_s + 0.01) == [Reconnect()]
 
 
+def test_a_slow_swarm_is_waited_for_while_the_world_publishes_our_tick_again() -> None:
+    """The world waits for other agents' commands (a slow host, a starved machine) and publishes its tick again
+    every republish_s: each time we send our command again, and our session plainly hears the world, so no new
+    session however long it lasts (new sessions of every host at once made a slow run of 144 collapse: tokens
+    gone, commands refused as impersonation, hosts leaving). Once the world falls silent, resubscribe_s counts."""
+    node = started(peers=())
+    first = cmds(node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.0))
+    assert [c.k for c in first] == [0]
+    t = 0.0
+    while t < 3 * T.resubscribe_s:  # the world waits on tick 0 for someone else
+        t += T.republish_s
+        out = node.step([clock(0, (A,)), state(0, 100.0, 0.0)], t)
+        assert out == first, t  # our command again, and nothing else
+    assert node.step([], t + T.resubscribe_s - 0.01) == []
+    assert node.step([], t + T.resubscribe_s + 0.01) == [Reconnect()]
+
+
 def test_a_new_session_keeps_knowledge_revision_and_escape_state() -> None:
     node = started(peers=())
     pts = ((130.0, 0.0, "diamond"), (131.0, 1.0, "diamond"), (131.0, -1.0, "diamond"))
