@@ -6,6 +6,8 @@ prints per module how many mutants the tests killed and how many survived, and t
     python bench/mutation.py                                   # every core module
     python bench/mutation.py reconswarm/plant/unicycle.py --jobs 2 --diff
     python bench/mutation.py --list                            # the modules and their tests
+    python bench/mutation.py simworld/world.py --json before.json          # then, with new tests:
+    python bench/mutation.py simworld/world.py --rerun before.json         # only before.json's survivors
 
 A survivor is a change of the code that none of the module's tests notices: either a test to write, or an
 equivalent change (the same behaviour, e.g. `<` for `<=` where equality cannot happen) to accept and record.
@@ -38,7 +40,7 @@ CORE: dict[str, tuple[str, ...]] = {
                                      "test_summary_fields.py"),
     "reconswarm/record/safety.py": ("test_safety_episodes.py", "test_summary_counts.py", "test_topology_metrics.py"),
     "agent/node.py": ("test_agent_node.py", "test_agent_node_waits.py"),
-    "simworld/world.py": ("test_world_node.py",),
+    "simworld/world.py": ("test_world_node.py", "test_world_uncommanded.py", "test_world_node_cases.py"),
     "simworld/plant.py": ("test_world_node.py", "test_ros2_plant_live.py"),
     "monitor/node.py": ("test_monitor_node.py", "test_membership_rules.py"),
     "monitor/presence.py": ("test_monitor_node.py", "test_membership_rules.py"),
@@ -92,17 +94,20 @@ def outcomes(tree: Path, module: str) -> dict[str, int | None]:
     return dict(json.loads(meta.read_text())["exit_code_by_key"]) if meta.exists() else {}
 
 
-def run_module(module: str, tests: tuple[str, ...], jobs: int, diff: bool, keep: bool) -> dict[str, object]:
+def run_module(module: str, tests: tuple[str, ...], jobs: int, diff: bool, keep: bool,
+               only: list[str] | None = None) -> dict[str, object]:
     tree = Path(tempfile.mkdtemp(prefix="mutation-"))
     try:
         copy_tree(tree)
         configure(tree, module, tests)
         env = {**os.environ, "PYTHONDONTWRITEBYTECODE": "1"}
         t0 = time.monotonic()
-        p = subprocess.run([sys.executable, "-m", "mutmut", "run", "--max-children", str(jobs)], cwd=tree, env=env,
-                           capture_output=True, text=True)
+        p = subprocess.run([sys.executable, "-m", "mutmut", "run", "--max-children", str(jobs), *(only or [])],
+                           cwd=tree, env=env, capture_output=True, text=True)
         took = time.monotonic() - t0
         codes = outcomes(tree, module)
+        if only is not None:  # (the others were not run)
+            codes = {k: c for k, c in codes.items() if k in set(only)}
         if not codes or all(c is None for c in codes.values()):  # (mutmut's clean run of the tests failed)
             tail = (p.stdout + p.stderr)[-3000:]
             raise SystemExit(f"mutation: mutmut checked no mutant of {module} (exit {p.returncode}):\n{tail}")
@@ -131,6 +136,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path, help="also write the figures to this file")
     ap.add_argument("--keep", action="store_true", help="keep the mutated copies (mutmut browse there)")
     ap.add_argument("--list", action="store_true", help="list the core modules and their tests")
+    ap.add_argument("--rerun", type=Path, metavar="JSON",
+                    help="test only the survivors of an earlier run (its --json file), e.g. after writing tests")
     a = ap.parse_args(argv)
     if a.list:
         for m, t in CORE.items():
@@ -148,11 +155,22 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:
         print("mutation: error: mutmut is not installed (pip install -e '.[mutation]')", file=sys.stderr)
         return 2
+    earlier: dict[str, list[str]] = {}
+    if a.rerun:
+        try:
+            earlier = {r["module"]: list(r["survived"]) for r in json.loads(a.rerun.read_text())}
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            print(f"mutation: error: --rerun {a.rerun}: not a --json file of this script ({e})", file=sys.stderr)
+            return 2
     rows = []
     for m in a.modules or list(CORE):
-        r = run_module(m, CORE[m], a.jobs, a.diff, a.keep)
+        if a.rerun and m not in earlier:
+            print(f"mutation: error: --rerun {a.rerun}: no run of {m} in it", file=sys.stderr)
+            return 2
+        r = run_module(m, CORE[m], a.jobs, a.diff, a.keep, earlier.get(m) if a.rerun else None)
         rows.append(r)
-        print(f"{m}: {r['mutants']} mutants, {r['killed']} killed, {len(r['survived'])} survived"  # type: ignore[arg-type]
+        rerun = " (survivors rerun)" if a.rerun else ""
+        print(f"{m}: {r['mutants']} mutants{rerun}, {r['killed']} killed, {len(r['survived'])} survived"  # type: ignore[arg-type]
               f"{', other ' + json.dumps(r['other']) if r['other'] else ''} ({r['seconds']} s)", flush=True)
         for name in r["survived"]:  # type: ignore[attr-defined]
             print(f"  survived: {name}")
