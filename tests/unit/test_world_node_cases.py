@@ -116,9 +116,12 @@ def test_an_agent_that_struck_out_and_commands_again_starts_its_strikes_afresh()
         advance(node, now, now + T.step_timeout_s)
         now += T.step_timeout_s
     assert late in node.unresponsive
-    node.step([], now)  # tick 2: not waited for, but it commands again
-    node.step(commands(2, (1.0, 0.0), now), now)
-    assert node.k == 3 and late not in node.unresponsive
+    node.step([], now)  # tick 2: not waited for, but it commands again (another agent is late this once)
+    node.step(commands(2, (1.0, 0.0), now, skip=(IDS[6],)), now)
+    assert late not in node.unresponsive
+    advance(node, now, now + T.step_timeout_s)
+    now += T.step_timeout_s
+    assert node.k == 3
     node.step([], now)  # tick 3: it is silent once
     node.step(commands(3, (1.0, 0.0), now, skip=(late,)), now)
     advance(node, now, now + T.step_timeout_s)

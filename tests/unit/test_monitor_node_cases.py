@@ -1,0 +1,227 @@
+"""The monitor's node (monitor/node.py) in the cases its mutation run (bench/mutation.py) found untested: the
+world's token as a stall, a world lost on a known clock, ends refused by the world's next clock or by the
+truth, the earliest conflicting command, a guess at tick 0, and how the record is closed. Driven by hand
+(tests/unit/monitor_run.py): no zenoh, times given, a real run.db."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from monitor.messages import ClockFrom
+from reconswarm.net.node import RouterLink, Stop
+from reconswarm.paper.events import EventKind
+from reconswarm.record.summary import summarize
+from tests.unit.monitor_run import (
+    DT,
+    IDS,
+    Run,
+    T,
+    clock,
+    kinds,
+    report,
+    started,
+    token,
+    tokens,
+    truth,
+    world,
+    world_report,
+)
+
+# ------------------------------------------------------------------------------------------ the world
+
+
+def test_the_worlds_token_going_is_a_stall_at_once_and_a_world_lost_on_its_last_clock(tmp_path: Path) -> None:
+    """The world's token goes 0.3 s after its last clock (tick 3, t = 0.15 s, at wall 1.2345678 s), well within
+    world_stall_s: the stall starts then, from that clock; a stop at wall 20.1234567 s records it as lost
+    18.889 s long, at t = 0.15 s and Unix time 1020.123457 (offset 1000 s, to the microsecond)."""
+    run = started(tmp_path)
+    for k in range(3):
+        run.tick(k, 0.01 * k)
+    run.tick(3, 1.2345678)
+    run.step(1.5345678, world(False))
+    assert run.node.stall_since == pytest.approx(1.2345678)
+    (lost,) = run.stop(20.1234567)
+    assert (lost.kind, lost.t, lost.duration_s, lost.wall_unix) == (EventKind.WORLD_LOST, 0.15, 18.889,
+                                                                   1020.123457)
+
+
+def test_the_worlds_token_coming_or_flapping_before_the_start_is_no_stall(tmp_path: Path) -> None:
+    run = started(tmp_path)
+    run.step(0.1, world(True))
+    run.step(0.2, world(False))  # (before the mission's first clock: nothing to stall)
+    run.step(0.3, world(True))
+    run.tick(0, 0.4)
+    run.step(0.5, world(True))  # its token declared again mid-run
+    run.tick(1, 0.6)
+    assert run.node.stall_since is None
+    run.stop(0.7)
+    assert run.events == []
+    with run.record() as rec:
+        assert [e["kind"] for e in rec.events()] == []
+
+
+def test_a_world_that_stalls_and_comes_back_is_one_event_stamped_on_the_unix_clock(tmp_path: Path) -> None:
+    run = started(tmp_path)
+    run.tick(0, 0.5)
+    run.step(0.6, world(False))
+    (stall,) = run.step(3.1234567, world(True), clock(1), truth(1))
+    assert (stall.kind, stall.duration_s, stall.wall_unix) == (EventKind.WORLD_STALLED, 2.623, 1003.123457)
+    for k in range(2, 8):  # judged burst_s after it is back, and the run goes on
+        run.tick(k, 3.2 + 0.5 * k)
+    run.stop(7.5)
+    with run.record() as rec:
+        assert rec.ticks().k.tolist() == list(range(8))
+
+
+# ------------------------------------------------------------------------------------------ ends
+
+
+def test_an_end_the_worlds_next_clock_contradicts_is_refused_and_recording_goes_on(tmp_path: Path) -> None:
+    """A forger claims the end at tick 2; the world's own clock for tick 2 (no end) refutes it: refused, naming
+    the forger, and the run is recorded on, to the world's own end."""
+    run = started(tmp_path)
+    run.tick(0, 0.0)
+    run.tick(1, 0.1)
+    run.step(0.15, clock(2, end=True, reason="duration", source="forger-zid"))
+    run.tick(2, 0.2)
+    (refused,) = run.refused
+    assert refused.source == "forger-zid" and "tick 2" in refused.why
+    run.tick(3, 0.3)
+    run.step(0.4, clock(4, end=True, reason="duration"), truth(4), world(False))
+    assert run.exit is not None and run.exit.reason == "recorded" and len(run.refused) == 1
+    with run.record() as rec:
+        assert rec.ticks().k.tolist() == [0, 1, 2, 3, 4] and rec.meta_json("extra")["end_reason"] == "duration"
+
+
+def test_a_converged_end_the_recorded_truth_contradicts_is_refused_and_recording_goes_on(tmp_path: Path) -> None:
+    run = started(tmp_path)
+    run.tick(0, 0.0)
+    run.step(0.1, clock(1, end=True, reason="converged", source="forger-zid"), truth(1), world(False))
+    (refused,) = run.refused
+    assert refused.source == "forger-zid" and "not converged" in refused.why and run.exit is None
+    run.tick(2, 0.2)
+    run.stop(0.3)
+    with run.record() as rec:
+        assert rec.ticks().k.tolist() == [0, 1, 2] and "end_reason" not in rec.meta_json("extra")
+
+
+def test_a_stop_with_the_end_recorded_in_the_same_step_is_a_recorded_end(tmp_path: Path) -> None:
+    run = started(tmp_path)
+    run.tick(0, 0.0)
+    run.step(0.1, clock(1, end=True, reason="duration"), truth(1), world(False), Stop())
+    assert run.exit is not None and run.exit.reason == "recorded"
+    with run.record() as rec:
+        assert rec.meta["finished"] == "1" and rec.meta_json("extra")["end_reason"] == "duration"
+
+
+def test_a_world_stopped_by_its_signal_is_not_a_finished_mission(tmp_path: Path) -> None:
+    run = started(tmp_path)
+    run.tick(0, 0.0)
+    run.step(0.1, clock(1, end=True, reason="stopped"), truth(1), world(False))
+    assert run.exit is not None and run.exit.reason == "recorded"
+    with run.record() as rec:
+        assert rec.meta["finished"] == "0" and rec.meta_json("extra")["end_reason"] == "stopped"
+
+
+def test_a_monitor_stopped_before_any_clock_closes_a_record_with_no_wall_time(tmp_path: Path) -> None:
+    run = started(tmp_path)
+    run.stop(5.0)
+    with run.record() as rec:
+        assert rec.ticks().k.tolist() == [] and rec.meta["finished"] == "0"
+        assert "wall_time_s" not in rec.meta  # (the mission never started)
+
+
+# ------------------------------------------------------------------------------------------ determinism
+
+
+def test_determinism_is_lost_at_the_earliest_conflicting_command_reported(tmp_path: Path) -> None:
+    run = started(tmp_path)
+    for k in range(6):
+        run.tick(k, 0.01 * k)
+    run.step(0.06, world_report((("conflicting_command", "stranger", 1, 3 * DT),)))
+    run.step(0.07, world_report((("conflicting_command", "stranger", 2, 1 * DT),)))
+    run.step(0.08, world_report((("conflicting_command", "stranger", 3, 4 * DT),)))
+    run.stop(0.1)
+    with run.record() as rec:
+        s = summarize(rec)
+    assert (s["deterministic"], s["determinism_lost_at_s"]) == (False, DT)
+
+
+def test_an_agent_guessing_at_tick_0_loses_determinism_at_t_0(tmp_path: Path) -> None:
+    run = started(tmp_path)
+    for k in range(3):  # agent IDS[1] guessed at tick 0, agent IDS[2] at tick 2 (later: not the first)
+        guessed = {IDS[1]: 0, IDS[2]: 2 if k == 2 else -1}
+        run.step(0.01 * k, clock(k), truth(k), *(report(a, 0, guessed.get(a, -1)) for a in IDS))
+    run.stop(0.1)
+    with run.record() as rec:
+        s = summarize(rec)
+    assert (s["deterministic"], s["determinism_lost_at_s"]) == (False, 0.0)
+
+
+# ------------------------------------------------------------------------------------------ who is alive
+
+
+def test_after_its_router_link_is_back_an_agent_whose_token_goes_is_lost(tmp_path: Path) -> None:
+    run = started(tmp_path)
+    run.tick(0, 0.0)
+    run.step(0.1, RouterLink(False))
+    run.step(0.2, RouterLink(True))
+    now = 0.2 + T.relink_settle_s + 0.5  # (tokens that go while the sessions settle are kept)
+    k = 1
+    t = 0.3
+    while t < now:
+        run.tick(k, t)
+        k, t = k + 1, t + 0.5
+    run.step(t, token(IDS[2], False))
+    run.tick(k, t + 0.5, quiet=(IDS[2],))
+    assert kinds(run.events) == [("agent_lost", IDS[2])]
+
+
+def test_a_run_whose_first_clock_comes_long_after_the_tokens_loses_nobody(tmp_path: Path) -> None:
+    run = Run(tmp_path)
+    run.step(0.0, *tokens(True))
+    for k in range(40):  # the first clock 30 s after the tokens; every agent reports from then on
+        run.tick(k, 30.0 + 0.5 * k)
+    assert run.events == []
+
+
+# ------------------------------------------------------------------------------------------ the record
+
+
+def test_ticks_missing_right_after_the_first_and_a_single_missing_tick_are_gaps(tmp_path: Path) -> None:
+    run = started(tmp_path)
+    for k in (0, 2, 5):
+        run.tick(k, 0.01 * k)
+    run.stop(0.1)
+    with run.record() as rec:
+        gaps = [(g["t_from"], g["t_to"], g["note"]) for g in rec.gaps()]
+    assert [x for a, b, _ in gaps for x in (a, b)] == pytest.approx([0.0, 2 * DT, 2 * DT, 5 * DT])
+    assert "1..1" in gaps[0][2] and "3..4" in gaps[1][2]
+
+
+def test_a_truth_that_comes_twice_is_recorded_once_with_its_headings(tmp_path: Path) -> None:
+    run = started(tmp_path)
+    run.tick(0, 0.0)
+    tr = truth(1)
+    turned = replace(tr, theta=tuple(0.25 for _ in IDS))
+    run.step(0.1, clock(1), turned)
+    run.step(0.2, turned)
+    run.stop(0.3)
+    with run.record() as rec:
+        ticks = rec.ticks()
+        assert ticks.k.tolist() == [0, 1] and ticks.theta[1].tolist() == [0.25] * len(IDS)
+        assert run.node.min_gap == pytest.approx(min(ticks.min_agent_gap_m.tolist()))
+
+
+def test_what_the_world_and_the_monitor_dropped_are_counted_each(tmp_path: Path) -> None:
+    run = started(tmp_path)
+    c = clock(0).clock
+    run.step(0.0, ClockFrom(type(c)(c.k, c.t, c.alive, c.mode, rejected=5), "world-zid"), truth(0))
+    run.step(0.1, truth(1, ids=[999, *IDS[1:]]), truth(2, ids=[998, *IDS[1:]]))
+    run.stop(0.2)
+    with run.record() as rec:
+        counters = rec.counters()
+    assert (counters["simworld"], counters["monitor"]) == (5, 2)
