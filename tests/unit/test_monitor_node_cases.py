@@ -225,3 +225,16 @@ def test_what_the_world_and_the_monitor_dropped_are_counted_each(tmp_path: Path)
     with run.record() as rec:
         counters = rec.counters()
     assert (counters["simworld"], counters["monitor"]) == (5, 2)
+
+
+def test_an_end_whose_tick_is_recorded_stands_only_once_the_world_is_gone(tmp_path: Path) -> None:
+    """A forger's end at tick 1 comes with tick 1's truth: recorded, but the world is still there (its token
+    even declared again), so the monitor waits, and the world's next clock refutes the end."""
+    run = started(tmp_path)
+    run.tick(0, 0.0)
+    run.step(0.1, clock(1, end=True, reason="duration", source="forger-zid"), truth(1))
+    assert run.exit is None
+    run.step(0.2, world(True))
+    assert run.exit is None
+    run.tick(2, 0.3)
+    assert run.exit is None and [r.source for r in run.refused] == ["forger-zid"]
