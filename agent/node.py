@@ -9,8 +9,7 @@ leader) and the obstacle sets of those within link range (all for the virtual le
 commands. Realtime: it acts shortly after each new state on whatever it has (latest beacons, sets). A lost
 peer stays where last seen or where the world's scan reports it held; a live one out of our cells is dropped.
 
-The node outlives its process's zenoh sessions: after a new session (`reconnected`) it still knows its
-peers' last positions and radii, lost peers, its knowledge, revisions and escape state.
+A new session of its process (`reconnected`) keeps the node: peers, lost peers, knowledge, revisions, escape state.
 """
 
 from __future__ import annotations
@@ -60,7 +59,7 @@ class AgentNode:
         self.started = False  # the mission began (first clock): the watches run from then on
         self.last_cmd: wire.Cmd | None = None
         self.heard: dict[int, float] = {}  # wall time of each peer's latest beacon (or of its token)
-        self.last_act = now_s  # wall time of our latest command (or of the latest new session)
+        self.last_act = self.acted = now_s  # wall time of our latest command, re-sent or not (acted: of a new tick)
         self.state_at: dict[int, float] = {}  # wall time each tick's state arrived (while waiting for the rest)
         self._linked: tuple[int, dict[int, int]] = (-1, {})  # (tick, linked peer -> its set's revision)
         self.beacon_again, self._again_n, self.told_waiting = 0.0, 0, 0.0  # announce again at; how often; logged
@@ -88,7 +87,7 @@ class AgentNode:
     def reconnected(self, now_s: float) -> None:
         """The process opened a new session: give it `resubscribe_s` to bring the commands back; put our obstacle
         set in the new session's cache (for peers that join later) at the next step."""
-        self.last_act = now_s
+        self.last_act = self.acted = now_s
         self._announce_set = self.brain.rev > 0
 
     def awaiting(self, now_s: float) -> int | None:
@@ -140,8 +139,8 @@ class AgentNode:
         elif isinstance(m, wire.State):
             if m.id != self.id:
                 return
-            if m.k == self.k and self.last_cmd is not None:  # the world missed a command: ours again (our session
-                self._out.append(self.last_cmd)          # hears the world, so no new session for a slow swarm)
+            if m.k == self.k and self.last_cmd is not None:  # the world missed a command: ours again (we hear it)
+                self._out.append(self.last_cmd)
                 self.last_act = now
                 return
             self.states[m.k] = m
@@ -172,7 +171,7 @@ class AgentNode:
         """The world is back from a stall: our wait for a command (before a new session) starts now, and so
         does every peer's silence (no peer has a state to announce while the world stalls)."""
         if self.world_gone:
-            self.world_gone, self.last_act = False, max(self.last_act, now)
+            self.world_gone, self.last_act, self.acted = False, max(self.last_act, now), max(self.acted, now)
             self.heard = {a: max(at, now) for a, at in self.heard.items()}
 
     # --------------------------------------------------------------------------------------- planning
@@ -319,7 +318,7 @@ class AgentNode:
         cells = self.nb.after_command(k)
         if cells is not None:
             self._out.append(cells)
-        self.last_act, self.k, self.wait_since = now, k, None
+        self.last_act, self.acted, self.k, self.wait_since = now, now, k, None
         if k % 20 == 0:
             self._prune(k)
 
@@ -382,12 +381,13 @@ class AgentNode:
         """The safety nets: a silent world (exit 3), no command for long (a new session), the waiting log."""
         t = self.timing
         if not self.started and self.clocks:  # the mission began: the watch starts now
-            self.started, self.last_act = True, now
+            self.started, self.last_act, self.acted = True, now, now
         if self.started and now - self.last_clock > t.world_silence_s:
             log.error("agent %d: no clock from the world for %.0f s", self.id, t.world_silence_s)
             self._out.append(Exit(3))
             return
-        if self.started and now - self.last_act > (t.resubscribe_world_gone_s if self.world_gone else t.resubscribe_s):
+        if self.started and (now - self.last_act > (t.resubscribe_world_gone_s if self.world_gone else t.resubscribe_s)
+                             or now - self.acted > t.resubscribe_world_gone_s):
             self._out.append(Reconnect())
             return
         if self.started and now - self.last_act > t.waiting_log_s and now > self.told_waiting + t.waiting_log_s:

@@ -24,7 +24,8 @@ class Timing:
     beacon_again_s: float = 0.5
     # No command for this long (each time the world re-sends the tick we commanded, every `republish_s` while it
     # waits for someone's command, we command it again): the agent opens a new zenoh session (its node, and so
-    # its knowledge and peers, are kept).
+    # its knowledge and peers, are kept). Commands re-sent only: a new session after `resubscribe_world_gone_s`
+    # (the world moves on within `step_timeout_s`; a tick it keeps re-sending may be lacking ours).
     resubscribe_s: float = 5.0
     # ... but this long while the world's own token is gone and no clock came since: the world stalled (frozen,
     # starved), and new sessions of every agent at once would only make its return harder (new session ids,

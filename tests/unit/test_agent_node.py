@@ -289,18 +289,25 @@ def test_a_stalled_world_is_waited_for_not_answered_with_a_new_session() -> None
 def test_a_slow_swarm_is_waited_for_while_the_world_publishes_our_tick_again() -> None:
     """The world waits for other agents' commands (a slow host, a starved machine) and publishes its tick again
     every republish_s: each time we send our command again, and our session plainly hears the world, so no new
-    session however long it lasts (new sessions of every host at once made a slow run of 144 collapse: tokens
-    gone, commands refused as impersonation, hosts leaving). Once the world falls silent, resubscribe_s counts."""
+    session at resubscribe_s (new sessions of every host at once made a slow run of 144 collapse: tokens gone,
+    commands refused as impersonation, hosts leaving). The world moves on within its step timeout, so a tick
+    published again for resubscribe_world_gone_s may be lacking ours (our way to it broken): a new session then.
+    Once the world falls silent, resubscribe_s counts from the last time we commanded."""
     node = started(peers=())
     first = cmds(node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.0))
     assert [c.k for c in first] == [0]
     t = 0.0
-    while t < 3 * T.resubscribe_s:  # the world waits on tick 0 for someone else
+    while t + T.republish_s < T.resubscribe_world_gone_s:  # the world waits on tick 0
         t += T.republish_s
         out = node.step([clock(0, (A,)), state(0, 100.0, 0.0)], t)
         assert out == first, t  # our command again, and nothing else
-    assert node.step([], t + T.resubscribe_s - 0.01) == []
-    assert node.step([], t + T.resubscribe_s + 0.01) == [Reconnect()]
+    assert t > T.resubscribe_s + 1.0
+    assert node.step([clock(0, (A,)), state(0, 100.0, 0.0)], T.resubscribe_world_gone_s + 0.01) == [*first, Reconnect()]
+    node.reconnected(16.0)
+    node.step([clock(1, (A,)), state(1, 100.0, 0.0)], 16.5)
+    assert node.k == 1
+    assert node.step([], 16.5 + T.resubscribe_s - 0.01) == []  # the world silent from here: 5 s
+    assert node.step([], 16.5 + T.resubscribe_s + 0.01) == [Reconnect()]
 
 
 def test_a_new_session_keeps_knowledge_revision_and_escape_state() -> None:
