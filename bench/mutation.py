@@ -44,7 +44,7 @@ CORE: dict[str, tuple[str, ...]] = {
     "simworld/plant.py": ("test_world_node.py", "test_ros2_plant_live.py", "test_plant_cases.py"),
     "monitor/node.py": ("test_monitor_node.py", "test_membership_rules.py", "test_world_uncommanded.py",
                         "test_monitor_node_cases.py"),
-    "monitor/presence.py": ("test_monitor_node.py", "test_membership_rules.py"),
+    "monitor/presence.py": ("test_monitor_node.py", "test_membership_rules.py", "test_presence_cases.py"),
 }
 
 # mutmut's exit codes (mutmut.stats.status_by_exit_code): 1 and 3 killed, 0 survived, the rest neither.

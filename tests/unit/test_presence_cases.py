@@ -1,0 +1,87 @@
+"""Who is there for the monitor (monitor/presence.py) in the cases its mutation run (bench/mutation.py) found
+untested: a join's groups and Unix time, a split's groups ordered by their first agent, two changes judged
+after one stall and a second stall, two splits and a merge of the first, a single loss after a merge, the
+merge's time. Pure: tokens given to the membership, times given."""
+
+from __future__ import annotations
+
+from monitor.presence import Presence
+from reconswarm.paper.events import Event, EventKind
+from tests.unit.monitor_run import IDS, T
+
+OFFSET = 1000.0
+
+
+def present() -> Presence:
+    """Everyone's token there at 0 s and the mission started (the first tokens are no joins)."""
+    pr = Presence(IDS, T, OFFSET)
+    for a in IDS:
+        pr.members.token(a, True, 0.0, 0.0)
+    assert pr.sync(0.0, 0.0, True, False, False) == []
+    return pr
+
+
+def tokens(pr: Presence, ids: list[int], up: bool, now: float) -> None:
+    for a in ids:
+        pr.members.token(a, up, now, 0.0)
+
+
+def judge(pr: Presence, now: float, t: float = 0.0, held: bool = False) -> list[Event]:
+    """What a monitor step at `now` records: changes (unless held), then the network's splits and merges."""
+    return pr.sync(now, t, True, False, held) + ([] if held else pr.network(now))
+
+
+def test_a_join_says_the_groups_before_and_after_and_its_unix_time() -> None:
+    pr = present()
+    tokens(pr, IDS[3:4], False, 0.1)
+    assert [e.kind for e in judge(pr, 0.5)] == [EventKind.AGENT_LOST]
+    tokens(pr, IDS[3:4], True, 0.6)
+    (joined,) = judge(pr, 0.7123456, t=0.35)
+    rest = tuple(a for a in IDS if a != IDS[3])
+    assert (joined.kind, joined.agent, joined.t, joined.wall_unix) == (EventKind.AGENT_JOINED, IDS[3], 0.35,
+                                                                       1000.712346)
+    assert (joined.before, joined.after) == ((rest,), (tuple(IDS),))
+
+
+def test_a_splits_groups_are_ordered_by_their_first_agent() -> None:
+    """Agents 1 and 10 stay, 2..9 go: the groups after are (1, 10) then (2..9), by their first agent."""
+    pr = present()
+    gone = IDS[1:-1]
+    tokens(pr, gone, False, 0.1)
+    assert [e.kind for e in judge(pr, 0.5)] == [EventKind.AGENT_LOST] * len(gone)
+    (split,) = judge(pr, 1.6)
+    assert split.kind == EventKind.SPLIT and split.wall_unix == 1001.6
+    assert split.after == ((IDS[0], IDS[-1]), tuple(gone))
+
+
+def test_two_agents_lost_during_a_stall_are_both_judged_and_a_second_stall_is_held_again() -> None:
+    pr = present()
+    tokens(pr, IDS[:2], False, 0.1)
+    assert judge(pr, 0.5, held=True) == []  # the world stalls: held
+    assert [(e.kind, e.agent) for e in pr.judge(3.0, 0.0)] == [(EventKind.AGENT_LOST, a) for a in IDS[:2]]
+    tokens(pr, IDS[2:3], False, 3.1)
+    assert judge(pr, 3.5, held=True) == []  # a second stall: held again
+    assert [(e.kind, e.agent) for e in pr.judge(6.0, 0.0)] == [(EventKind.AGENT_LOST, IDS[2])]
+
+
+def test_two_splits_and_the_first_group_back_is_a_merge_then_a_single_loss_is_none() -> None:
+    pr = present()
+    tokens(pr, IDS[:2], False, 0.1)
+    judge(pr, 0.5)
+    assert [e.kind for e in judge(pr, 1.6)] == [EventKind.SPLIT]
+    tokens(pr, IDS[2:4], False, 2.0)
+    judge(pr, 2.5)
+    assert [e.kind for e in judge(pr, 3.6)] == [EventKind.SPLIT]
+    tokens(pr, IDS[:1], True, 4.0)  # the first group back, one agent after the other
+    assert [e.kind for e in judge(pr, 4.1, t=2.0)] == [EventKind.AGENT_JOINED]
+    tokens(pr, IDS[1:2], True, 4.5)
+    assert [e.kind for e in judge(pr, 4.6, t=2.5)] == [EventKind.AGENT_JOINED]
+    (merge,) = judge(pr, 5.2, t=3.0)
+    assert merge.kind == EventKind.MERGE and merge.t == 2.0 and merge.wall_unix == 1005.2  # from the first back
+    assert set(merge.before) == {tuple(IDS[:2]), tuple(IDS[4:])} and merge.after == ((*IDS[:2], *IDS[4:]),)
+    # One of them lost alone and back: agent_lost and agent_joined only, no split and no merge.
+    tokens(pr, IDS[:1], False, 6.0)
+    assert [e.kind for e in judge(pr, 6.5)] == [EventKind.AGENT_LOST]
+    tokens(pr, IDS[:1], True, 6.6)
+    assert [e.kind for e in judge(pr, 6.7)] == [EventKind.AGENT_JOINED]
+    assert judge(pr, 8.0) == []
