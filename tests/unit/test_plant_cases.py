@@ -20,6 +20,7 @@ def test_a_ticks_truth_and_states_say_its_tick_time_and_every_robots_pose() -> N
     plant = Plant(S, 0.2)
     plant.theta = plant.theta + np.linspace(0.1, 1.0, len(IDS))  # distinct headings
     plant.p = plant.p + np.column_stack([np.arange(len(IDS)), 2.0 * np.arange(len(IDS))])
+    plant.p[0] = np.asarray(S.obstacles[0].vertices_m[0]) - 1.0  # next to an obstacle: it has a scan
     truth, states = plant.observe(3, set(IDS))
     c = unicycle.body_centre(plant.p, plant.theta, S.head_offsets)  # s = p - l [cos θ, sin θ]
     assert (truth.k, truth.t, truth.ids) == (3, pytest.approx(3 * DT), tuple(IDS))
@@ -27,7 +28,8 @@ def test_a_ticks_truth_and_states_say_its_tick_time_and_every_robots_pose() -> N
     assert truth.px == tuple(plant.p[:, 0]) and truth.py == tuple(plant.p[:, 1])
     for i, m in enumerate(states):
         assert (m.id, m.k, m.t) == (IDS[i], 3, pytest.approx(3 * DT))
-        assert m.scan is None or (m.scan.k, m.scan.t) == (3, pytest.approx(3 * DT))
+    scan = states[0].scan
+    assert scan is not None and scan.points and (scan.id, scan.k, scan.t) == (IDS[0], 3, pytest.approx(3 * DT))
 
 
 def test_a_held_robot_near_a_live_one_is_in_its_scan_even_with_no_contour_in_range() -> None:
