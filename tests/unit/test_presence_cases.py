@@ -85,3 +85,25 @@ def test_two_splits_and_the_first_group_back_is_a_merge_then_a_single_loss_is_no
     tokens(pr, IDS[:1], True, 6.6)
     assert [e.kind for e in judge(pr, 6.7)] == [EventKind.AGENT_JOINED]
     assert judge(pr, 8.0) == []
+
+
+def test_a_merge_orders_its_groups_by_their_first_agent_and_a_second_split_merges_again() -> None:
+    """2..9 go and come back: the merge's groups before are (1, 10) then (2..9); then 2 and 3 go and come back:
+    a second split and a second merge."""
+    pr = present()
+    gone = IDS[1:-1]
+    tokens(pr, gone, False, 0.1)
+    judge(pr, 0.5)
+    assert [e.kind for e in judge(pr, 1.6)] == [EventKind.SPLIT]
+    tokens(pr, gone, True, 2.0)
+    judge(pr, 2.1)
+    (merge,) = judge(pr, 3.2)
+    assert merge.kind == EventKind.MERGE and merge.before == ((IDS[0], IDS[-1]), tuple(gone))
+    again = IDS[1:3]
+    tokens(pr, again, False, 4.0)
+    judge(pr, 4.5)
+    assert [e.kind for e in judge(pr, 5.6)] == [EventKind.SPLIT]
+    tokens(pr, again, True, 6.0)
+    judge(pr, 6.1)
+    (merge,) = judge(pr, 7.2)
+    assert merge.kind == EventKind.MERGE and merge.after == (tuple(IDS),)
