@@ -104,8 +104,8 @@ class AgentHost:
         self.listening: dict[int, frozenset[Cell] | None] = {}  # agent -> the cells it listens to (None: all)
         self.by_cell: dict[Cell | None, set[int]] = {}  # cell -> the agents listening to it (None: to all)
         self.cell_subs: dict[Cell | None, tuple[Any, Any]] = {}  # the host's subscriptions (None: every cell)
-        self.sets: dict[int, Item] = {}  # agent -> the newest obstacle set heard from it (with its cell in its key)
-        self.replay: list[tuple[int, Item]] = []  # (agent, obstacle set) for that agent alone (replayed)
+        self.sets: dict[int, tuple[Tag, Item]] = {}  # agent -> its newest obstacle set heard (its cell in its key)
+        self.replay: list[tuple[int, Tag, Item]] = []  # (agent, tag, obstacle set) for that agent alone (replayed)
         self._cells: dict[str, Cell | None] = {}  # key -> the cell in it (None: not a cell key)
         self.known = {a.id for a in next(iter(links.values())).node.s.agents}
         self.max_set_bytes = next(iter(links.values())).gate.adm.max_set_bytes
@@ -138,7 +138,7 @@ class AgentHost:
             self.by_cell.get(cell, set()).discard(aid)
         for cell in {None} if c.listen is None else c.listen:
             self.by_cell.setdefault(cell, set()).add(aid)
-        self.replay += [(aid, item) for item in self.sets.values()
+        self.replay += [(aid, tag, item) for tag, item in self.sets.values()
                          if self._hears(c.listen, self._cell(item[0])) and not self._hears(old, self._cell(item[0]))]
         want: set[Cell | None] = set().union(*({None} if ls is None else ls for ls in self.listening.values()))
         for cell in want - self.cell_subs.keys():
@@ -184,8 +184,8 @@ class AgentHost:
         came through (one just replaced, or every cell's), once."""
         batches: dict[int, list[Input]] = {aid: [] for aid in self.active}
         pending, self.replay = self.replay, []
-        for aid, item in pending:
-            self._deliver(("cell", None), item, batches, aid)
+        for aid, tag, item in pending:
+            self._deliver(tag, item, batches, aid)
         local, self.local = self.local, []
         for tag, item in local:
             self._deliver(tag, item, batches, None)
@@ -221,15 +221,29 @@ class AgentHost:
             who = [a for a in who if a == only]
         if not who:
             return
-        if key.endswith("/obstacles"):
+        # A co-hosted agent's own beacon or set, handed over in the process: ours, believed without admission
+        # (the tag is the host's own: no sample from zenoh carries it, whatever source it is stamped with).
+        cohosted = tag[0] == "local"
+        if key.endswith("/obstacles") and not cohosted:
             who = [a for a in who if self.active[a].admit_bytes(len(payload), source, key)]
             if not who:
                 return
         m: Decoded = decode_sample(self.keys, key, payload, kind)
         if isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known and self._cell(key) is not None:
-            self.sets[m.id] = item  # (for an agent that starts listening to its cell later)
+            self.sets[m.id] = (tag, item)  # (for an agent that starts listening to its cell later)
+        if cohosted:
+            for aid in who:
+                if m is not None:
+                    batches[aid].append(m)
+            return
+        # In the name of an agent running in this process, from another session: forged (ours never come that way).
+        forged = m.id if isinstance(m, wire.Beacon | wire.ObstacleSet) and m.id in self.active else None
         for aid in who:
-            got = self.active[aid].take(m, key, source)
+            link = self.active[aid]
+            if forged is not None and aid != forged:  # (its own link counts one on its own key as invalid)
+                link.refuse_cohosted(forged, key, source)
+                continue
+            got = link.take(m, key, source)
             if got is not None:
                 batches[aid].append(got)
 
@@ -269,7 +283,7 @@ class AgentHost:
             item = (put[0], put[1], "PUT", self.source, now_s)
             self.local.append((("local", aid), item))
             if isinstance(out, wire.ObstacleSet):
-                self.sets[aid] = item  # (for an agent that starts listening to its cell later)
+                self.sets[aid] = (("local", aid), item)  # (for an agent that starts listening to its cell later)
         return False
 
     def close(self) -> None:

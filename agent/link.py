@@ -21,6 +21,7 @@ from agent.neighbours import Cells
 from agent.node import AgentNode
 from agent.ros2_io import AgentRos2
 from reconswarm.net import wire
+from reconswarm.net.admission import Intrusion, IntrusionKind
 from reconswarm.net.cells import Cell
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Rejections
@@ -144,6 +145,12 @@ class AgentLink(Member):
             self.rej.reject(key, bad.reason)
             return bad
         return m if self.gate.admit(m, source, key, time.monotonic()) else None
+
+    def refuse_cohosted(self, agent_id: int, key: str, source: str) -> None:
+        """A beacon or set in the name of an agent hosted with us, from another session: forged (the genuine ones
+        are handed over in the process, never through the router), refused and counted by our gate."""
+        why = f"agent {agent_id} is hosted in our process, not in session {source}"
+        self.gate.refuse(Intrusion(IntrusionKind.IMPERSONATION, source, key, why), time.monotonic())
 
     def publish(self, out: Output) -> tuple[str, bytes] | None:
         """Put what the node returned; a beacon or obstacle set: its key and payload (for co-hosted agents)."""

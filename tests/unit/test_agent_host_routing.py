@@ -20,7 +20,7 @@ from reconswarm.net import wire
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Rejections
 from reconswarm.net.keys import Keys
-from reconswarm.net.node import Invalid
+from reconswarm.net.node import Exit, Invalid
 from reconswarm.net.session import ZenohOptions
 from reconswarm.scenario.model import load
 from tests.support import PAPER, free_port
@@ -93,8 +93,33 @@ def test_what_a_co_hosted_agent_publishes_goes_to_the_others_never_back(host: Ag
     host.local.append((("local", 1), item))
     got = host.route([])
     assert got[1] == [] and ids(got[2]) == [("Beacon", 1)]
-    # Agent 1's key from another session: agent 1 counts it invalid; agent 2's gate refuses it (agent 1 speaks
-    # from the host's session, pinned by the beacon above).
+    # Agent 1's key from another session: agent 1 counts it invalid; agent 2's gate refuses it (agent 1 runs in
+    # this process: its beacons never come through the router).
     got = host.route([(("cell", A), beacon(1, A, source=PEER))])
     assert [type(m).__name__ for m in got[1]] == ["Invalid"] and got[2] == []
     assert host.links[1].rej.count == 1 and host.links[2].gate.count == 1
+
+
+def test_a_beacon_forged_in_a_co_hosted_agents_name_is_refused_even_before_it_spoke(host: AgentHost) -> None:
+    """The co-hosted agents' own beacons skip admission (the host hands them over itself), so no pin says who
+    speaks for agent 1: the host refuses any beacon or set in its name from another session, at any time."""
+    host.listen(1, Cells(A, frozenset({A})))
+    host.listen(2, Cells(A, frozenset({A})))
+    got = host.route([(("cell", A), beacon(1, A, source=PEER)), (("cell", A), obstacle_set(1, A))])
+    assert ids(got[2]) == [] and host.links[2].gate.count == 2
+    assert set(host.links[2].gate.tally.rows) == {("impersonation", PEER)}
+    # Agent 1 left the process (it failed; agent 2 goes on): a lone agent 1 elsewhere speaks for it now.
+    host.exited(1, Exit(1, "failed"), 0.0)
+    got = host.route([(("cell", A), beacon(1, A, source=PEER))])
+    assert ids(got[2]) == [("Beacon", 1)] and host.links[2].gate.count == 2
+
+
+def test_a_co_hosted_agents_set_is_replayed_as_its_own_not_refused(host: AgentHost) -> None:
+    host.listen(1, Cells(A, frozenset({A})))
+    host.listen(2, Cells(B, frozenset({B})))
+    out = wire.ObstacleSet(1, 0, 1, {})
+    host.act(1, out, 0.0)  # agent 1 publishes its set in cell A: agent 2 does not listen there yet
+    assert host.route([]) == {1: [], 2: []}
+    host.listen(2, Cells(B, frozenset({A, B})))
+    got = host.route([])
+    assert ids(got[2]) == [("ObstacleSet", 1)] and host.links[2].gate.count == 0
