@@ -34,7 +34,7 @@ CORE: dict[str, tuple[str, ...]] = {
     "reconswarm/paper/planner.py": ("test_planner.py", "test_admission.py", "test_engine.py", "test_planner_cases.py"),
     "reconswarm/plant/unicycle.py": ("test_unicycle.py", "test_unicycle_vw.py", "test_unicycle_limits.py"),
     "reconswarm/paper/topology.py": ("test_topology_metrics.py", "test_summary_counts.py", "test_topology_cases.py"),
-    "reconswarm/net/wire.py": ("test_wire.py", "test_wire_points.py", "test_wire_fields.py"),
+    "reconswarm/net/wire.py": ("test_wire.py", "test_wire_points.py", "test_wire_fields.py", "test_wire_cases.py"),
     "reconswarm/net/admission.py": ("test_admission.py", "test_membership_rules.py", "test_admission_cases.py"),
     "reconswarm/record/summary.py": ("test_summary_counts.py", "test_monitor_node.py", "test_run_store.py",
                                      "test_summary_fields.py"),
