@@ -375,7 +375,19 @@ def event_from_wire(payload: bytes) -> Event:
                 _int({"id": a}, "id", 0, MAX_AGENT_ID)
     if "agent" in o:
         _int(o, "agent", 0, MAX_AGENT_ID)
+    _event_values(o)
     try:
         return Event.from_dict(o)
     except (KeyError, TypeError, ValueError) as exc:
         raise WireError(f"event: {exc}") from None
+
+
+def _event_values(o: dict[str, Any]) -> None:
+    """An event's time and, when set, its other times are finite numbers and its cause a short string
+    (Event.from_dict alone would take "1.5", true or NaN as a time and any value as the cause)."""
+    _float(o, "t")
+    for key in ("t_confirmed", "duration_s", "wall_unix"):
+        if key in o:
+            _num(o[key], f"field {key!r}")
+    if "cause" in o:
+        _str(o["cause"], "field 'cause'")

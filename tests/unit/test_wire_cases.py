@@ -270,3 +270,27 @@ def test_what_is_wrong_with_a_payload_is_said() -> None:
     assert refused(wire.state_from_wire, msgpack.packb([1, 2]), 1) == "payload is not a map"
     assert refused(wire.state_from_wire, msgpack.packb({"v": 2}), 1) == "schema version 2, expected 1"
     assert refused(wire.clock_from_wire, msgpack.packb({"k": 1})) == "schema version None, expected 1"
+
+
+@pytest.mark.parametrize("fields, why", [
+    ({"t": math.nan}, "field 't': not finite"), ({"t": math.inf}, "field 't': not finite"),
+    ({"t": "1.5"}, "field 't': expected a number"), ({"t": True}, "field 't': expected a number"),
+    ({"t": None}, "field 't' missing"),
+    ({"t_confirmed": -math.inf}, "field 't_confirmed': not finite"),
+    ({"duration_s": "2"}, "field 'duration_s': expected a number"),
+    ({"wall_unix": math.nan}, "field 'wall_unix': not finite"), ({"wall_unix": None}, "field 'wall_unix'"),
+    ({"cause": 5}, "field 'cause': expected a short string"), ({"cause": ""}, "field 'cause'"),
+    ({"cause": "c" * (MAX_STR + 1)}, "field 'cause'"),
+])
+def test_an_events_times_are_finite_numbers_and_its_cause_a_short_string(fields: dict[str, Any], why: str) -> None:
+    """NaN or ±inf anywhere is refused (docs/wire.md, Validation), and so are wrong types: an event's times
+    are not converted from strings or booleans, its cause not from a number."""
+    payload = pack(**{"t": 1.0, "kind": "split", "before": [[1, 2]], "after": [[1], [2]], **fields})
+    assert refused(wire.event_from_wire, payload).startswith(why)
+
+
+def test_an_events_optional_fields_are_taken_as_sent() -> None:
+    e = wire.event_from_wire(pack(t=3, kind="split", before=[[1, 2]], after=[[1], [2]], cause="network",
+                                  t_confirmed=4.0, duration_s=1, wall_unix=1.8e9))
+    assert (e.t, e.cause, e.t_confirmed, e.duration_s, e.wall_unix) == (3.0, "network", 4.0, 1.0, 1.8e9)
+    assert type(e.t) is float and type(e.duration_s) is float
