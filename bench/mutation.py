@@ -39,7 +39,7 @@ CORE: dict[str, tuple[str, ...]] = {
     "reconswarm/record/summary.py": ("test_summary_counts.py", "test_monitor_node.py", "test_run_store.py",
                                      "test_summary_fields.py"),
     "reconswarm/record/safety.py": ("test_safety_episodes.py", "test_summary_counts.py", "test_topology_metrics.py"),
-    "agent/node.py": ("test_agent_node.py", "test_agent_node_waits.py"),
+    "agent/node.py": ("test_agent_node.py", "test_agent_node_waits.py", "test_agent_node_cases.py"),
     "simworld/world.py": ("test_world_node.py", "test_world_uncommanded.py", "test_world_node_cases.py"),
     "simworld/plant.py": ("test_world_node.py", "test_ros2_plant_live.py", "test_plant_cases.py"),
     "monitor/node.py": ("test_monitor_node.py", "test_membership_rules.py", "test_world_uncommanded.py",
