@@ -17,6 +17,7 @@ from agent.messages import Output
 from agent.neighbours import Cells
 from agent.node import AgentNode
 from reconswarm.net import wire
+from reconswarm.scenario.model import PlannerKind
 from tests.support import joined, left, world_token
 from tests.unit.test_agent_node import DT, RADIUS, A, B, C, S, T, beacon, beacons, clock, cmds, started, state
 
@@ -117,6 +118,15 @@ def test_awaiting_counts_the_linked_peers_sets_not_yet_in() -> None:
     assert node.k == 0 and node.guessed_k == -1
 
 
+def test_awaiting_adds_the_linked_sets_to_the_beacons_also_heard() -> None:
+    node = started(peers=(B, D))  # D starts far away: not waited for at tick 0
+    node.step([clock(0, (A, B, D)), state(0, 100.0, 0.0), beacon(B, 0, 110.0, 0.0),
+               wire.Beacon(D, 0, 0.0, 160.0, 0.0, RADIUS[D], 0)], 0.0)
+    assert node.k == 0
+    node.step([clock(1, (A, B, D)), state(1, 100.0, 0.0), beacon(B, 1, 110.0, 0.0, rev=1)], 0.05)
+    assert node.k == 0 and node.awaiting(0.05) == 2  # B's set, and D's beacon of tick 1 (heard, not waited for)
+
+
 def test_awaiting_for_a_late_joiner_is_a_count() -> None:
     node = started(peers=(B, C))
     node.step([clock(300, (A, B, C)), state(300, 100.0, 0.0), beacon(B, 300, 900.0, 0.0, rev=4),
@@ -137,6 +147,17 @@ def test_a_robot_whose_agent_is_gone_is_lost_and_blocks_the_passage_beside_a_hul
     live.tick(0, (100.0, 0.0), [peer(B, 140.0), peer(C, 107.0)], scan=HULL_XY)
     assert vw(out) == [ref.tick(1, (100.05, 0.0), [peer(B, 140.0)], lost=[peer(C, 107.0)])]
     assert vw(out) != [live.tick(1, (100.05, 0.0), [peer(B, 140.0), peer(C, 107.0)])]  # (lost is not live)
+
+
+def test_a_tick_judges_lost_peers_by_its_own_clock_not_a_newer_one() -> None:
+    """The world held C's robot at tick 1 (its clock of 1 lacks C; a forged token keeps C alive by its
+    membership), and counts C again at tick 2 (restarted): tick 1 still plans C as a lost robot."""
+    node, ref = started(peers=(B, C)), Ref()
+    node.step([clock(0), state(0, 100.0, 0.0, scan=wire.Scan(A, 0, 0.0, HULL)), beacon(B, 0, 140.0, 0.0),
+               beacon(C, 0, 107.0, 0.0)], 0.0)
+    ref.tick(0, (100.0, 0.0), [peer(B, 140.0), peer(C, 107.0)], scan=HULL_XY)
+    out = node.step([clock(1, (A, B)), clock(2, (A, B, C)), state(1, 100.05, 0.0), beacon(B, 1, 140.0, 0.0)], 0.05)
+    assert vw(out) == [ref.tick(1, (100.05, 0.0), [peer(B, 140.0)], lost=[peer(C, 107.0)])]
 
 
 def test_a_waited_peer_given_up_is_planned_live_where_last_heard() -> None:
@@ -187,7 +208,6 @@ def test_realtime_a_neighbour_many_ticks_behind_survives_pruning() -> None:
     node.step([clock(80, (A, B), **RT), state(80, 100.0, 0.0)], 0.05)
     node.step([], node.wake_at_s() or 0.1)
     assert node.k == 80  # (a prune tick; B's beacon is 80 ticks old, heard 0.05 s ago)
-    node.step([beacon(B, 0, 104.0, 0.0)], 0.1)  # still heard
     out = node.step([clock(81, (A, B), **RT), state(81, 100.0, 0.0)], 0.15)
     out += node.step([], node.wake_at_s() or 0.2)
     brain = AgentBrain(S, A)
@@ -225,6 +245,43 @@ def test_a_peer_back_while_we_act_is_waited_for_where_it_was_held() -> None:
     assert [c.k for c in cmds(out)] == [1] and node.guessed_k == -1
 
 
+def test_a_peer_back_and_heard_again_is_placed_by_its_beacons_again() -> None:
+    """Once a peer back is heard, only its beacon of the tick before says whether a tick waits for it: a peer
+    that said nothing of tick 2 (stuck, re-sending its beacon of tick 1) is not waited for at tick 3."""
+    node = started(peers=(B,))
+    node.step([left(B)], 0.0)
+    node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.01)
+    node.step([joined(B)], 0.02)
+    node.step([clock(1, (A, B)), state(1, 100.0, 0.0)], 0.05)
+    node.step([beacon(B, 1, 110.0, 0.0)], 0.06)
+    assert node.k == 1 and node.guessed_k == -1
+    node.step([clock(2, (A, B)), state(2, 100.0, 0.0)], 0.1)
+    now = 0.1
+    while node.k < 2:  # B keeps re-sending its beacon of tick 1: tick 2 gives up after agent_wait_timeout_s
+        now = round(now + 0.25, 2)
+        node.step([beacon(B, 1, 110.0, 0.0)], now)
+    assert now < 0.1 + T.agent_wait_timeout_s + 0.3 and node.guessed_k == 2
+    out = node.step([clock(3, (A, B)), state(3, 100.0, 0.0), beacon(B, 1, 110.0, 0.0)], now + 0.05)
+    assert [c.k for c in cmds(out)] == [3]  # at once: B announced nothing of tick 2
+
+
+@pytest.mark.xfail(strict=True, reason="a peer back is taken off the joined list by its first beacon even when "
+                   "that beacon is of the very tick whose wait set is not fixed yet (agent/neighbours.py peer_heard)")
+def test_a_peer_backs_first_beacon_before_our_state_is_no_intruder() -> None:
+    """The same as test_a_peer_back_while_we_act_is_waited_for_where_it_was_held, with B's beacon of tick 1 in
+    before our own state of tick 1 (an ordinary order: B's state came first). The wait set of tick 1 must not
+    depend on that order (agent/neighbours.py: with no beacon of k-1 from a peer that joined again, the
+    position it is held at counts): B is expected, so its beacon is no intruder and nothing was guessed."""
+    node = started(peers=(B,))
+    node.step([left(B)], 0.0)
+    node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.01)
+    node.step([joined(B)], 0.02)
+    node.step([beacon(B, 1, 110.0, 0.0)], 0.04)
+    out = node.step([clock(1, (A, B)), state(1, 100.05, 0.0)], 0.05)
+    assert [c.k for c in cmds(out)] == [1]
+    assert node.guessed_k == -1
+
+
 def test_a_late_beacon_of_the_tick_just_acted_on_within_reach_is_a_guess_said_once() -> None:
     node = started(peers=())
     node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
@@ -233,8 +290,8 @@ def test_a_late_beacon_of_the_tick_just_acted_on_within_reach_is_a_guess_said_on
     assert node.guessed_k == 0
     node.step([clock(1, (A,)), state(1, 100.0, 0.0)], 0.05)
     node.step([wire.Beacon(E, 1, DT, 101.0, 0.0, RADIUS[E], 0)], 0.06)  # another one, later: the first stays
-    node.step([clock(2, (A,)), state(2, 100.0, 0.0), wire.Beacon(E, 2, 2 * DT, 101.0, 0.0, RADIUS[E], 0)], 0.1)
-    assert node.k == 2 and node.guessed_k == 0
+    node.step([clock(2, (A,)), state(2, 100.0, 0.0), wire.Beacon(7, 2, 2 * DT, 101.0, 0.0, RADIUS[7], 0)], 0.1)
+    assert node.k == 2 and node.guessed_k == 0  # (agent 7's beacon made tick 2 a guess too: still the first said)
 
 
 def test_a_beacon_within_reach_from_a_peer_not_waited_for_makes_the_tick_a_guess() -> None:
@@ -252,6 +309,10 @@ def test_the_worlds_scan_reports_other_robots_never_our_own() -> None:
     assert vw(out) == [Ref().tick(0, (100.0, 0.0), [peer(B, 110.0)], lost=[peer(C, 104.0)])]
     node.step([joined(C), beacon(C, 1, 104.0, 0.0)], 0.02)  # C's agent is back and talks: its beacon replaces it
     assert node.last_seen[C].k == 1 and node.last_seen[C].id == C
+    node = started(peers=(B,))  # the world's clock does not count us (held): our own robot is still no obstacle
+    held = wire.Scan(A, 0, 0.0, (), ((A, 100.0, 0.0),))
+    out = node.step([clock(0, (B,)), state(0, 100.0, 0.0, scan=held), beacon(B, 0, 110.0, 0.0)], 0.01)
+    assert vw(out) == [Ref().tick(0, (100.0, 0.0), [peer(B, 110.0)])]
 
 
 # ------------------------------------------------------------------------------------ ticks and waits
@@ -271,10 +332,13 @@ def test_the_joining_rule_holds_only_for_a_first_tick_mid_mission() -> None:
     """A first tick after 0 waits for every peer's cached set (any revision, far ones too) and merges them all;
     tick 0, and any tick after our first command, waits only for the sets of the peers within link range."""
     far = {"hexagon": ((600.0, 0.0), (601.0, 1.0), (601.0, -1.0))}
-    node = started(peers=(B,))  # tick 0: B is 50 m away (beyond link range), announcing a set we do not have
+    node = started(peers=(B,))  # tick 0: B is 50 m away (beyond link range), announcing a set we have
     node.step([wire.ObstacleSet(B, 0, 1, far), clock(0, (A, B)), state(0, 100.0, 0.0)], 0.0)
-    node.step([beacon(B, 0, 150.0, 0.0, rev=2)], 0.01)
-    assert node.k == 0 and "hexagon" not in node.brain.obstacle_sets()  # not linked: not waited for, not merged
+    node.step([beacon(B, 0, 150.0, 0.0, rev=1)], 0.01)
+    assert node.k == 0 and "hexagon" not in node.brain.obstacle_sets()  # not linked: not merged
+    node = started(peers=(B,))  # the same with B's set not in: not waited for, at tick 0 or after
+    node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 150.0, 0.0, rev=2)], 0.0)
+    assert node.k == 0
     node.step([clock(1, (A, B)), state(1, 100.0, 0.0), beacon(B, 1, 150.0, 0.0, rev=3)], 0.05)
     assert node.k == 1 and node.guessed_k == -1
     node = started(peers=(B,))  # first tick 1: joining
@@ -366,12 +430,13 @@ def test_a_new_session_publishes_the_set_once_at_the_last_commanded_tick() -> No
 def test_a_new_home_cell_gets_the_set_again_a_new_listening_cell_does_not() -> None:
     node = started(peers=())
     node.step([clock(0, (A,)), state(0, 100.0, 0.0, scan=wire.Scan(A, 0, 0.0, HULL))], 0.0)
-    out = node.step([clock(1, (A,)), state(1, 110.0, 0.0)], 0.05)  # same home cell, more cells to listen to
-    assert isinstance(out[0], Cells) and out[0].home == node.nb.grid.cell_of(100.0, 0.0)
-    assert [type(o) for o in out] == [Cells, wire.Beacon, wire.Cmd]
-    out = node.step([clock(2, (A,)), state(2, 112.0, 0.0)], 0.1)  # a new home cell: its cache lacks our set
+    out = node.step([clock(1, (A,)), state(1, 112.0, 0.0)], 0.05)  # a new home cell: its cache lacks our set
     assert [type(o) for o in out][:3] == [Cells, wire.ObstacleSet, wire.Beacon]
-    assert [(s.id, s.k, s.rev) for s in sets(out)] == [(A, 1, 1)]  # (as of our last command)
+    assert [(s.id, s.k, s.rev) for s in sets(out)] == [(A, 0, 1)]  # (as of our last command)
+    home = node.nb.grid.cell_of(112.0, 0.0)
+    out = node.step([clock(2, (A,)), state(2, 120.0, 20.0)], 0.1)  # same home cell, more cells to listen to
+    assert isinstance(out[0], Cells) and out[0].home == home
+    assert [type(o) for o in out][:3] == [Cells, wire.Beacon, wire.Cmd] and sets(out) == []
     node = started(peers=())  # knowing nothing: no set to put
     node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
     out = node.step([clock(1, (A,)), state(1, 112.0, 0.0)], 0.05)
@@ -395,6 +460,8 @@ def test_realtime_one_beacon_and_one_command_per_tick() -> None:
     out = node.step([beacon(B, 0, 110.0, 0.0)], 0.002)
     assert [c.k for c in cmds(out)] == [0]
     assert node.step([beacon(B, 0, 110.0, 0.0)], 0.003) == []  # tick 0 is done: no second command
+    out = node.step([state(1, 100.0, 0.0), beacon(B, 1, 110.0, 0.0)], 0.004)
+    assert [c.k for c in cmds(out)] == [1] and node.guessed_k == -1  # (realtime says no guess: not lockstep)
 
 
 def test_realtime_acts_a_fraction_of_a_period_after_the_state() -> None:
@@ -412,3 +479,27 @@ def test_the_waiting_log_runs_before_any_state() -> None:
     node.step([clock(0, (A,))], 0.0)
     assert node.step([], T.waiting_log_s + 0.1) == []  # (logs what it lacks; no state to name yet)
     assert "no state yet" in node.waiting_for()
+
+
+def test_realtime_after_the_first_command_plans_with_the_scans_of_skipped_ticks() -> None:
+    node = started(peers=())
+    node.step([clock(0, (A,), **RT), state(0, 100.0, 0.0)], 0.0)
+    assert node.k == 0
+    one = wire.Scan(A, 1, DT, ((130.0, 0.0, "one"), (131.0, 1.0, "one"), (131.0, -1.0, "one")))
+    node.step([clock(2, (A,), **RT), state(1, 100.0, 0.0, scan=one), state(2, 100.0, 0.0)], 0.01)
+    node.step([], node.wake_at_s() or 0.1)
+    assert node.k == 2 and set(node.brain.obstacle_sets()) == {"one"}  # tick 1 skipped, its scan not
+
+
+@pytest.mark.parametrize("mode", ["lockstep", "realtime"])
+def test_the_virtual_leader_merges_every_peers_set_into_the_union(mode: str) -> None:
+    s = dataclasses.replace(S, planner=dataclasses.replace(S.planner, kind=PlannerKind.VIRTUAL_LEADER))
+    node = AgentNode(s, A, 0.0, T)
+    node.step([joined(A), joined(B)], 0.0)
+    kw = RT if mode == "realtime" else {}
+    far = wire.ObstacleSet(B, 0, 1, {"hexagon": ((600.0, 0.0), (601.0, 1.0), (601.0, -1.0))})
+    node.step([far, clock(0, (A, B), **kw), state(0, 100.0, 0.0), beacon(B, 0, 900.0, 0.0, rev=1)], 0.0)
+    node.step([], node.wake_at_s() or 0.01)
+    assert node.k == 0
+    assert "hexagon" in dict(node.brain.union.sorted_items())  # far beyond link range: the union has it
+    assert "hexagon" not in node.brain.obstacle_sets()  # (our own knowledge merges linked peers' sets only)
