@@ -48,7 +48,7 @@ class Plant:
         t = k * self.s.meta.dt_s
         true_d = self.field.true_distances(self.p, self.s.planner.sensing_range_m)
         qa, qs = self.field.scan(self.p, self.s.planner.sensing_range_m, true_d)
-        bodies = self.held_bodies(alive)
+        bodies = self.held_bodies(alive, k)
         counts = np.bincount(qa, minlength=len(self.ids)) + np.array([len(b) for b in bodies], dtype=np.int64)
         c = unicycle.body_centre(self.p, self.theta, self.l)
         truth = wire.Truth(k, t, tuple(self.ids), tuple(c[:, 0].tolist()), tuple(c[:, 1].tolist()),
@@ -66,19 +66,22 @@ class Plant:
                              float(self.p[i, 1]), scans[i]) for i, a in enumerate(self.ids)]
         return truth, states
 
-    def held_bodies(self, alive: set[int]) -> list[tuple[tuple[int, float, float], ...]]:
-        """Per robot: the held robots (whose agents are not in `alive`) within body_range_m of its head point, as
-        (agent id, head x, y); none for a robot whose own agent is gone."""
+    def held_bodies(self, alive: set[int], k: int = 0) -> list[tuple[tuple[int, float, float], ...]]:
+        """Per robot: the held robots within body_range_m of its head point, as (agent id, head x, y): those whose
+        agents are not in `alive`, and from tick 1 on those standing still because their agent's commands stopped
+        `hold_sim_s` ago or never came (an agent alive by its token that never spoke is heard by nobody: without
+        this its robot would be in nobody's plan); none for a robot whose own agent is gone."""
         out: list[tuple[tuple[int, float, float], ...]] = [()] * len(self.ids)
-        held = [i for i, a in enumerate(self.ids) if a not in alive]
-        if not held or len(held) == len(self.ids):
+        stopped = (k - self.held_k) > self.hold_ticks if k >= 1 else np.zeros(len(self.ids), dtype=bool)
+        held = [i for i, a in enumerate(self.ids) if a not in alive or stopped[i]]
+        if not held:
             return out
         hp = self.p[held]  # (H, 2)
         d = np.hypot(*(self.p[:, None, :] - hp[None, :, :]).transpose(2, 0, 1))  # (N, H)
         for i, a in enumerate(self.ids):
             if a in alive:
                 out[i] = tuple((self.ids[held[j]], float(hp[j, 0]), float(hp[j, 1]))
-                               for j in map(int, np.flatnonzero(d[i] <= self.body_range_m)))
+                               for j in map(int, np.flatnonzero(d[i] <= self.body_range_m)) if held[j] != i)
         return out
 
     def apply(self, k: int) -> set[int]:
