@@ -26,6 +26,7 @@ HULL = ((110.0, 0.0, "diamond"), (111.0, 1.0, "diamond"), (111.0, -1.0, "diamond
 HULL_XY = {"diamond": np.array([[110.0, 0.0], [111.0, 1.0], [111.0, -1.0]])}
 PATIENT = dataclasses.replace(T, agent_wait_timeout_s=10.0)  # longer than peer_silent_s: silence decides
 RT = {"mode": "realtime", "speed": 10.0}
+Hulls = dict[str, tuple[tuple[float, float], ...]]
 
 
 def sets(out: list[Output]) -> list[wire.ObstacleSet]:
@@ -107,7 +108,7 @@ def test_awaiting_counts_the_linked_peers_sets_not_yet_in() -> None:
         dataclasses.replace(a, start_m=(pos[a.id] - 0.5, 0.0)) if a.id in pos else a for a in S.agents))
     node = AgentNode(s, A, 0.0, T)
     node.step([joined(a) for a in (A, B, C, D, E)], 0.0)
-    far = {"hexagon": ((600.0, 0.0), (601.0, 1.0), (601.0, -1.0))}
+    far: Hulls = {"hexagon": ((600.0, 0.0), (601.0, 1.0), (601.0, -1.0))}
     out = node.step([wire.ObstacleSet(D, 0, 3, far), clock(0, (A, B, C, D, E)), state(0, 100.0, 0.0),
                      beacon(B, 0, 110.0, 0.0, rev=1), beacon(C, 0, 120.0, 0.0, rev=2),
                      wire.Beacon(D, 0, 0.0, 105.0, 0.0, RADIUS[D], 3),
@@ -331,7 +332,7 @@ def test_a_second_lost_clock_is_waited_for_from_its_own_state() -> None:
 def test_the_joining_rule_holds_only_for_a_first_tick_mid_mission() -> None:
     """A first tick after 0 waits for every peer's cached set (any revision, far ones too) and merges them all;
     tick 0, and any tick after our first command, waits only for the sets of the peers within link range."""
-    far = {"hexagon": ((600.0, 0.0), (601.0, 1.0), (601.0, -1.0))}
+    far: Hulls = {"hexagon": ((600.0, 0.0), (601.0, 1.0), (601.0, -1.0))}
     node = started(peers=(B,))  # tick 0: B is 50 m away (beyond link range), announcing a set we have
     node.step([wire.ObstacleSet(B, 0, 1, far), clock(0, (A, B)), state(0, 100.0, 0.0)], 0.0)
     node.step([beacon(B, 0, 150.0, 0.0, rev=1)], 0.01)
