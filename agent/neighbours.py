@@ -63,7 +63,7 @@ class Neighbourhood:
         self.start: dict[int, XY] = {
             a.id: (float(a.start_m[0] + l_m[i] * math.cos(th[i])), float(a.start_m[1] + l_m[i] * math.sin(th[i])))
             for i, a in enumerate(s.agents)}
-        self.joined: set[int] = set()  # peers whose token came back while we were acting, not heard since
+        self.joined: set[int] = set()  # peers whose token came back while we were acting, no beacon of a k-1 since
         self.near: dict[int, frozenset[int]] = {}  # tick -> peers that may matter at it (before the alive filter)
         self.own: dict[int, XY] = {}  # tick -> our head point
         # Every cell until our first command: a (re)started agent does not know where its robot is; so it
@@ -78,9 +78,6 @@ class Neighbourhood:
         """A peer's token appeared. Once we act, it is a peer (re)joining: its robot is held where it was."""
         if acting and peer != self.id:
             self.joined.add(peer)
-
-    def peer_heard(self, peer: int) -> None:
-        self.joined.discard(peer)
 
     # -------------------------------------------------------------------------------------- cells
 
@@ -141,7 +138,8 @@ class Neighbourhood:
         out = set()
         for a in self.peers:
             b = prev.get(a)
-            if b is not None:
+            if b is not None:  # (a peer that joined again is placed by its beacons from here on: only once its
+                self.joined.discard(a)  # beacon of k-1 is in, whatever came before our state of k, is it heard)
                 pos: XY | None = (b.px, b.py)
             elif k == 0 or a in self.joined:  # not moved since we knew it (its agent was away)
                 seen = last_seen.get(a)

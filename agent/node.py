@@ -157,7 +157,6 @@ class AgentNode:
         elif isinstance(m, wire.Beacon):
             self.beacons.setdefault(m.k, {})[m.id] = m
             self.heard[m.id] = now
-            self.nb.peer_heard(m.id)
             if m.k <= self.k and self.guessed_k < 0 and self.nb.intruder(m.k, m):  # too late: we acted without it
                 self.guessed_k = m.k
                 log.warning("agent %d: tick %d: %s; lockstep is no longer deterministic", self.id, m.k,

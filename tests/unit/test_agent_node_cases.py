@@ -266,8 +266,6 @@ def test_a_peer_back_and_heard_again_is_placed_by_its_beacons_again() -> None:
     assert [c.k for c in cmds(out)] == [3]  # at once: B announced nothing of tick 2
 
 
-@pytest.mark.xfail(strict=True, reason="a peer back is taken off the joined list by its first beacon even when "
-                   "that beacon is of the very tick whose wait set is not fixed yet (agent/neighbours.py peer_heard)")
 def test_a_peer_backs_first_beacon_before_our_state_is_no_intruder() -> None:
     """The same as test_a_peer_back_while_we_act_is_waited_for_where_it_was_held, with B's beacon of tick 1 in
     before our own state of tick 1 (an ordinary order: B's state came first). The wait set of tick 1 must not

@@ -87,8 +87,9 @@ def test_at_tick_0_and_for_a_peer_that_joined_again_its_held_position_counts() -
     nb.after_command(9)
     nb.peer_joined(C, acting=True)  # C's agent restarted: its robot was held at its start (never heard)
     assert nb.wait_set(10, ALIVE, {}, {}) == {C}
-    nb.peer_heard(C)
-    assert nb.wait_set(11, ALIVE, {}, {}) == frozenset()  # (no beacon of 10 from anyone: nobody near)
+    # C's beacon of 10 places it from tick 11 on (far away now: not waited for), whenever it came.
+    assert nb.wait_set(11, ALIVE, {C: beacon(C, 10, 500.0, 0.0)}, {}) == frozenset()
+    assert nb.wait_set(12, ALIVE, {}, {}) == frozenset()  # (no beacon of 11 from anyone: nobody near)
 
 
 def test_a_first_tick_mid_mission_waits_for_every_live_peer() -> None:
