@@ -138,8 +138,10 @@ class Neighbourhood:
         out = set()
         for a in self.peers:
             b = prev.get(a)
-            if b is not None:  # (a peer that joined again is placed by its beacons from here on: only once its
-                self.joined.discard(a)  # beacon of k-1 is in, whatever came before our state of k, is it heard)
+            # A peer that joined again is placed by its beacons once its beacon of k-1 is in (not by any beacon of
+            # it: one of k may come before our state of k, and the wait set must not depend on that order).
+            if b is not None:
+                self.joined.discard(a)
                 pos: XY | None = (b.px, b.py)
             elif k == 0 or a in self.joined:  # not moved since we knew it (its agent was away)
                 seen = last_seen.get(a)
