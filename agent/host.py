@@ -232,8 +232,9 @@ class AgentHost:
         if isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known and self._cell(key) is not None:
             self.sets[m.id] = (tag, item)  # (for an agent that starts listening to its cell later)
         if cohosted:
-            for aid in who if m is not None else ():
-                batches[aid].append(m)
+            if m is not None:
+                for aid in who:
+                    batches[aid].append(m)
             return
         # In the name of an agent running in this process, from another session: forged (ours never come that way).
         forged = m.id if isinstance(m, wire.Beacon | wire.ObstacleSet) and m.id in self.active else None
