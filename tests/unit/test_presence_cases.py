@@ -5,6 +5,8 @@ merge's time. Pure: tokens given to the membership, times given."""
 
 from __future__ import annotations
 
+import pytest
+
 from monitor.presence import Presence
 from reconswarm.paper.events import Event, EventKind
 from tests.unit.monitor_run import IDS, T
@@ -107,3 +109,53 @@ def test_a_merge_orders_its_groups_by_their_first_agent_and_a_second_split_merge
     judge(pr, 6.1)
     (merge,) = judge(pr, 7.2)
     assert merge.kind == EventKind.MERGE and merge.after == (tuple(IDS),)
+
+
+def test_a_partitioned_agent_back_and_lost_again_within_the_burst_is_no_merge() -> None:
+    """1 and 2 split off; 1 comes back and goes again before the burst ends: nobody is back at its end, so no
+    merge (only its join and its loss); both back later are the merge."""
+    pr = present()
+    tokens(pr, IDS[:2], False, 0.1)
+    judge(pr, 0.5)
+    assert [e.kind for e in judge(pr, 1.6)] == [EventKind.SPLIT]
+    tokens(pr, IDS[:1], True, 2.0)
+    assert [(e.kind, e.agent) for e in judge(pr, 2.1)] == [(EventKind.AGENT_JOINED, IDS[0])]
+    tokens(pr, IDS[:1], False, 2.2)
+    assert [(e.kind, e.agent) for e in judge(pr, 2.6)] == [(EventKind.AGENT_LOST, IDS[0])]
+    assert judge(pr, 3.2) == [] and pr.alive_ids() == IDS[2:]
+    tokens(pr, IDS[:2], True, 4.0)
+    assert [e.kind for e in judge(pr, 4.1)] == [EventKind.AGENT_JOINED] * 2
+    (merge,) = judge(pr, 5.2)
+    assert merge.kind == EventKind.MERGE and merge.before == (tuple(IDS[:2]), tuple(IDS[2:]))
+
+
+def ended(pr: Presence, now: float, t: float = 0.0) -> list[Event]:
+    """A monitor step while an end is claimed: no change is judged (agents leave when the mission ends)."""
+    return pr.sync(now, t, True, True, False)
+
+
+def test_an_agent_gone_while_an_end_is_claimed_and_back_once_it_is_refused_is_alive_and_in_no_burst() -> None:
+    """Agent 1's token goes while an end is claimed (not judged); the end is refused and agent 1 is back: it is
+    alive as recorded, no event, and it is in no burst: 2 and 3 lost later are a split from their own loss."""
+    pr = present()
+    tokens(pr, IDS[:1], False, 0.1)
+    assert ended(pr, 0.5) == []
+    tokens(pr, IDS[:1], True, 0.6)  # the end refused: judged again
+    assert judge(pr, 0.7, t=0.3) == [] and pr.alive_ids() == IDS
+    tokens(pr, IDS[1:3], False, 1.0)
+    assert [e.kind for e in judge(pr, 1.4, t=0.6)] == [EventKind.AGENT_LOST] * 2
+    assert judge(pr, 1.8, t=0.8) == []  # 0.4 s after the losses: the burst goes on
+    (split,) = judge(pr, 2.5, t=1.0)
+    assert split.kind == EventKind.SPLIT and split.t == 0.6 and split.after == ((IDS[0], *IDS[3:]), tuple(IDS[1:3]))
+
+
+@pytest.mark.xfail(strict=True, reason="an agent lost while an end is claimed is never recorded lost once the end "
+                   "is refused: Presence.sync keeps `told` up to date while ended, so the change is never judged")
+def test_an_agent_gone_while_an_end_is_claimed_is_lost_once_the_end_is_refused() -> None:
+    """The mission did not end (the end was refused): an agent gone meanwhile and still gone is lost."""
+    pr = present()
+    tokens(pr, IDS[:1], False, 0.1)
+    assert ended(pr, 0.5) == []
+    lost = judge(pr, 0.7, t=0.3)  # the end refused: judged again
+    assert [(e.kind, e.agent) for e in lost] == [(EventKind.AGENT_LOST, IDS[0])]
+    assert pr.alive_ids() == IDS[1:]
