@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from reconswarm.net.cells import CellGrid
 from reconswarm.plant import unicycle
 from simworld.plant import Plant
 from tests.unit.test_world_node import IDS, S
@@ -66,3 +67,77 @@ def test_a_robot_commanded_at_every_tick_moves_at_every_tick() -> None:
             plant.command(a, k, 1.0, 0.0)
         assert plant.apply(k) == set(range(len(IDS)))
         assert np.hypot(*(plant.p - before).T) == pytest.approx(1.0 * DT)  # straight at 1 m/s
+
+
+def apart() -> Plant:
+    """Every robot far from every obstacle and from each other (commands of (0, 0): they stand still)."""
+    plant = Plant(S, 0.2)
+    for i in range(len(IDS)):
+        plant.p[i] = np.array([-5000.0, 3000.0 + 1000.0 * i])
+    return plant
+
+
+def moved(plant: Plant, k: int) -> np.ndarray:
+    """How far each head point moves over the step k -> k+1."""
+    before = plant.p.copy()
+    plant.apply(k)
+    return np.hypot(*(plant.p - before).T)
+
+
+def test_a_scan_with_as_many_contour_points_as_held_robots_is_sent() -> None:
+    """Robot 0 sees one contour point (an obstacle's vertex, just within R_v) and one held robot: its scan has
+    both."""
+    plant = apart()
+    vertex = np.asarray(S.obstacles[0].vertices_m[0])  # (345, 0), the diamond's right-hand vertex
+    plant.p[0] = vertex + np.array([S.planner.sensing_range_m - 0.25, 0.0])
+    plant.p[1] = plant.p[0] + np.array([0.0, 5.0])  # its agent is gone
+    scan = plant.observe(0, set(IDS) - {IDS[1]})[1][0].scan
+    assert scan is not None and len(scan.points) == 1 and scan.points[0][:2] == tuple(vertex)
+    assert scan.bodies == ((IDS[1], *plant.p[1].tolist()),)
+
+
+def test_a_held_robot_is_reported_within_reach_plus_two_steps_and_not_beyond() -> None:
+    """docs/wire.md: the scan reports every held robot within reach + 2 V dt of an agent (the cell grid's reach
+    and V dt)."""
+    grid = CellGrid.for_scenario(S)
+    edge = grid.reach_m + 2.0 * grid.step_m
+    for d, seen in ((edge - 0.01, True), (edge + 0.01, False)):
+        plant = apart()
+        plant.p[1] = plant.p[0] + np.array([0.0, d])
+        scan = plant.observe(0, set(IDS) - {IDS[1]})[1][0].scan
+        assert (scan is not None and [b[0] for b in scan.bodies] == [IDS[1]]) is seen, d
+
+
+def test_a_missing_command_is_held_one_tick_when_hold_sim_s_is_one_tick_then_the_robot_stops() -> None:
+    plant = Plant(S, DT)
+    for a in IDS:
+        plant.command(a, 0, 1.0, 0.0)
+    assert moved(plant, 0) == pytest.approx(1.0 * DT)  # its own tick
+    assert moved(plant, 1) == pytest.approx(1.0 * DT)  # tick 1's command missing: tick 0's held for one tick
+    assert np.all(moved(plant, 2) == 0.0)  # then it stops
+
+
+def test_a_late_command_counts_while_held_and_one_older_than_the_hold_or_than_the_last_is_ignored() -> None:
+    """hold_sim_s = 0.2 s is 4 ticks: robot 0's command for tick 0 arriving at tick 4 is still held over the step
+    4 -> 5 (1 m/s), not over 5 -> 6; robot 1's for tick 2 arriving at tick 10 and robot 0's for tick 5 arriving
+    after its command for tick 6 are ignored."""
+    plant = apart()
+    for k in range(4):
+        assert np.all(moved(plant, k) == 0.0)  # nobody commands
+    plant.command(IDS[0], 0, 1.0, 0.0)  # late, for tick 0
+    assert moved(plant, 4).tolist() == pytest.approx([1.0 * DT] + [0.0] * (len(IDS) - 1))
+    assert np.all(moved(plant, 5) == 0.0)
+    for k in range(6, 10):
+        plant.command(IDS[0], k, 0.0, 0.0)
+        plant.apply(k)
+    plant.command(IDS[1], 2, 1.0, 0.0)  # 8 ticks late: older than the hold
+    plant.command(IDS[0], 5, 1.0, 0.0)  # older than robot 0's last command (tick 9)
+    assert np.all(moved(plant, 10) == 0.0)
+
+
+def test_held_bodies_without_a_tick_is_the_start_only_robots_whose_agents_are_gone() -> None:
+    """Nobody has commanded yet: at the start (no tick given, tick 0) nobody stands still for want of commands."""
+    plant = apart()
+    plant.p[1] = plant.p[0] + np.array([0.0, 5.0])
+    assert plant.held_bodies(set(IDS)) == [()] * len(IDS)
+    assert plant.held_bodies(set(IDS) - {IDS[1]})[0] == ((IDS[1], *plant.p[1].tolist()),)
