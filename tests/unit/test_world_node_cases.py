@@ -305,3 +305,19 @@ def test_the_plant_given_is_the_one_stepped() -> None:
     node.step([*tokens(), MONITOR], 0.0)
     run_ticks(node, range(0, 1), 0.0)
     assert not (plant.p == S.starts).all()  # the robots it holds moved
+
+
+def test_a_realtime_agent_silent_2_s_of_wall_and_of_simulated_time_is_gone_though_its_token_stays() -> None:
+    """Membership: an agent with a token counts until silent both fresh_s (2 s) of wall time and fresh_sim_s (2 s)
+    of simulated time. Agent 2 commands ticks 0 to 2, then falls silent (its token stays); the others command
+    every tick. At speed 10, 2.5 s of wall later the simulated time is 25 s on: agent 2 is gone, the others
+    not."""
+    node = started(ClockMode.REALTIME, now=0.0)
+    mute, now = IDS[1], 0.0
+    while now < 2.5:
+        out = node.step([], now)
+        for tick in ticks(out):
+            skip = (mute,) if tick.clock.k > 2 else ()
+            node.step(commands(tick.clock.k, (0.0, 0.0), now, skip), now)
+        now = round(now + PERIOD, 6)
+    assert node.k * DT > 20.0 and mute not in node.alive and node.alive == set(IDS) - {mute}
