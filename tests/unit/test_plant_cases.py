@@ -141,3 +141,17 @@ def test_held_bodies_without_a_tick_is_the_start_only_robots_whose_agents_are_go
     plant.p[1] = plant.p[0] + np.array([0.0, 5.0])
     assert plant.held_bodies(set(IDS)) == [()] * len(IDS)
     assert plant.held_bodies(set(IDS) - {IDS[1]})[0] == ((IDS[1], *plant.p[1].tolist()),)
+
+
+def test_a_robot_never_commanded_is_held_from_tick_1_even_with_a_hold_of_many_ticks() -> None:
+    """hold_sim_s = 5 s (100 ticks): a robot whose agent never commanded is held from tick 1 all the same (its
+    commands never came; docs/wire.md), not only 100 ticks after some earlier time."""
+    plant = Plant(S, 5.0)
+    for i in range(len(IDS)):
+        plant.p[i] = np.array([-5000.0, 3000.0 + 1000.0 * i])
+    plant.p[1] = plant.p[0] + np.array([0.0, 5.0])
+    for a in IDS[:1] + IDS[2:]:  # everyone but agent 1 (alive by its token) commands tick 0
+        plant.command(a, 0, 0.0, 0.0)
+    plant.apply(0)
+    scan = plant.observe(1, set(IDS))[1][0].scan
+    assert scan is not None and scan.bodies == ((IDS[1], *plant.p[1].tolist()),)
