@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from monitor.messages import ClockFrom
@@ -238,3 +239,69 @@ def test_an_end_whose_tick_is_recorded_stands_only_once_the_world_is_gone(tmp_pa
     assert run.exit is None
     run.tick(2, 0.3)
     assert run.exit is None and [r.source for r in run.refused] == ["forger-zid"]
+
+
+# ------------------------------------------------------------------------------------------ a restarted monitor
+
+
+def restarted(tmp_path: Path, last_k: int) -> Run:
+    """A record holding ticks 0..last_k, and a second monitor appending to it (every agent's token there)."""
+    first = started(tmp_path)
+    for k in range(last_k + 1):
+        first.tick(k, 0.01 * k)
+    first.stop(1.0)
+    again = Run(tmp_path, offset=1005.0, append=True)
+    assert again.step(0.0, *tokens(True)) == []
+    return again
+
+
+def test_a_restarted_monitor_takes_no_truth_of_the_ticks_it_has_and_notes_one_gap(tmp_path: Path) -> None:
+    """The world's publisher sends the record's last tick (2) again: not recorded again; the restart's gap is one,
+    from tick 2 to the first new tick (40)."""
+    run = restarted(tmp_path, 2)
+    run.step(0.05, truth(2))
+    run.tick(40, 0.1)
+    run.stop(0.2)
+    with run.record() as rec:
+        assert rec.ticks().k.tolist() == [0, 1, 2, 40]
+        assert [(g["t_from"], g["t_to"]) for g in rec.gaps()] == [(pytest.approx(2 * DT), pytest.approx(40 * DT))]
+
+
+def test_a_restarted_monitor_sees_no_split_across_its_gap_and_one_right_after_it(tmp_path: Path) -> None:
+    """The swarm in one line after the restart, 10 m apart (one group): no split or merge across the gap. Agent 1
+    goes 10 km away at tick 50, 0.5 s after the restart's first tick, and stays: one split at tick 50's time,
+    confirmed once it persisted (1 s)."""
+    run = restarted(tmp_path, 2)
+    line = np.column_stack([10.0 * np.arange(len(IDS)), np.zeros(len(IDS))])
+    far = line.copy()
+    far[0] = (10_000.0, 0.0)
+    for k in range(40, 50):
+        run.tick(k, 0.01 * k, p=line)
+    assert [e for e in run.events if e.kind in (EventKind.SPLIT, EventKind.MERGE)] == []
+    for k in range(50, 81):
+        run.tick(k, 0.01 * k, p=far)
+    run.stop(2.0)
+    (split,) = [e for e in run.events if e.kind in (EventKind.SPLIT, EventKind.MERGE)]
+    assert split.kind == EventKind.SPLIT and split.t == pytest.approx(50 * DT) and (IDS[0],) in split.after
+
+
+def test_a_restarted_monitor_stamps_a_loss_before_its_first_clock_with_the_records_time(tmp_path: Path) -> None:
+    """The record stands at tick 40 (t = 2 s); an agent's token goes before the second monitor's first clock: its
+    loss is at t = 2 s, the record's time, not 0."""
+    run = restarted(tmp_path, 40)
+    run.step(0.1, token(IDS[2], False))
+    (lost,) = run.step(0.5)
+    assert (lost.kind, lost.agent, lost.t) == (EventKind.AGENT_LOST, IDS[2], pytest.approx(40 * DT))
+
+
+def test_an_agent_never_heard_gets_its_grace_from_the_first_clock_not_from_the_tokens(tmp_path: Path) -> None:
+    """Tokens at 0 s, the first clock at 30 s, then 6.45 s of simulated time within 1.3 s of wall; agent 4 never
+    reports: it is not lost within grace_s (10 s) of wall time from the first clock, and lost after it."""
+    run = Run(tmp_path)
+    run.step(0.0, *tokens(True))
+    quiet = (IDS[3],)
+    for k in range(130):
+        run.tick(k, 30.0 + 0.01 * k, quiet=quiet)
+    assert run.events == []
+    run.tick(130, 40.5, quiet=quiet)
+    assert kinds(run.events) == [("agent_lost", IDS[3])]
