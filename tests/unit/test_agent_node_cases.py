@@ -502,3 +502,18 @@ def test_the_virtual_leader_merges_every_peers_set_into_the_union(mode: str) -> 
     assert node.k == 0
     assert "hexagon" in dict(node.brain.union.sorted_items())  # far beyond link range: the union has it
     assert "hexagon" not in node.brain.obstacle_sets()  # (our own knowledge merges linked peers' sets only)
+
+
+def test_with_the_deadlock_perturbation_on_the_brain_is_fed_each_tick() -> None:
+    """perturbation_mps > 0: the stall detector keeps a window of ticks (stall_window_s = 5 s, 100 ticks) and
+    perturbs a robot that made no progress over it. Standing still for 120 ticks, the node commands every tick
+    as the brain fed that tick does, and the perturbation comes in (the command changes with no new input)."""
+    s = dataclasses.replace(S, planner=dataclasses.replace(S.planner, perturbation_mps=0.5))
+    node = started(node_s=s, peers=())
+    ref = AgentBrain(s, A)
+    got, want = [], []
+    for k in range(120):
+        got += vw(node.step([clock(k, (A,)), state(k, 100.0, 0.0)], k * 0.01))
+        u, _ = ref.tick(k, np.array([100.0, 0.0]), {}, [], [])
+        want.append((k, *ref.inputs(u, 0.0)))
+    assert got == want and got[-1][1:] != got[0][1:]
