@@ -56,9 +56,9 @@ class Presence:
         for aid in self.ids:
             up = self.members.alive(aid, now_s, t)
             if self.told.get(aid, False) != up:
-                self.told[aid] = up
-                if ended:  # agents leave when the mission ends: not a loss
+                if ended:  # agents leave when the mission ends: not a loss (judged, should the end be refused)
                     continue
+                self.told[aid] = up
                 if held:
                     self.deferred[aid] = up
                 else:

@@ -5,8 +5,6 @@ merge's time. Pure: tokens given to the membership, times given."""
 
 from __future__ import annotations
 
-import pytest
-
 from monitor.presence import Presence
 from reconswarm.paper.events import Event, EventKind
 from tests.unit.monitor_run import IDS, T
@@ -149,8 +147,6 @@ def test_an_agent_gone_while_an_end_is_claimed_and_back_once_it_is_refused_is_al
     assert split.kind == EventKind.SPLIT and split.t == 0.6 and split.after == ((IDS[0], *IDS[3:]), tuple(IDS[1:3]))
 
 
-@pytest.mark.xfail(strict=True, reason="an agent lost while an end is claimed is never recorded lost once the end "
-                   "is refused: Presence.sync keeps `told` up to date while ended, so the change is never judged")
 def test_an_agent_gone_while_an_end_is_claimed_is_lost_once_the_end_is_refused() -> None:
     """The mission did not end (the end was refused): an agent gone meanwhile and still gone is lost."""
     pr = present()
