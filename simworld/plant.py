@@ -72,7 +72,7 @@ class Plant:
         `hold_sim_s` ago or never came (an agent alive by its token that never spoke is heard by nobody: without
         this its robot would be in nobody's plan); none for a robot whose own agent is gone."""
         out: list[tuple[tuple[int, float, float], ...]] = [()] * len(self.ids)
-        stopped = (k - self.held_k) > self.hold_ticks if k >= 1 else np.zeros(len(self.ids), dtype=bool)
+        stopped = self.stopped(k) if k >= 1 else np.zeros(len(self.ids), dtype=bool)
         held = [i for i, a in enumerate(self.ids) if a not in alive or stopped[i]]
         if not held:
             return out
@@ -83,6 +83,10 @@ class Plant:
                 out[i] = tuple((self.ids[held[j]], float(hp[j, 0]), float(hp[j, 1]))
                                for j in map(int, np.flatnonzero(d[i] <= self.body_range_m)) if held[j] != i)
         return out
+
+    def stopped(self, k: int) -> np.ndarray:
+        """(N,) bool: the robots no command holds at tick k (the last one older than `hold_sim_s`, or none ever)."""
+        return (k - self.held_k) > self.hold_ticks
 
     def apply(self, k: int) -> set[int]:
         """Choose every robot's input for the step k -> k+1 and integrate; the agent indices commanded for k."""
@@ -97,8 +101,7 @@ class Plant:
                 self._hold(kk, late)
         if got:
             self._hold(k, got)
-        stale = (k - self.held_k) > hold
-        self.integrate(np.where(stale[:, None], 0.0, self.held))
+        self.integrate(np.where(self.stopped(k)[:, None], 0.0, self.held))
         return set(got)
 
     def _hold(self, k: int, cmds: dict[int, np.ndarray]) -> None:
