@@ -50,22 +50,24 @@ Tag = tuple[str, Any]  # ALL | ("own", agent id) | ("cell", cell or None): the s
 
 class TaggedInbox:
     """Samples from zenoh with the subscription they came through, held raw until the loop takes them all at
-    once (inbox.Inbox's rules: an urgent sample, or `want` of them, wake the loop; nothing blocks or calls
-    zenoh in a callback); counted in inbox.Inbox's process totals."""
+    once (inbox.Inbox's rules: `want` of them, or the hosted agents' states, wake the loop; nothing blocks or
+    calls zenoh in a callback); counted in inbox.Inbox's process totals.
+
+    The world publishes every robot's state of a tick in one burst: the loop wakes once the states of all the
+    hosted agents that wait for one are in (`urgent` of them), or `LINGER_S` after the first, so that one
+    round, not several, takes the burst."""
+
+    LINGER_S = 0.002  # how long the rest of a burst of states may take after its first
 
     def __init__(self) -> None:
-        self._samples: deque[tuple[Tag, Any, float]] = deque()
+        self._samples: deque[tuple[Tag, Any, float, bool]] = deque()
         self._ready = threading.Event()
         self._want: float = 1
-        self._urgent = False
 
     def callback(self, tag: Tag, urgent: bool = False) -> Callable[[Any], None]:
         def cb(sample: Any) -> None:
-            self._samples.append((tag, sample, time.monotonic()))
-            if urgent:
-                self._urgent = True
-                self._ready.set()
-            elif len(self._samples) >= self._want:
+            self._samples.append((tag, sample, time.monotonic(), urgent))
+            if urgent or len(self._samples) >= self._want:
                 self._ready.set()
 
         return cb
@@ -73,17 +75,33 @@ class TaggedInbox:
     def handler(self, tag: Tag, urgent: bool = False) -> Any:
         return zenoh.handlers.Callback(self.callback(tag, urgent))
 
-    def take(self, want: int | None, timeout: float | None) -> list[tuple[Tag, Item]]:
+    def _states(self) -> tuple[int, float]:
+        """How many hosted agents' urgent samples wait, and when the first came (inf: none)."""
+        got = [(at, tag) for tag, _s, at, urgent in list(self._samples) if urgent]  # (list(): one atomic copy)
+        return len({tag for _at, tag in got}), min((at for at, _tag in got), default=math.inf)
+
+    def take(self, want: int | None, timeout: float | None, urgent: int = 1) -> list[tuple[Tag, Item]]:
+        """Every sample waiting, once `want` of them (None: only states) are in, or the states of `urgent` hosted
+        agents (or some, `LINGER_S` ago), or once `timeout` seconds passed (at once if 0)."""
         self._want = math.inf if want is None else max(1, want)
-        self._ready.clear()
-        if not self._urgent and len(self._samples) < self._want and (timeout is None or timeout > 0):
-            self._ready.wait(timeout)
-        self._urgent = False
+        end = math.inf if timeout is None else time.monotonic() + timeout
+        while timeout != 0 and len(self._samples) < self._want:
+            states, first = self._states()
+            if states >= max(1, urgent):
+                break
+            until = min(end, first + self.LINGER_S)
+            now = time.monotonic()
+            if now >= until:
+                break
+            self._ready.clear()
+            if len(self._samples) >= self._want or self._states()[0] > states:  # (came meanwhile)
+                continue
+            self._ready.wait(None if until == math.inf else until - now)
         if timeout != 0:  # (a round that only hands over what co-hosted agents published does not count)
             Inbox.wakeups += 1
         out = []
         while self._samples:
-            tag, sample, at = self._samples.popleft()
+            tag, sample, at, _urgent = self._samples.popleft()
             item = to_item(sample, at)
             if item is not None:
                 out.append((tag, item))
@@ -103,6 +121,7 @@ class AgentHost:
         self.local: list[tuple[Tag, Item]] = []  # what co-hosted agents published since the last round
         self.listening: dict[int, frozenset[Cell] | None] = {}  # agent -> the cells it listens to (None: all)
         self.by_cell: dict[Cell | None, set[int]] = {}  # cell -> the agents listening to it (None: to all)
+        self._heard_by: dict[Cell | None, list[int]] = {}  # cell -> `_listeners` (until listening or `active` change)
         self.cell_subs: dict[Cell | None, tuple[Any, Any]] = {}  # the host's subscriptions (None: every cell)
         self.sets: dict[int, tuple[Tag, Item]] = {}  # agent -> its newest obstacle set heard (its cell in its key)
         self.replay: list[tuple[int, Tag, Item]] = []  # (agent, tag, obstacle set) for that agent alone (replayed)
@@ -134,6 +153,7 @@ class AgentHost:
         if aid in self.listening and old == c.listen:
             return
         self.listening[aid] = c.listen
+        self._heard_by.clear()
         for cell in {None} if old is None else old:  # (the index: who listens to a cell; None: to every cell)
             self.by_cell.get(cell, set()).discard(aid)
         for cell in {None} if c.listen is None else c.listen:
@@ -156,8 +176,11 @@ class AgentHost:
     def _listeners(self, cell: Cell | None) -> list[int]:
         """The running agents that listen to `cell` (a valid one; None: nobody but those listening to every cell),
         in id order."""
-        got = self.by_cell.get(cell, set()) if cell is not None else set()
-        return sorted(a for a in got | self.by_cell.get(None, set()) if a in self.active)
+        heard_by = self._heard_by.get(cell)
+        if heard_by is None:
+            got = self.by_cell.get(cell, set()) if cell is not None else set()
+            heard_by = self._heard_by[cell] = sorted(a for a in got | self.by_cell.get(None, set()) if a in self.active)
+        return heard_by
 
     @staticmethod
     def _hears(listen: frozenset[Cell] | None, cell: Cell | None) -> bool:
@@ -258,8 +281,17 @@ class AgentHost:
         exits = rt.run(nodes, self, started=lambda: any(n.started for n in nodes.values()))
         return RECONNECT if rt.interrupted else max((e.code for e in exits.values()), default=0)
 
-    def pending(self) -> bool:
-        return bool(self.local)
+    def pending(self) -> dict[int, int]:
+        """How many inputs each hosted agent's next batch holds already: what co-hosted agents published for it
+        (their beacons and sets in its cells), the sets replayed to it."""
+        held: dict[int, int] = {}
+        for aid, _tag, _item in self.replay:
+            held[aid] = held.get(aid, 0) + 1
+        for tag, item in self.local:
+            for aid in self._listeners(self._cell(item[0])):
+                if aid != tag[1]:
+                    held[aid] = held.get(aid, 0) + 1
+        return held
 
     def idle(self, who: int, now_s: float) -> None:
         self.links[who].report()
@@ -268,6 +300,7 @@ class AgentHost:
         link = self.links[aid]
         link.report(final=True)
         del self.active[aid]
+        self._heard_by.clear()
         if code.code != 0 and self.active:  # it stops; its co-hosted agents go on
             self.listen(aid, Cells(link.home or (0, 0), frozenset()))
             self.listening.pop(aid)

@@ -154,8 +154,8 @@ class MonitorPort(Member):
     def exited(self, who: int, code: Exit, now_s: float) -> None:
         log.info("monitor: %s", code.reason)
 
-    def pending(self) -> bool:
-        return False
+    def pending(self) -> dict[Any, int]:
+        return {}
 
     # ------------------------------------------------------------------------------------ views
 

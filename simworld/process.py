@@ -149,8 +149,8 @@ class WorldPort(Member):
     def exited(self, who: Any, code: Exit, now_s: float) -> None:
         self.report(final=True)
 
-    def pending(self) -> bool:
-        return False
+    def pending(self) -> dict[Any, int]:
+        return {}
 
     def report(self, final: bool = False) -> None:
         r = self.gate.report(time.monotonic(), final)

@@ -53,9 +53,9 @@ class Inbox:
         self._urgent = True
         self._ready.set()
 
-    def take(self, want: int | None, timeout: float | None) -> list[Item]:
+    def take(self, want: int | None, timeout: float | None, urgent: int = 1) -> list[Item]:
         """Every sample waiting, once an urgent one or `want` of them (None: only an urgent one) are in, or
-        once `timeout` seconds passed (at once if 0)."""
+        once `timeout` seconds passed (at once if 0). (`urgent`: one is enough here: a process with one node.)"""
         self._want = math.inf if want is None else max(1, want)
         self._ready.clear()  # (set by samples an earlier take already had, or that were fewer than wanted then)
         if not self._urgent and len(self._samples) < self._want and (timeout is None or timeout > 0):

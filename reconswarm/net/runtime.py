@@ -6,8 +6,11 @@ inbox, `route` turns a batch of raw samples into each node's inputs (the table f
 with admission and rejection counting: what a node is given is believed), `act` does what a node returned
 (put a message on the wire under its key or ROS 2 topic, hand rows to the record). The runtime owns the rest:
 
-- one wake-up per batch: it sleeps until the nodes' count of what they still need is in (`awaiting`), an
-  urgent sample comes, the nearest node timer is due (`wake_at_s`), or `poll_s` passed;
+- one wake-up per batch: it sleeps until the nodes' count of what they still need is in (`awaiting`, less what
+  the port holds for each without a sample to come: what co-hosted nodes published), the urgent samples of
+  the nodes that need one to act came (an agent's state; the inbox may go on with some after a short while),
+  the nearest node timer is due (`wake_at_s`), or `poll_s` passed; at once if what the port holds is all a
+  node still needs;
 - a node is stepped when it has inputs, when its timer is due, or every `poll_s` (its timers);
 - our own session's router link going or coming back reaches every node as `RouterLink` (net/uplink.py);
 - SIGINT/SIGTERM (the `Stopper`) reach every node as `Stop`: each winds down and says what happened (its
@@ -30,11 +33,12 @@ from reconswarm.net.uplink import LinkChange, Uplink
 
 
 class Batches(Protocol):
-    """An inbox: `take` every sample waiting once `want` of them (None: only an urgent one) are in, an urgent one
-    came, or `timeout` seconds passed (net/inbox.Inbox; agent/host.TaggedInbox, which tags each sample with
-    the subscription it came through)."""
+    """An inbox: `take` every sample waiting once `want` of them (None: only urgent ones) are in, `urgent` urgent
+    ones came (from as many nodes; an inbox may go on with fewer after a short while), or `timeout` seconds
+    passed (net/inbox.Inbox; agent/host.TaggedInbox, which tags each sample with the subscription it came
+    through)."""
 
-    def take(self, want: int | None, timeout: float | None) -> Sequence[Any]: ...
+    def take(self, want: int | None, timeout: float | None, urgent: int = 1) -> Sequence[Any]: ...
 
 
 class Port(Protocol):
@@ -56,8 +60,9 @@ class Port(Protocol):
         """Node `who` left the loop with `code` (the others go on)."""
         ...
 
-    def pending(self) -> bool:
-        """Whether something is waiting that needs no sample to arrive (what co-hosted nodes published)."""
+    def pending(self) -> Mapping[Any, int]:
+        """How many inputs wait for each node that need no sample to arrive (what co-hosted nodes published): its
+        next batch has them, whenever it comes."""
         ...
 
 
@@ -79,11 +84,15 @@ class Runtime:
         while active:
             mark(started())
             now = time.monotonic()
-            needs = [w for w in (n.awaiting(now) for n in active.values()) if w is not None]
+            held = port.pending()
+            awaiting = [(who, n.awaiting(now)) for who, n in active.items()]
+            needs = [w - held.get(who, 0) for who, w in awaiting if w is not None]
             wakes = [w for w in (n.wake_at_s() for n in active.values()) if w is not None]
-            timeout = 0.0 if port.pending() else self.poll_s if not wakes else min(
+            # (what the port holds may all be in a node's count of what it needs: then nothing need arrive)
+            timeout = 0.0 if any(w <= 0 for w in needs) else self.poll_s if not wakes else min(
                 self.poll_s, max(0.0, min(wakes) - now))
-            items = self.inbox.take(min(needs) if needs else None, timeout)
+            # (the nodes that need an urgent sample of their own to act: their states, which come in one burst)
+            items = self.inbox.take(max(1, min(needs)) if needs else None, timeout, len(awaiting) - len(needs))
             now = time.monotonic()
             shared: list[Any] = []
             if (change := self.uplink.poll()) is not None:

@@ -91,8 +91,9 @@ def test_what_a_co_hosted_agent_publishes_goes_to_the_others_never_back(host: Ag
     host.listen(2, Cells(A, frozenset({A, B})))
     item = beacon(1, A, source=host.source)
     host.local.append((("local", 1), item))
+    assert host.pending() == {2: 1}  # (the runtime counts it in what agent 2 still needs: nothing need arrive)
     got = host.route([])
-    assert got[1] == [] and ids(got[2]) == [("Beacon", 1)]
+    assert got[1] == [] and ids(got[2]) == [("Beacon", 1)] and host.pending() == {}
     # Agent 1's key from another session: agent 1 counts it invalid; agent 2's gate refuses it (agent 1 runs in
     # this process: its beacons never come through the router).
     got = host.route([(("cell", A), beacon(1, A, source=PEER))])
@@ -121,5 +122,6 @@ def test_a_co_hosted_agents_set_is_replayed_as_its_own_not_refused(host: AgentHo
     host.act(1, out, 0.0)  # agent 1 publishes its set in cell A: agent 2 does not listen there yet
     assert host.route([]) == {1: [], 2: []}
     host.listen(2, Cells(B, frozenset({A, B})))
+    assert host.pending() == {2: 1}  # (replayed to agent 2 alone)
     got = host.route([])
     assert ids(got[2]) == [("ObstacleSet", 1)] and host.links[2].gate.count == 0

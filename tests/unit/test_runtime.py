@@ -1,8 +1,9 @@
 """The one runtime (reconswarm/net/runtime.py) against its rules, with nodes and an inbox of our own (no zenoh: the
 runtime's only zenoh call, the uplink's, finds no router on a session object without one and follows nothing).
 
-Rules: one wake-up per batch, waiting for the fewest messages any node still needs or the nearest node timer (at
-once if something co-hosted is pending); a node is stepped when it has inputs, when its timer is due, or every
+Rules: one wake-up per batch, waiting for the fewest messages any node still needs (less what the port holds for
+it; at once if that is all it needs), for the urgent samples of the nodes that need one, or for the nearest node
+timer; a node is stepped when it has inputs, when its timer is due, or every
 poll_s; a signal reaches every node once as Stop; a node's Exit takes it out of the loop and the others go on; a
 port's act can stop the whole loop."""
 
@@ -36,9 +37,11 @@ class Inbox:
     def __init__(self, batches: list[list[Any]], on_take: Any = None) -> None:
         self.batches, self.on_take = batches, on_take
         self.asked: list[tuple[int | None, float | None]] = []
+        self.urgent: list[int] = []
 
-    def take(self, want: int | None, timeout: float | None) -> Sequence[Any]:
+    def take(self, want: int | None, timeout: float | None, urgent: int = 1) -> Sequence[Any]:
         self.asked.append((want, timeout))
+        self.urgent.append(urgent)
         if self.on_take is not None:
             self.on_take(len(self.asked))
         return self.batches.pop(0) if self.batches else []
@@ -78,7 +81,7 @@ class Port:
         self.idled: list[Any] = []
         self.gone: list[tuple[Any, int]] = []
         self.stop_on = stop_on
-        self.local = False
+        self.local: dict[Any, int] = {}
 
     def route(self, items: Sequence[Any], now_s: float) -> dict[Any, list[Any]]:
         out: dict[Any, list[Any]] = {}
@@ -96,7 +99,7 @@ class Port:
     def exited(self, who: Any, code: Exit, now_s: float) -> None:
         self.gone.append((who, code.code))
 
-    def pending(self) -> bool:
+    def pending(self) -> dict[Any, int]:
         return self.local
 
 
@@ -138,14 +141,38 @@ def test_the_wait_is_for_the_fewest_messages_any_node_needs() -> None:
     inbox = Inbox([[("to", w, ("exit", 0)) for w in (1, 2, 3)]])
     runtime(inbox, poll_s=0.3).run({1: a, 2: b, 3: c}, Port())
     assert inbox.asked == [(2, 0.3)]
+    assert inbox.urgent == [1]  # (node 3 needs an urgent sample of its own: its state)
 
 
-def test_something_pending_means_no_waiting() -> None:
+def test_the_wait_is_for_the_urgent_samples_of_every_node_that_needs_one() -> None:
+    nodes = {w: Node(need=None) for w in (1, 2, 3)} | {4: Node(need=2)}
+    inbox = Inbox([[("to", w, ("exit", 0)) for w in (1, 2, 3, 4)]])
+    runtime(inbox, poll_s=0.3).run(nodes, Port())
+    assert inbox.asked == [(2, 0.3)] and inbox.urgent == [3]
+
+
+def test_what_the_port_holds_for_a_node_counts_toward_what_it_needs() -> None:
     port = Port()
-    port.local = True
+    port.local = {1: 2, 2: 1}  # (held for node 1: 2 of the 5 it needs; for node 2: 1 of its 4)
+    inbox = Inbox([[("to", w, ("exit", 0)) for w in (1, 2)]])
+    runtime(inbox, poll_s=0.3).run({1: Node(need=5), 2: Node(need=4)}, port)
+    assert inbox.asked == [(3, 0.3)]
+
+
+def test_no_waiting_when_what_the_port_holds_is_all_a_node_needs() -> None:
+    port = Port()
+    port.local = {2: 3}
+    inbox = Inbox([[("to", w, ("exit", 0)) for w in (1, 2)]])
+    runtime(inbox, poll_s=0.3).run({1: Node(need=5), 2: Node(need=3)}, port)
+    assert inbox.asked == [(1, 0.0)]  # (node 2 steps now: nothing need arrive)
+
+
+def test_what_the_port_holds_for_a_node_that_needs_its_own_state_first_is_no_reason_to_wake() -> None:
+    port = Port()
+    port.local = {1: 4}
     inbox = Inbox([[("to", 1, ("exit", 0))]])
-    runtime(inbox, poll_s=0.3).run({1: Node()}, port)
-    assert inbox.asked == [(None, 0.0)]
+    runtime(inbox, poll_s=0.3).run({1: Node(need=None)}, port)
+    assert inbox.asked == [(None, 0.3)]
 
 
 def test_a_signal_reaches_every_node_once_as_stop() -> None:

@@ -1,0 +1,87 @@
+"""An agent host's inbox (agent/host.TaggedInbox) against its rules, fed by hand as zenoh's callbacks feed it: the
+loop wakes once `want` samples are in, or once the states (urgent samples) of `urgent` hosted agents are in, so
+that one round takes the world's burst of states, or `LINGER_S` after the first state if the rest does not come.
+
+(Each take runs in a thread joined with a long timeout: a take that waits when it should not hangs there.)"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from typing import Any
+
+from agent.host import TaggedInbox
+
+
+class Payload:
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+
+    def to_bytes(self) -> bytes:
+        return self.data
+
+
+class Sample:
+    """What the inbox reads of a zenoh sample (inbox.to_item)."""
+
+    def __init__(self, key: str) -> None:
+        self.key_expr, self.payload, self.kind, self.timestamp = key, Payload(b"x"), "PUT", None
+
+
+def fill(inbox: TaggedInbox, *who: int | str) -> None:
+    """An agent's state (urgent) for each int, a beacon for each string."""
+    for w in who:
+        if isinstance(w, int):
+            inbox.callback(("own", w), urgent=True)(Sample(f"s/agent/{w}/state"))
+        else:
+            inbox.callback(("cell", None))(Sample(w))
+
+
+def take(inbox: TaggedInbox, want: int | None, urgent: int, later: list[int | str] | None = None,
+         timeout: float | None = None) -> list[str]:
+    """The keys one take returns (None: it did not return); `later` is fed 0.2 s after the take started."""
+    got: list[Any] = []
+    t = threading.Thread(target=lambda: got.extend(inbox.take(want, timeout, urgent)))
+    t.start()
+    if later:
+        time.sleep(0.2)
+        fill(inbox, *later)
+    t.join(30.0)
+    assert not t.is_alive(), "the take is still waiting"
+    return [item[0] for _tag, item in got]
+
+
+def test_the_states_of_every_hosted_agent_waiting_for_one_wake_the_loop_together() -> None:
+    inbox = TaggedInbox()
+    inbox.LINGER_S = math.inf  # (the rest of the burst is waited for as long as it takes)
+    fill(inbox, 1, 2)
+    assert take(inbox, None, 3, later=[3]) == ["s/agent/1/state", "s/agent/2/state", "s/agent/3/state"]
+
+
+def test_two_states_of_one_agent_count_once() -> None:
+    inbox = TaggedInbox()
+    inbox.LINGER_S = math.inf
+    fill(inbox, 1, 1)
+    assert len(take(inbox, None, 2, later=[2])) == 3
+
+
+def test_the_rest_of_a_burst_is_not_waited_for_past_the_linger() -> None:
+    inbox = TaggedInbox()
+    inbox.LINGER_S = 0.0
+    fill(inbox, 1)
+    assert take(inbox, None, 3) == ["s/agent/1/state"]
+
+
+def test_want_samples_wake_the_loop_whatever_states_are_missing() -> None:
+    inbox = TaggedInbox()
+    fill(inbox, "b/1", "b/2")
+    assert take(inbox, 3, 5, later=["b/3"]) == ["b/1", "b/2", "b/3"]
+
+
+def test_a_timeout_of_zero_takes_what_is_there_at_once() -> None:
+    inbox = TaggedInbox()
+    inbox.LINGER_S = math.inf
+    fill(inbox, 1, "b/1")
+    assert take(inbox, 5, 3, timeout=0.0) == ["s/agent/1/state", "b/1"]
+    assert take(inbox, 5, 3, timeout=0.0) == []
