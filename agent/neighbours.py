@@ -29,7 +29,7 @@ that meets the disk of radius reach + 3 V dt around its head point, V the scenar
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Container, Iterable, Mapping
 from dataclasses import dataclass
 
 from reconswarm.net import wire
@@ -118,14 +118,13 @@ class Neighbourhood:
                  last_seen: Mapping[int, wire.Beacon]) -> frozenset[int]:
         """The live peers tick k waits for (fixed at its first call for k, then filtered by `alive`).
         prev: the peers' beacons of tick k-1."""
-        alive = {a for a in alive if a != self.id}
         if self.everyone:
-            return frozenset(alive)
+            return frozenset(alive) - {self.id}
         near = self.near.get(k)
         if near is None:
             near = self._near(k, prev, last_seen)
             self.near[k] = near
-        return near & alive
+        return near.intersection(alive)  # (near never holds us; for a set `alive`, as long as the smaller)
 
     def _near(self, k: int, prev: Mapping[int, wire.Beacon], last_seen: Mapping[int, wire.Beacon]) -> frozenset[int]:
         """Every peer of the scenario that may matter at k, alive or not: whom `alive` names may still grow
@@ -136,7 +135,8 @@ class Neighbourhood:
         if own is None:
             return frozenset()
         out = set()
-        for a in self.peers:
+        # (after tick 0 only peers with a beacon of k-1 or back in the mission can be near: not the whole swarm)
+        for a in self.peers if k == 0 else self.peers.intersection(prev.keys() | self.joined):
             b = prev.get(a)
             # A peer that joined again is placed by its beacons once its beacon of k-1 is in (not by any beacon of
             # it: one of k may come before our state of k, and the wait set must not depend on that order).
@@ -163,10 +163,18 @@ class Neighbourhood:
         return out
 
     @staticmethod
-    def heard_lately(alive: Iterable[int], heard: Mapping[int, float], now: float, period_s: float) -> set[int]:
-        """Realtime: the live peers heard within REALTIME_SILENT_S (or 3 periods) of wall time."""
+    def heard_lately(alive: Container[int], heard: dict[int, float], now: float, period_s: float) -> set[int]:
+        """Realtime: the live peers heard within REALTIME_SILENT_S (or 3 periods) of wall time. `heard` is in the
+        order its times were set (the newest last) and holds every live peer (its token's time if nothing else):
+        only the peers heard lately are read, not the whole swarm."""
         quiet = max(REALTIME_SILENT_S, 3.0 * period_s)
-        return {a for a in alive if now - heard.get(a, now) <= quiet}
+        out = set()
+        for a in reversed(heard):  # (newest first)
+            if now - heard[a] > quiet:
+                break
+            if a in alive:
+                out.add(a)
+        return out
 
     def intruder(self, k: int, b: wire.Beacon) -> bool:
         """A beacon of tick k from a peer we did not wait for at k, within reach of us at k: the speed bound
@@ -175,6 +183,11 @@ class Neighbourhood:
         if self.everyone or near is None or own is None or b.id in near:
             return False
         return (b.px - own[0]) ** 2 + (b.py - own[1]) ** 2 <= self.grid.reach_m ** 2
+
+    def intruders(self, k: int, fresh: Mapping[int, wire.Beacon]) -> list[wire.Beacon]:
+        """The intruders among tick k's beacons `fresh` (by peer), reading only the peers we did not wait for."""
+        near = self.near.get(k)
+        return [] if near is None else [b for a, b in fresh.items() if a not in near and self.intruder(k, b)]
 
     def also_heard(self, alive: set[int], prev: Mapping[int, wire.Beacon], fresh: Mapping[int, wire.Beacon],
                    waited: set[int]) -> int:

@@ -58,7 +58,7 @@ class AgentNode:
         self.world_gone = False  # the world's token went away and no clock came since (a stalled world)
         self.started = False  # the mission began (first clock): the watches run from then on
         self.last_cmd: wire.Cmd | None = None
-        self.heard: dict[int, float] = {}  # wall time of each peer's latest beacon (or of its token)
+        self.heard: dict[int, float] = {}  # wall time of each peer's latest beacon (or of its token), the newest last
         self.last_act = self.acted = now_s  # wall time of our latest command, re-sent or not (acted: of a new tick)
         self.state_at: dict[int, float] = {}  # wall time each tick's state arrived (while waiting for the rest)
         self._linked: tuple[int, dict[int, int]] = (-1, {})  # (tick, linked peer -> its set's revision)
@@ -115,7 +115,17 @@ class AgentNode:
     # ----------------------------------------------------------------------------------------- input
 
     def _take(self, m: Input, now: float) -> None:
-        if isinstance(m, Token) and m.role is Role.AGENT and m.agent is not None:
+        if isinstance(m, wire.Beacon):  # (most of what arrives: first)
+            self.beacons.setdefault(m.k, {})[m.id] = m
+            self.heard.pop(m.id, None)  # (kept in the order of its times: the newest last)
+            self.heard[m.id] = now
+            if m.k <= self.k and self.guessed_k < 0 and self.nb.intruder(m.k, m):  # too late: we acted without it
+                self.guessed_k = m.k
+                log.warning("agent %d: tick %d: %s; lockstep is no longer deterministic", self.id, m.k,
+                            self.nb.unexpected(m))
+            if m.id not in self.last_seen or m.k >= self.last_seen[m.id].k:
+                self.last_seen[m.id] = m
+        elif isinstance(m, Token) and m.role is Role.AGENT and m.agent is not None:
             (self.alive.add if m.up else self.alive.discard)(m.agent)
             (self.gone.discard if m.up else self.gone.add)(m.agent)
             if m.up:
@@ -154,15 +164,6 @@ class AgentNode:
                 # Held robots near us (the world says their agents are gone; maybe never heard: lost far away).
                 self.last_seen.update((a, wire.Beacon(a, m.k, m.t, x, y, self.nb.radius[a])) for a, x, y in m.bodies
                                       if a in self.nb.radius and a != self.id)
-        elif isinstance(m, wire.Beacon):
-            self.beacons.setdefault(m.k, {})[m.id] = m
-            self.heard[m.id] = now
-            if m.k <= self.k and self.guessed_k < 0 and self.nb.intruder(m.k, m):  # too late: we acted without it
-                self.guessed_k = m.k
-                log.warning("agent %d: tick %d: %s; lockstep is no longer deterministic", self.id, m.k,
-                            self.nb.unexpected(m))
-            if m.id not in self.last_seen or m.k >= self.last_seen[m.id].k:
-                self.last_seen[m.id] = m
         elif isinstance(m, wire.ObstacleSet):
             self.peer_sets.add(m)
 
@@ -184,12 +185,12 @@ class AgentNode:
         self.nb.own.setdefault(k, p)
         return set(self.nb.wait_set(k, self._living(clock), self.beacons.get(k - 1, {}), self.last_seen))
 
-    def _living(self, clock: wire.Clock | None) -> set[int]:
+    def _living(self, clock: wire.Clock | None) -> set[int] | frozenset[int]:
         """The one notion of a live peer: alive by its token; once a clock says, counted by the world's clock
         and not seen going by its token. Not `alive` there: the world saw its token, whose news to us may come
         after the clock (zenoh-python runs each subscriber's callbacks on a thread of its own, so no order
         holds between the liveliness and the data subscribers)."""
-        return self.alive if clock is None else set(clock.alive) - self.gone
+        return self.alive if clock is None else clock.alive_set - self.gone if self.gone else clock.alive_set
 
     def _peers(self, k: int) -> tuple[list[Peer], list[Peer]]:
         """Whom tick k plans with, (live, lost). Live: every beacon of k; the latest beacon of a peer it
@@ -285,7 +286,7 @@ class AgentNode:
     def _act(self, k: int, now: float) -> None:
         st = self.states[k]
         if self.mode == "lockstep" and not self._guess:
-            late = [b for b in self.beacons.get(k, {}).values() if self.nb.intruder(k, b)]
+            late = self.nb.intruders(k, self.beacons.get(k, {}))
             self._guess = self.nb.unexpected(late[0]) if late else ""
         if self._guess and self.guessed_k < 0:
             self.guessed_k = k

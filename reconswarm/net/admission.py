@@ -124,7 +124,7 @@ class Admission:
         self.s = s
         self.pins = pins or Pins()
         self.radius = {a.id: a.radius_m for a in s.agents}
-        self.head_offset = {a.id: float(s.head_offsets[i]) for i, a in enumerate(s.agents)}
+        self.head_offset = {a.id: float(a.head_offset_m) for a in s.agents}
         self.polygons = {o.id: s.polygon(k) for k, o in enumerate(s.obstacles)}
         self.edges = {o: Edges.of([poly]) for o, poly in self.polygons.items()}
         # Hulls already found on their obstacle's boundary: peers share the same merged hulls over and over,

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import StrEnum
+from functools import cached_property
 from typing import Any
 
 import msgpack
@@ -114,6 +115,11 @@ class Clock:
     reason: str = ""
     rejected: int = 0  # messages simworld has rejected so far
     stats: dict[str, float] = field(default_factory=dict)  # final realtime statistics
+
+    @cached_property
+    def alive_set(self) -> frozenset[int]:
+        """`alive` as a set, built once per clock (a host hands one clock to each of its agents)."""
+        return frozenset(self.alive)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from agent.brain import AgentBrain, Peer
 from agent.messages import Output
-from agent.neighbours import Cells, Neighbourhood
+from agent.neighbours import REALTIME_SILENT_S, Cells, Neighbourhood
 from agent.node import AgentNode
 from reconswarm.net import wire
 from reconswarm.net.cells import CellGrid
@@ -206,3 +206,35 @@ def test_a_far_unexpected_peer_is_no_violation() -> None:
     node.step([clock(0), state(0, *HEAD[A]), beacon(B, 0, *HEAD[B])], 0.0)
     node.step([clock(1), state(1, 0.0, 0.0), beacon(B, 1, *HEAD[B]), beacon(C, 1, 60.0, 0.0)], 0.05)
     assert node.k == 1 and node.guessed_k == -1  # heard (it is in our cells) but beyond reach: harmless
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.integers(1, 12), st.floats(0.0, 2.0)), max_size=40),
+       st.sets(st.integers(1, 12)), st.floats(0.0, 0.2))
+def test_peers_heard_lately_are_those_heard_within_the_quiet_time(updates: list[tuple[int, float]], alive: set[int],
+                                                                  period_s: float) -> None:
+    """heard_lately reads only the newest part of `heard` (kept in the order of its times, as the node keeps it):
+    the same peers as checking every live peer's time."""
+    heard: dict[int, float] = {}
+    now = 0.0
+    for a, dt in updates:  # (times only grow: the node's steps come in wall-time order)
+        now += dt
+        heard.pop(a, None)
+        heard[a] = now
+    for a in alive:
+        heard.setdefault(a, now)  # (every live peer has a time: its token's if nothing else)
+    now += 0.5
+    quiet = max(REALTIME_SILENT_S, 3.0 * period_s)
+    expected = {a for a in alive if now - heard[a] <= quiet}
+    assert Neighbourhood.heard_lately(alive, heard, now, period_s) == expected
+
+
+def test_the_intruders_of_a_tick_are_the_peers_within_reach_it_did_not_wait_for() -> None:
+    nb = Neighbourhood(S, A)
+    nb.own[4] = nb.own[5] = (0.0, 0.0)
+    assert nb.wait_set(5, ALIVE, {B: beacon(B, 4, 10.0, 0.0)}, {}) == {B}  # (C had no beacon of 4: not waited)
+    fresh = {B: beacon(B, 5, 10.0, 0.0), C: beacon(C, 5, G.reach_m - 1.0, 0.0)}
+    assert nb.intruders(5, fresh) == [fresh[C]]
+    assert nb.intruders(5, {C: beacon(C, 5, G.reach_m + 1.0, 0.0)}) == []  # (out of reach: no matter)
+    assert nb.intruders(6, fresh) == []  # (no wait set for 6 yet: nobody is an intruder)
+    assert [b for b in fresh.values() if nb.intruder(5, b)] == nb.intruders(5, fresh)

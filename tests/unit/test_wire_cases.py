@@ -294,3 +294,9 @@ def test_an_events_optional_fields_are_taken_as_sent() -> None:
                                   t_confirmed=4.0, duration_s=1, wall_unix=1.8e9))
     assert (e.t, e.cause, e.t_confirmed, e.duration_s, e.wall_unix) == (3.0, "network", 4.0, 1.0, 1.8e9)
     assert type(e.t) is float and type(e.duration_s) is float
+
+
+def test_a_clocks_alive_set_is_its_alive_list_and_changes_nothing_else() -> None:
+    c = wire.clock_from_wire(wire.clock_to_wire(wire.Clock(3, 0.15, (4, 1, 9))))
+    assert c.alive_set == frozenset({1, 4, 9}) and c.alive_set is c.alive_set  # (built once)
+    assert c == wire.Clock(3, 0.15, (4, 1, 9)) and wire.clock_from_wire(wire.clock_to_wire(c)) == c
