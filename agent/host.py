@@ -127,6 +127,12 @@ class AgentHost:
         self.replay: list[tuple[int, Tag, Item]] = []  # (agent, tag, obstacle set) for that agent alone (replayed)
         self._cells: dict[str, Cell | None] = {}  # key -> the cell in it (None: not a cell key)
         self.known = {a.id for a in next(iter(links.values())).node.s.agents}
+        # The cells around the hosted agents' starts, declared with every cell's subscription: an agent that listens
+        # to every cell until its first command then finds its own cells declared (not declared all at once, on
+        # the mission's first tick, when every hosted agent commands for the first time).
+        self.warm: frozenset[Cell] = frozenset().union(*(
+            link.node.nb.grid.listen_cells(*link.node.nb.start[aid]) for aid, link in links.items()
+            if not link.node.nb.everyone))
         self.max_set_bytes = next(iter(links.values())).gate.adm.max_set_bytes
         z, k = session, keys
         self.subs: list[Any] = []
@@ -161,6 +167,8 @@ class AgentHost:
         self.replay += [(aid, tag, item) for tag, item in self.sets.values()
                          if self._hears(c.listen, self._cell(item[0])) and not self._hears(old, self._cell(item[0]))]
         want: set[Cell | None] = set().union(*({None} if ls is None else ls for ls in self.listening.values()))
+        if None in want:
+            want |= self.warm
         for cell in want - self.cell_subs.keys():
             tag, k = ("cell", cell), self.keys
             self.cell_subs[cell] = (

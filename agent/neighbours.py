@@ -87,10 +87,12 @@ class Neighbourhood:
 
     def on_state(self, k: int, p: XY) -> Cells | None:
         """Our state of tick k is in: add the cells around p (keep the old ones until our command is out) and
-        publish from p's cell. None: nothing changes."""
+        publish from p's cell. None: nothing changes. Every cell until our first command, unless the mission
+        starts now (k = 0): nobody has moved or shared anything yet, so our cells are all tick 0 can need."""
         self.own[k] = p
         home = self.grid.cell_of(*p)
-        listen = None if self.listen is None else self.listen | self._around(p)
+        fresh_start = k == 0 and not self.everyone
+        listen = None if self.listen is None and not fresh_start else (self.listen or frozenset()) | self._around(p)
         if home == self.home and listen == self.listen:
             return None
         self.home, self.listen = home, listen

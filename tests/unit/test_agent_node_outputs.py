@@ -126,7 +126,8 @@ def test_a_new_session_publishes_the_set_once_at_the_last_commanded_tick() -> No
     grown = sets(out)
     assert [(s.id, s.k, s.rev) for s in grown] == [(A, 0, 1)]  # knowledge grew at tick 0
     assert [c.id for c in cmds(out)] == [A]
-    assert isinstance(out[-1], Cells) and out[-1].listen is not None  # after the command: only our cells
+    # The mission's first tick: only our cells, from our state on (before our beacon).
+    assert isinstance(out[0], Cells) and out[0].listen is not None and isinstance(out[1], wire.Beacon)
     node.reconnected(1.0)
     out = node.step([], 1.1)
     assert [(s.id, s.k, s.rev, set(s.obstacles)) for s in sets(out)] == [(A, 0, 1, {"diamond"})]

@@ -128,10 +128,14 @@ def test_the_virtual_leader_waits_for_everyone_and_hears_every_cell() -> None:
 
 def test_cells_follow_the_agent_new_before_the_command_old_after_it() -> None:
     nb = Neighbourhood(S, A)
-    # Every cell until the first command (a restarted agent does not know where its robot is), then around it.
+    # Every cell until the first command (a restarted agent does not know where its robot is), then around it...
     assert nb.current() == Cells(G.cell_of(*HEAD[A]), None)
-    assert nb.on_state(0, HEAD[A]) is None
-    assert nb.after_command(0) == nb.current() == Cells(G.cell_of(*HEAD[A]), G.listen_cells(*HEAD[A]))
+    assert nb.on_state(3, HEAD[A]) is None  # (joining at tick 3)
+    assert nb.after_command(3) == nb.current() == Cells(G.cell_of(*HEAD[A]), G.listen_cells(*HEAD[A]))
+    # ... unless the mission starts (tick 0): around it from its state on, before its beacon.
+    nb = Neighbourhood(S, A)
+    assert nb.on_state(0, HEAD[A]) == nb.current() == Cells(G.cell_of(*HEAD[A]), G.listen_cells(*HEAD[A]))
+    assert nb.after_command(0) is None
     assert nb.on_state(1, HEAD[A]) is None and nb.after_command(1) is None  # nothing moved
     far = (3 * G.width_m + 1.0, 0.0)  # (a jump, to see both sets apart)
     grown = nb.on_state(1, far)
