@@ -19,21 +19,16 @@ import sys
 import time
 from typing import Any
 
-import zenoh
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from reconswarm.cli import outputs
 from reconswarm.errors import BadInput
-from reconswarm.net import wire
-from reconswarm.net.admission import Admission
-from reconswarm.net.inbox import sample_source
-from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions, open_session
+from reconswarm.net.session import DEFAULT_ROUTER
 from reconswarm.net.timing import TIMING
-from reconswarm.paper.events import Event
 from reconswarm.scenario.generate import generate
 from reconswarm.scenario.model import Scenario, load, parse, to_toml, warnings
 from reconswarm_bringup import chaos, netns, outcome, outdir, packing, runid, validate
+from reconswarm_bringup.clockwatch import ClockWatch
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.fleet import ROOT, Fleet, Proc
 from reconswarm_bringup.network import Net, check_live_port, plan_network
@@ -64,43 +59,6 @@ def prepare_scenario(cfg: LaunchConfig) -> Scenario:
         log.warning("warning: %s", w)
     validate.fault_targets(cfg.faults, {a.id for a in s.agents})
     return s if cfg.planner is None else s.with_planner(cfg.planner)
-
-
-class ClockWatch:
-    """Follows the run's clock (and events) on its own zenoh session: progress and fault timing.
-
-    The clock lands in a one-slot ring (only the latest matters), events in a queue; both are read when
-    the launcher polls, so this process does not wake for every tick.
-    """
-
-    def __init__(self, run: str, zopts: ZenohOptions, s: Scenario) -> None:
-        self.keys = Keys(run)
-        self.admission = Admission(s)  # a clock counts only from the world's session (an `end` above all)
-        self.session = open_session(zopts, "run_local")
-        self.clock_sub = self.session.declare_subscriber(self.keys.clock, zenoh.handlers.RingChannel(1))
-        self.event_sub = self.session.declare_subscriber(self.keys.event, zenoh.handlers.FifoChannel(10_000))
-        self.t = 0.0
-        self.k = -1
-        self.alive = 0
-        self.end: wire.Clock | None = None
-        self.events: list[Event] = []
-
-    def poll(self) -> None:
-        with contextlib.suppress(WireError):
-            sample = self.clock_sub.try_recv()
-            if sample is not None:
-                c = wire.clock_from_wire(sample.payload.to_bytes())
-                if self.admission.check_clock(c, sample_source(sample), self.keys.clock) is None:
-                    if c.k >= self.k:
-                        self.t, self.k, self.alive = c.t, c.k, len(c.alive)
-                    if c.end:
-                        self.end = c
-        while (sample := self.event_sub.try_recv()) is not None:
-            with contextlib.suppress(WireError):
-                self.events.append(wire.event_from_wire(sample.payload.to_bytes()))
-
-    def close(self) -> None:
-        self.session.close()
 
 
 def run(cfg: LaunchConfig) -> int:

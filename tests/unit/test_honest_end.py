@@ -80,3 +80,25 @@ def test_a_converged_end_whose_tick_never_comes_is_judged_at_the_last_tick_recor
     run.step(3.2)
     assert run.exit is None and run.node.end is None  # the grace is over: the record is not converged
     assert "not converged" in run.refused[0].why
+
+
+def test_the_launcher_believes_a_claimed_end_only_until_the_world_ticks_on() -> None:
+    """The launcher's clock view (faults fire on it): a forged end with the world's id is refuted by the world's
+    next clock, and the view follows the world again; the world's own end stands."""
+    from reconswarm.net import wire
+    from reconswarm_bringup.clockwatch import ClockFollow
+
+    f = ClockFollow()
+    for k in range(4):
+        f.take(wire.Clock(k, 0.05 * k, (1, 2, 3)))
+    forged = wire.Clock(4, 0.2, (1, 2, 3), end=True, reason="converged")
+    f.take(forged)
+    assert f.end == forged and f.k == 3  # (the view stays at the last tick)
+    f.take(wire.Clock(4, 0.2, (1, 2)))  # the world's tick 4: it did not end
+    assert f.end is None and f.refuted == [forged] and (f.k, f.t, f.alive) == (4, 0.2, 2)
+    f.take(wire.Clock(2, 0.1, (1, 2, 3)))  # a stale clock does not move the view back
+    assert (f.k, f.alive) == (4, 2)
+    own = wire.Clock(5, 0.25, (1, 2), end=True, reason="duration")
+    f.take(own)
+    f.take(wire.Clock(3, 0.15, (1, 2)))  # (older than the end: no refutation)
+    assert f.end == own and f.refuted == [forged]

@@ -1,0 +1,92 @@
+"""The launcher's view of the run's clock: progress, fault timing, and whether the world ended the mission.
+
+A clock counts only from the world's session (`Admission.check_clock`), but a session id can be stamped by
+anyone on the run's router (open mode): a forged `end` carrying the world's id passes that check. So, as the
+monitor does (monitor/node.py), a claimed end is only tentative here: the world's own clock going on at or
+past the claimed tick refutes it, and faults due later still fire.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass, field
+
+import zenoh
+
+from reconswarm.net import wire
+from reconswarm.net.admission import Admission
+from reconswarm.net.inbox import sample_source
+from reconswarm.net.keys import Keys, WireError
+from reconswarm.net.session import ZenohOptions, open_session
+from reconswarm.paper.events import Event
+from reconswarm.scenario.model import Scenario
+
+CLOCK_RING = 64  # clocks kept between two polls (the launcher polls every 50 ms): a forged one cannot hide the world's
+
+
+@dataclass
+class ClockFollow:
+    """What the admitted clocks say so far (pure: fed one admitted clock at a time)."""
+
+    t: float = 0.0
+    k: int = -1
+    alive: int = 0
+    end: wire.Clock | None = None  # the end claimed, until a later clock of the world refutes it
+    refuted: list[wire.Clock] = field(default_factory=list)  # the ends refuted (forged: the world ticked on)
+
+    def take(self, c: wire.Clock) -> None:
+        if c.end:
+            if self.end is None:
+                self.end = c
+            return
+        if self.end is not None and c.k >= self.end.k:  # the world ticks on: it did not end
+            self.refuted.append(self.end)
+            self.end = None
+        if c.k >= self.k:
+            self.t, self.k, self.alive = c.t, c.k, len(c.alive)
+
+
+class ClockWatch:
+    """Follows the run's clock (and events) on its own zenoh session.
+
+    Clocks land in a ring (the newest CLOCK_RING), events in a queue; both are read when the launcher polls,
+    so this process does not wake for every tick.
+    """
+
+    def __init__(self, run: str, zopts: ZenohOptions, s: Scenario) -> None:
+        self.keys = Keys(run)
+        self.admission = Admission(s)  # a clock counts only from the world's session
+        self.session = open_session(zopts, "run_local")
+        self.clock_sub = self.session.declare_subscriber(self.keys.clock, zenoh.handlers.RingChannel(CLOCK_RING))
+        self.event_sub = self.session.declare_subscriber(self.keys.event, zenoh.handlers.FifoChannel(10_000))
+        self.follow = ClockFollow()
+        self.events: list[Event] = []
+
+    @property
+    def t(self) -> float:
+        return self.follow.t
+
+    @property
+    def k(self) -> int:
+        return self.follow.k
+
+    @property
+    def alive(self) -> int:
+        return self.follow.alive
+
+    @property
+    def end(self) -> wire.Clock | None:
+        return self.follow.end
+
+    def poll(self) -> None:
+        while (sample := self.clock_sub.try_recv()) is not None:
+            with contextlib.suppress(WireError):
+                c = wire.clock_from_wire(sample.payload.to_bytes())
+                if self.admission.check_clock(c, sample_source(sample), self.keys.clock) is None:
+                    self.follow.take(c)
+        while (sample := self.event_sub.try_recv()) is not None:
+            with contextlib.suppress(WireError):
+                self.events.append(wire.event_from_wire(sample.payload.to_bytes()))
+
+    def close(self) -> None:
+        self.session.close()
