@@ -85,17 +85,15 @@ class TaggedInbox:
         agents (or some, `LINGER_S` ago), or once `timeout` seconds passed (at once if 0)."""
         self._want = math.inf if want is None else max(1, want)
         end = math.inf if timeout is None else time.monotonic() + timeout
-        while timeout != 0 and len(self._samples) < self._want:
-            states, first = self._states()
-            if states >= max(1, urgent):
+        while timeout != 0:
+            self._ready.clear()  # (before looking: a sample that comes after the look sets it again)
+            if len(self._samples) >= self._want:
                 break
+            states, first = self._states()
             until = min(end, first + self.LINGER_S)
             now = time.monotonic()
-            if now >= until:
+            if states >= max(1, urgent) or now >= until:
                 break
-            self._ready.clear()
-            if len(self._samples) >= self._want or self._states()[0] > states:  # (came meanwhile)
-                continue
             self._ready.wait(None if until == math.inf else until - now)
         if timeout != 0:  # (a round that only hands over what co-hosted agents published does not count)
             Inbox.wakeups += 1
