@@ -1,7 +1,8 @@
 """The monitor's end against its own record (issue 20): an end clock that the world's next clock contradicts,
 or a "converged" that the truth contradicts, is refused (a `RefusedEnd` output: the process counts it as an
 intrusion of the session that claimed it) and the recording goes on; a conflicting command reported by the
-world makes the run not deterministic. MonitorNode driven by hand, a real run.db."""
+world makes the run not deterministic. MonitorNode driven by hand, a real run.db; and the launcher's view of the
+clock (its faults fire on it), which believes a claimed end only until the world ticks on."""
 
 from __future__ import annotations
 
@@ -9,7 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
+from reconswarm.net import wire
 from reconswarm.record.summary import summarize
+from reconswarm_bringup.clockwatch import ClockFollow
 from tests.unit.monitor_run import DT, S, clock, started, truth, world, world_report
 
 
@@ -85,9 +88,6 @@ def test_a_converged_end_whose_tick_never_comes_is_judged_at_the_last_tick_recor
 def test_the_launcher_believes_a_claimed_end_only_until_the_world_ticks_on() -> None:
     """The launcher's clock view (faults fire on it): a forged end with the world's id is refuted by the world's
     next clock, and the view follows the world again; the world's own end stands."""
-    from reconswarm.net import wire
-    from reconswarm_bringup.clockwatch import ClockFollow
-
     f = ClockFollow()
     for k in range(4):
         f.take(wire.Clock(k, 0.05 * k, (1, 2, 3)))
