@@ -18,7 +18,6 @@ from reconswarm.net.admission import Admission
 from reconswarm.net.inbox import sample_source
 from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.session import ZenohOptions, open_session
-from reconswarm.paper.events import Event
 from reconswarm.scenario.model import Scenario
 
 CLOCK_RING = 64  # clocks kept between two polls (the launcher polls every 50 ms): a forged one cannot hide the world's
@@ -47,20 +46,15 @@ class ClockFollow:
 
 
 class ClockWatch:
-    """Follows the run's clock (and events) on its own zenoh session.
-
-    Clocks land in a ring (the newest CLOCK_RING), events in a queue; both are read when the launcher polls,
-    so this process does not wake for every tick.
-    """
+    """Follows the run's clock on its own zenoh session. Clocks land in a ring (the newest CLOCK_RING), read when
+    the launcher polls, so this process does not wake for every tick."""
 
     def __init__(self, run: str, zopts: ZenohOptions, s: Scenario) -> None:
         self.keys = Keys(run)
         self.admission = Admission(s)  # a clock counts only from the world's session
         self.session = open_session(zopts, "run_local")
         self.clock_sub = self.session.declare_subscriber(self.keys.clock, zenoh.handlers.RingChannel(CLOCK_RING))
-        self.event_sub = self.session.declare_subscriber(self.keys.event, zenoh.handlers.FifoChannel(10_000))
         self.follow = ClockFollow()
-        self.events: list[Event] = []
 
     @property
     def t(self) -> float:
@@ -84,9 +78,6 @@ class ClockWatch:
                 c = wire.clock_from_wire(sample.payload.to_bytes())
                 if self.admission.check_clock(c, sample_source(sample), self.keys.clock) is None:
                     self.follow.take(c)
-        while (sample := self.event_sub.try_recv()) is not None:
-            with contextlib.suppress(WireError):
-                self.events.append(wire.event_from_wire(sample.payload.to_bytes()))
 
     def close(self) -> None:
         self.session.close()
