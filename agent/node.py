@@ -55,6 +55,7 @@ class AgentNode:
         self.period_s, self.now = 0.0, now_s  # (now: the wall time of the latest step or awaiting call)
         self.act_at: float | None = None
         self.last_clock, self.ended = now_s, False
+        self.clock_in: wire.Clock | None = None  # the latest clock received: an end stands if nothing came after it
         self.world_gone = False  # the world's token went away and no clock came since (a stalled world)
         self.started = False  # the mission began (first clock): the watches run from then on
         self.last_cmd: wire.Cmd | None = None
@@ -139,8 +140,7 @@ class AgentNode:
         elif isinstance(m, Invalid):
             self.rejected += 1
         elif isinstance(m, wire.Clock):
-            self.clocks[m.k] = m
-            self.last_clock = now
+            self.clocks[m.k], self.clock_in, self.last_clock = m, m, now
             for a in set(m.alive) - self.alive - self.gone - {self.id}:  # counted before its token reached us:
                 self.heard.setdefault(a, now)  # its silence counts from now
             self._world_back(now)
@@ -393,7 +393,7 @@ class AgentNode:
         if self.started and now - self.last_act > t.waiting_log_s and now > self.told_waiting + t.waiting_log_s:
             self.told_waiting = now
             log.info("agent %d: %s", self.id, self.waiting_for())
-        last = self.clocks.get(max(self.clocks, default=-1))  # an end stands once the world's token went after it,
+        last = self.clock_in  # an end stands once the world's token went after it, or no clock came for a while (a
         self.ended |= last is not None and last.end and (self.world_gone or now - self.last_clock > t.end_confirm_s)
-        if self.ended:  # (or no clock came for a while: a later clock from the world says the end was not its own)
+        if self.ended:  # later clock from the world, whatever tick the end claimed, says it was not the world's)
             self._out.append(Exit(0))

@@ -2,8 +2,8 @@
 
 A clock counts only from the world's session (`Admission.check_clock`), but a session id can be stamped by
 anyone on the run's router (open mode): a forged `end` carrying the world's id passes that check. So, as the
-monitor does (monitor/node.py), a claimed end is only tentative here: the world's own clock going on at or
-past the claimed tick refutes it, and faults due later still fire.
+monitor does (monitor/node.py), a claimed end is only tentative here: any clock of the world after it refutes
+it (the world puts nothing after its own end; a forged end may claim any tick), and faults due later still fire.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ class ClockFollow:
             if self.end is None:
                 self.end = c
             return
-        if self.end is not None and c.k >= self.end.k:  # the world ticks on: it did not end
+        if self.end is not None:  # the world ticks on: it did not end (it puts nothing after its own end)
             self.refuted.append(self.end)
             self.end = None
         if c.k >= self.k:

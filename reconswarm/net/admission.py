@@ -14,7 +14,7 @@ which the receiver drops, counts (`IntrusionTally`) and logs. The rules:
 - commands: |u| at most `command_bound_mps` (what the planner can output with bounded repulsion) and for a
   tick the world has published;
 - the world's messages (clock, state, scan, truth): only from the world's session, pinned at its first
-  clock; the clock keeps its mode and speed, and t = k dt;
+  clock; the clock keeps its mode and speed, t = k dt, and k is no later than the mission's last tick;
 - an agent's messages (beacon, cmd): only from the session that agent speaks from (`Pins`, pinned at first
   sight; another session may take over only once the pinned one has been silent `repin_after_s`, as a
   restarted agent's new session does);
@@ -125,6 +125,7 @@ class Admission:
         self.pins = pins or Pins()
         self.radius = {a.id: a.radius_m for a in s.agents}
         self.head_offset = {a.id: float(a.head_offset_m) for a in s.agents}
+        self.last_tick = round(s.meta.duration_s / s.meta.dt_s)  # the world's last (simworld/world.py: n_ticks)
         self.polygons = {o.id: s.polygon(k) for k, o in enumerate(s.obstacles)}
         self.edges = {o: Edges.of([poly]) for o, poly in self.polygons.items()}
         # Hulls already found on their obstacle's boundary: peers share the same merged hulls over and over,
@@ -296,6 +297,9 @@ class Admission:
                 return Intrusion(bad.kind, source, key, f"{bad.detail} (this one claims the end: {c.reason!r})")
             return bad
         dt = self.s.meta.dt_s
+        if c.k > self.last_tick:  # (the world ends the mission at its duration: a later tick is not its clock)
+            return Intrusion(IntrusionKind.CLOCK, source, key,
+                             f"tick {c.k} after the mission's last ({self.last_tick})")
         if abs(c.t - c.k * dt) > 1e-9 * max(1.0, abs(c.t)):
             return Intrusion(IntrusionKind.CLOCK, source, key, f"t = {c.t:.9g} s at tick {c.k} (dt {dt} s)")
         if self.clock_mode is not None and self.clock_mode != (c.mode, c.speed):

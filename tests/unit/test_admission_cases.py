@@ -200,8 +200,9 @@ def test_the_clock_tolerance_on_t_equals_k_dt() -> None:
     ids = tuple(a.id for a in PAPER_S.agents)
     k = 20_000
     t = k * dt  # 1000 s: relative 1e-9
-    assert started().check_clock(wire.Clock(k, t * (1 + 0.5e-9), ids), WORLD, KEYS.clock) is None
-    got = started().check_clock(wire.Clock(k, t * (1 + 2e-9), ids), WORLD, KEYS.clock)
+    long = replace(PAPER_S, meta=replace(PAPER_S.meta, duration_s=2000.0))
+    assert started(long).check_clock(wire.Clock(k, t * (1 + 0.5e-9), ids), WORLD, KEYS.clock) is None
+    got = started(long).check_clock(wire.Clock(k, t * (1 + 2e-9), ids), WORLD, KEYS.clock)
     assert refused(got, K.CLOCK, WORLD, KEYS.clock, f"at tick {k}")
     # Below 1 s: 1e-9 s absolute.
     assert started().check_clock(wire.Clock(10, 10 * dt + 0.5e-9, ids), WORLD, KEYS.clock) is None
@@ -210,6 +211,18 @@ def test_the_clock_tolerance_on_t_equals_k_dt() -> None:
     adm = started()
     got = adm.check_clock(wire.Clock(1, dt, ids, mode=wire.ClockMode.REALTIME, speed=4.0), WORLD, KEYS.clock)
     assert refused(got, K.CLOCK, WORLD, KEYS.clock, "mode realtime x4", "the run's is lockstep x0")
+
+
+def test_a_clock_after_the_missions_last_tick_is_refused() -> None:
+    """The world ends the mission at its duration (tick duration / dt): a later tick is forged, an end above all
+    (one claiming a far tick was not refuted by the world's clocks, which never reach it)."""
+    dt, ids = PAPER_S.meta.dt_s, tuple(a.id for a in PAPER_S.agents)
+    last = round(PAPER_S.meta.duration_s / dt)
+    assert started().check_clock(wire.Clock(last, last * dt, ids, end=True, reason="duration"), WORLD,
+                                 KEYS.clock) is None
+    got = started().check_clock(wire.Clock(last + 1, (last + 1) * dt, ids, end=True, reason="duration"), WORLD,
+                                KEYS.clock)
+    assert refused(got, K.CLOCK, WORLD, KEYS.clock, f"tick {last + 1} after the mission's last ({last})")
 
 
 # ------------------------------------------------------------------------------------------ who speaks

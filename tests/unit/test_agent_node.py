@@ -438,6 +438,16 @@ def test_an_end_the_worlds_next_clock_contradicts_is_not_the_end() -> None:
     assert Exit(0) in node.step([], 1.2)  # no news of the world's token, no later clock: the end stands
 
 
+def test_an_end_claiming_a_far_tick_is_not_the_end_once_the_world_ticks_on() -> None:
+    """A forged end may claim a tick the world has not reached: the world's next clock refutes it all the same
+    (it stood as the newest clock and ended the agent once the world was quiet for end_confirm_s)."""
+    node = started(peers=(), timing=dataclasses.replace(T, end_confirm_s=1.0))
+    node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
+    assert Exit(0) not in node.step([clock(50, (A,), end=True, reason="duration")], 0.1)
+    node.step([clock(1, (A,)), state(1, 100.0, 0.0)], 0.2)  # the world goes on
+    assert Exit(0) not in node.step([], 1.5)  # quiet a while (a stall shorter than world_silence_s)
+
+
 def test_while_waiting_the_node_logs_what_it_lacks(caplog: pytest.LogCaptureFixture) -> None:
     node = started(peers=(B,))
     node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 105.0, 0.0)], 0.0)

@@ -52,6 +52,20 @@ def test_an_end_the_worlds_next_clock_contradicts_is_refused(tmp_path: Path) -> 
     assert run.exit is None
 
 
+def test_an_end_claiming_a_far_tick_is_refused_by_the_worlds_next_clock(tmp_path: Path) -> None:
+    """A forged end may claim any tick: one far ahead is refuted by the world's next clock all the same (it was
+    believed until `end_grace_s` passed, then closed the record as ended while the world went on)."""
+    run = started(tmp_path)
+    run.tick(0, 0.0)
+    run.step(0.01, clock(4000, end=True, reason="duration"))
+    run.tick(1, 0.05)  # the world ticks on, far before tick 4000
+    (refused,) = run.refused
+    assert run.node.end is None and "goes on" in refused.why
+    for k in range(2, 100):  # longer than end_grace_s (3 s) of wall time
+        run.tick(k, 0.05 * k)
+    assert run.exit is None
+
+
 def test_a_real_converged_end_stands(tmp_path: Path) -> None:
     run = started(tmp_path)
     run.tick(0, 0.0)
@@ -98,7 +112,10 @@ def test_the_launcher_believes_a_claimed_end_only_until_the_world_ticks_on() -> 
     assert f.end is None and f.refuted == [forged] and (f.k, f.t, f.alive) == (4, 0.2, 2)
     f.take(wire.Clock(2, 0.1, (1, 2, 3)))  # a stale clock does not move the view back
     assert (f.k, f.alive) == (4, 2)
-    own = wire.Clock(5, 0.25, (1, 2), end=True, reason="duration")
+    far = wire.Clock(4000, 200.0, (1, 2), end=True, reason="duration")  # a forged end may claim any tick
+    f.take(far)
+    f.take(wire.Clock(5, 0.25, (1, 2)))
+    assert f.end is None and f.refuted == [forged, far]
+    own = wire.Clock(6, 0.3, (1, 2), end=True, reason="duration")
     f.take(own)
-    f.take(wire.Clock(3, 0.15, (1, 2)))  # (older than the end: no refutation)
-    assert f.end == own and f.refuted == [forged]
+    assert f.end == own and (f.k, f.alive) == (5, 2)
