@@ -1,10 +1,11 @@
 """The floor of the distributed lockstep tick: its message pattern with nothing of ours behind it.
 
-A router, one world process and N agent processes, each a zenoh client session connected to the router
-(the launcher's ZENOH_RUNTIME in the non-router processes, BLOCK congestion control, samples through
-reconswarm.net.inbox.Inbox with the same wake-ups), with msgpack payloads of the real messages' shapes
-and sizes; no planning, no admission, no record, no monitor. The robots stay at the grid scenario's
-starts (bench/grid.py). Per tick:
+A router, one world process and N agents in processes of K (`--per-process`, as `--agents-per-process`: one
+zenoh client session per process connected to the router, the launcher's ZENOH_RUNTIME, BLOCK congestion
+control, samples through the agent processes' own inbox with the same wake-ups; a co-hosted agent's beacon
+counted in the process), with msgpack payloads of the real messages' shapes and sizes; no planning, no
+admission, no record, no monitor. The robots stay at the grid scenario's starts (bench/grid.py), or at a
+scenario file's (`--scenario`). Per tick:
 
 - the world puts the clock (k, t, alive list) on `swarm/<run>/clock` and each agent's state on
   `swarm/<run>/agent/<id>/state`, then waits for every agent's command of the tick;
@@ -21,13 +22,13 @@ first and last tick; the router's CPU is read from
 /proc/<pid>/stat when the world says it is at those ticks.
 
     .venv/bin/python bench/floor.py -n 16 36 64 --ticks 200
+    .venv/bin/python bench/floor.py --scenario deploy/scenarios/paper.toml --per-process 1 5 10
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import resource
 import subprocess
@@ -41,64 +42,18 @@ import msgpack
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import machine, median
+from floor_pattern import beacon_bytes, clock_bytes, cmd_bytes, head_points, heard, state_bytes
 from grid import grid_scenario
 
 from reconswarm.net.cells import CellGrid
 from reconswarm.net.inbox import Inbox
 from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions, open_session
-from reconswarm.net.wire import VERSION
-from reconswarm.scenario.model import Scenario
+from reconswarm.scenario.model import Scenario, load
 
 ROOT = Path(__file__).resolve().parent.parent
 PATTERNS = ("cells", "all")
 STALL_S = 60.0  # a process that makes no progress this long gives up (exit 1): the run is reported failed
-XY = tuple[float, float]
-
-
-# ------------------------------------------------------------------------------------- the pattern (pure)
-
-def head_points(s: Scenario) -> dict[int, XY]:
-    """Each agent's head point at its start (the robots do not move in the floor)."""
-    l_m, th = s.head_offsets, s.headings
-    return {a.id: (float(a.start_m[0] + l_m[i] * math.cos(th[i])), float(a.start_m[1] + l_m[i] * math.sin(th[i])))
-            for i, a in enumerate(s.agents)}
-
-
-def heard(s: Scenario, agent_id: int, pattern: str) -> tuple[frozenset[int], frozenset[int]]:
-    """(peers whose beacons reach the agent, the peers it must wait for): in `cells` those publishing in the
-    cells it listens to, and those whose position may matter to it (CellGrid.may_matter); in `all` every peer."""
-    pts = head_points(s)
-    peers = frozenset(a for a in pts if a != agent_id)
-    if pattern == "all":
-        return peers, peers
-    grid = CellGrid.for_scenario(s)
-    own = pts[agent_id]
-    cells = grid.listen_cells(*own)
-    return (frozenset(a for a in peers if grid.cell_of(*pts[a]) in cells),
-            frozenset(a for a in peers if grid.may_matter(own, pts[a])))
-
-
-def pack(obj: dict[str, Any]) -> bytes:
-    return msgpack.packb({"v": VERSION, **obj}, use_bin_type=True)
-
-
-def state_bytes(aid: int, k: int, t: float, p: XY) -> bytes:
-    """Same map as wire.state_to_wire (the body centre half a metre behind the head point)."""
-    return pack({"id": aid, "k": k, "t": t, "x": p[0] - 0.5, "y": p[1], "theta": 0.0, "px": p[0], "py": p[1]})
-
-
-def clock_bytes(k: int, t: float, alive: list[int], end: bool = False) -> bytes:
-    return pack({"k": k, "t": t, "alive": alive, "mode": "lockstep", "speed": 0.0, "end": end,
-                 "reason": "time limit" if end else "", "rejected": 0, "stats": {}})
-
-
-def beacon_bytes(aid: int, k: int, t: float, p: XY, radius_m: float) -> bytes:
-    return pack({"id": aid, "k": k, "t": t, "px": p[0], "py": p[1], "radius": radius_m, "rev": 0})
-
-
-def cmd_bytes(aid: int, k: int) -> bytes:
-    return pack({"id": aid, "k": k, "v_mps": 0.123456789, "omega_radps": -0.987654321})
 
 
 # ------------------------------------------------------------------------------------------- processes
@@ -118,79 +73,106 @@ def session(port: int) -> Any:
     return open_session(ZenohOptions.build([f"tcp/127.0.0.1:{port}"], None, "client", None), "floor", 30.0)
 
 
-def agent_main(port: int, run: str, n: int, aid: int, pattern: str, start: int, end: int) -> int:
+def scenario_of(n: int, path: str | None) -> Scenario:
+    """The grid of n agents (bench/grid.py), or a scenario file's agents at their starts."""
+    return grid_scenario(n, 10.0) if not path else load(Path(path))
+
+
+def agent_main(port: int, run: str, s: Scenario, ids: list[int], pattern: str, start: int, end: int) -> int:
+    """One process hosting the agents `ids` (one session, each agent its own keys and token, as an agent host):
+    what a co-hosted agent publishes is counted by the others in the process, not sent back through zenoh."""
     import zenoh
 
-    s = grid_scenario(n, 10.0)
-    keys, p = Keys(run), head_points(s)[aid]
-    radius = float(s.radii[s.agent_index(aid)])
-    hear, _ = heard(s, aid, pattern)
+    from agent.host import TaggedInbox  # the agent processes' own inbox: the same wake-ups
+
+    keys, pts, dt = Keys(run), head_points(s), s.meta.dt_s
+    radius = {a: float(s.radii[s.agent_index(a)]) for a in ids}
+    hear = {a: heard(s, a, pattern)[0] for a in ids}
     z = session(port)
     block, remote = zenoh.CongestionControl.BLOCK, zenoh.Locality.REMOTE
-    inbox = Inbox()
-    cb = inbox.handler()
+    inbox = TaggedInbox()
     if pattern == "cells":
         grid = CellGrid.for_scenario(s)
-        pub_beacon = z.declare_publisher(keys.beacon(grid.cell_of(*p), aid), congestion_control=block)
-        subs = [z.declare_subscriber(keys.cell_agents(c, "beacon"), cb, allowed_origin=remote)
-                for c in sorted(grid.listen_cells(*p))]
+        pub_beacon = {a: z.declare_publisher(keys.beacon(grid.cell_of(*pts[a]), a), congestion_control=block)
+                      for a in ids}
+        cells = sorted(set().union(*(grid.listen_cells(*pts[a]) for a in ids)))
+        subs = [z.declare_subscriber(keys.cell_agents(c, "beacon"), inbox.handler(("cell", c)), allowed_origin=remote)
+                for c in cells]
     else:
-        pub_beacon = z.declare_publisher(keys.agent(aid, "beacon"), congestion_control=block)
-        subs = [z.declare_subscriber(keys.all_agents("beacon"), cb, allowed_origin=remote)]
-    pub_cmd = z.declare_publisher(keys.cmd(aid), congestion_control=block)
-    subs += [z.declare_subscriber(keys.state(aid), inbox.handler(urgent=True)),
-             z.declare_subscriber(keys.clock, cb)]
-    token = z.liveliness().declare_token(keys.alive_agent(aid))  # last: we are ready to receive
-    states: set[int] = set()
+        pub_beacon = {a: z.declare_publisher(keys.agent(a, "beacon"), congestion_control=block) for a in ids}
+        subs = [z.declare_subscriber(keys.all_agents("beacon"), inbox.handler(("all", None)), allowed_origin=remote)]
+    pub_cmd = {a: z.declare_publisher(keys.cmd(a), congestion_control=block) for a in ids}
+    subs += [z.declare_subscriber(keys.state(a), inbox.handler(("own", a), urgent=True)) for a in ids]
+    subs.append(z.declare_subscriber(keys.clock, inbox.handler(("clock", None))))
+    tokens = [z.liveliness().declare_token(keys.alive_agent(a)) for a in ids]  # last: we are ready to receive
+    states: dict[int, set[int]] = {a: set() for a in ids}
+    beacons: dict[int, dict[int, int]] = {a: {} for a in ids}  # agent -> tick -> beacons heard
     clocks: set[int] = set()
-    beacons: dict[int, int] = {}
-    k, sent, marks, done = 0, -1, {}, False
-    last = time.monotonic()
+    k, sent = dict.fromkeys(ids, 0), dict.fromkeys(ids, -1)
+    marks: dict[int, tuple[float, int, int, int]] = {}
+    done, last = False, time.monotonic()
+
+    def heard_by(sender: int, tick: int) -> None:
+        for b in ids:
+            if sender in hear[b] and b != sender:
+                beacons[b][tick] = beacons[b].get(tick, 0) + 1
+
     try:
         while not done:
             if time.monotonic() - last > STALL_S:
-                raise RuntimeError(f"agent {aid}: stuck at tick {k}")
-            want = None if k not in states else max(1, len(hear) - beacons.get(k, 0) + (k not in clocks))
-            for key, payload, _kind, _src, _at in inbox.take(want, 1.0):
+                raise RuntimeError(f"agents {ids}: stuck at ticks {sorted(set(k.values()))}")
+            acting = [a for a in ids if k[a] in states[a]]
+            want = None if not acting else max(1, min(
+                len(hear[a]) - beacons[a].get(k[a], 0) + (k[a] not in clocks) for a in acting))
+            for _tag, (key, payload, _kind, _src, _at) in inbox.take(want, 1.0, max(1, len(ids) - len(acting))):
                 m = msgpack.unpackb(payload, raw=False)
                 if key.endswith("/beacon"):
-                    beacons[m["k"]] = beacons.get(m["k"], 0) + 1
+                    heard_by(m["id"], m["k"])
                 elif key.endswith("/state"):
-                    states.add(m["k"])
-                    if m["k"] == start:
+                    states[m["id"]].add(m["k"])
+                    if m["k"] == start and start not in marks:
                         marks[start] = (cpu_s(), Inbox.samples_in, Inbox.wakeups, switches())
                 elif m["end"]:
                     marks[end] = (cpu_s(), Inbox.samples_in, Inbox.wakeups, switches())
                     done = True
                 else:
                     clocks.add(m["k"])
-            if k in states and sent < k:
-                pub_beacon.put(beacon_bytes(aid, k, k * s.meta.dt_s, p, radius))
-                sent = k
-            if k in states and k in clocks and beacons.get(k, 0) >= len(hear):
-                pub_cmd.put(cmd_bytes(aid, k))
-                states.discard(k)
-                clocks.discard(k)
-                beacons.pop(k, None)
-                k += 1
-                last = time.monotonic()
+            moved = True
+            while moved:  # (a co-hosted agent's beacon may complete another's tick)
+                moved = False
+                for a in ids:
+                    ka = k[a]
+                    if ka in states[a] and sent[a] < ka:
+                        pub_beacon[a].put(beacon_bytes(a, ka, ka * dt, pts[a], radius[a]))
+                        sent[a] = ka
+                        heard_by(a, ka)
+                        moved = True
+                    if ka in states[a] and ka in clocks and beacons[a].get(ka, 0) >= len(hear[a]):
+                        pub_cmd[a].put(cmd_bytes(a, ka))
+                        states[a].discard(ka)
+                        beacons[a].pop(ka, None)
+                        k[a] = ka + 1
+                        last, moved = time.monotonic(), True
+            clocks.difference_update([c for c in clocks if c < min(k.values())])
     finally:
-        token.undeclare()
+        for token in tokens:
+            token.undeclare()
         for sub in subs:
             sub.undeclare()
         z.close()
     (c0, m0, w0, s0), (c1, m1, w1, s1) = marks[start], marks[end]
-    ticks = end - start
-    print(json.dumps({"cpu_ms": 1000 * (c1 - c0) / ticks, "msgs_in": (m1 - m0) / ticks, "wakeups": (w1 - w0) / ticks,
-                      "switches": (s1 - s0) / ticks, "heard": len(hear)}), flush=True)
+    ticks, per = end - start, len(ids)
+    print(json.dumps({"cpu_ms": 1000 * (c1 - c0) / ticks, "agents": per, "msgs_in": (m1 - m0) / ticks / per,
+                      "wakeups": (w1 - w0) / ticks / per, "switches": (s1 - s0) / ticks / per,
+                      "heard": median([len(h) for h in hear.values()])}), flush=True)
     return 0
 
 
-def world_main(port: int, run: str, n: int, start: int, end: int) -> int:
+def world_main(port: int, run: str, s: Scenario, start: int, end: int) -> int:
     import zenoh
 
-    s = grid_scenario(n, 10.0)
     keys, pts = Keys(run), head_points(s)
+    n = len(pts)
     ids = sorted(pts)
     z = session(port)
     block = zenoh.CongestionControl.BLOCK
@@ -262,20 +244,26 @@ def free_port() -> int:
         return int(so.getsockname()[1])
 
 
-def floor_run(n: int, pattern: str, ticks: int = 200, warmup: int = 20, timeout_s: float = 900.0) -> dict[str, float]:
+def floor_run(n: int, pattern: str, ticks: int = 200, warmup: int = 20, timeout_s: float = 900.0,
+              per_process: int = 1, scenario: str | None = None) -> dict[str, float]:
     """One floor run: CPU-ms per tick per role over `ticks` ticks after `warmup`, samples and wake-ups in per
-    agent per tick (medians over the agents), ticks per wall second. Every process is ended by its PID."""
+    agent per tick (medians over the agents; a process of K agents counts a K-th to each), ticks per wall
+    second. `per_process`: K consecutive agents per process; `scenario`: a scenario file's agents (n is then
+    theirs). Every process is ended by its PID."""
     from reconswarm_bringup.fleet import batch_policy
     from reconswarm_bringup.launcher import ZENOH_RUNTIME
 
     if pattern not in PATTERNS:
         raise ValueError(f"pattern: expected one of {PATTERNS}, got {pattern!r}")
-    port, run = free_port(), f"floor{os.getpid()}x{n}{pattern}"
+    if scenario:
+        n = len(load(Path(scenario)).agents)
+    port, run = free_port(), f"floor{os.getpid()}x{n}{pattern}k{per_process}"
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     client_env = dict(env, ZENOH_RUNTIME=ZENOH_RUNTIME)
     me = [sys.executable, str(Path(__file__).resolve())]
     common = ["--port", str(port), "--run", run, "--agents", str(n), "--start", str(warmup),
-              "--end", str(warmup + ticks)]
+              "--end", str(warmup + ticks), *(["--scenario", scenario] if scenario else [])]
+    groups = [list(range(a, min(a + per_process, n + 1))) for a in range(1, n + 1, per_process)]
     procs: list[subprocess.Popen] = []
 
     def spawn(cmd: list[str], **kw: Any) -> subprocess.Popen:
@@ -291,9 +279,10 @@ def floor_run(n: int, pattern: str, ticks: int = 200, warmup: int = 20, timeout_
                            stderr=(logs / "router.log").open("w"))
             procs.append(router)
             agents: list[subprocess.Popen] = []
-            for a in range(1, n + 1):
+            for g in groups:
+                a = g[0]
                 out = (logs / f"agent{a}.out").open("w")
-                agents.append(spawn([*me, "agent", "--id", str(a), "--pattern", pattern, *common],
+                agents.append(spawn([*me, "agent", "--ids", ",".join(map(str, g)), "--pattern", pattern, *common],
                                     env=client_env, cwd=ROOT, stdout=out, stderr=(logs / f"agent{a}.log").open("w")))
             procs.extend(agents)
             world = spawn([*me, "world", *common], env=client_env, cwd=ROOT, stdout=subprocess.PIPE,
@@ -313,7 +302,7 @@ def floor_run(n: int, pattern: str, ticks: int = 200, warmup: int = 20, timeout_
             if failed or len(router_cpu) != 2:
                 err = (logs / ("world.log" if world in failed else "agent1.log")).read_text()[-1500:]
                 raise RuntimeError(f"floor run N={n} {pattern}: {len(failed)} processes failed: {err}")
-            res = [json.loads((logs / f"agent{a}.out").read_text()) for a in range(1, n + 1)]
+            res = [json.loads((logs / f"agent{g[0]}.out").read_text()) for g in groups]
         finally:
             for p in reversed(procs):
                 if p.poll() is None:
@@ -327,8 +316,10 @@ def floor_run(n: int, pattern: str, ticks: int = 200, warmup: int = 20, timeout_
     def med(key: str) -> float:
         return median([r[key] for r in res])
 
-    return {"n": n, "ticks": ticks, "ticks_per_s": ticks / w["wall_s"], "agent_ms": med("cpu_ms"),
-            "agents_ms": sum(r["cpu_ms"] for r in res), "world_ms": w["cpu_ms"],
+    for r in res:
+        r["agent_ms"] = r["cpu_ms"] / r["agents"]
+    return {"n": n, "per_process": per_process, "ticks": ticks, "ticks_per_s": ticks / w["wall_s"],
+            "agent_ms": med("agent_ms"), "agents_ms": sum(r["cpu_ms"] for r in res), "world_ms": w["cpu_ms"],
             "router_ms": 1000 * (router_cpu[1] - router_cpu[0]) / ticks,
             "msgs_in": med("msgs_in"), "wakeups": med("wakeups"), "switches": med("switches"),
             "heard": med("heard")}
@@ -341,24 +332,31 @@ def main() -> int:
     ap.add_argument("--pattern", nargs="+", choices=PATTERNS, default=list(PATTERNS))
     ap.add_argument("--ticks", type=int, default=200, help="ticks measured (after the warm-up)")
     ap.add_argument("--warmup", type=int, default=20, help="ticks run before the measurement starts")
-    for hidden in ("--port", "--id", "--start", "--end"):
+    ap.add_argument("--per-process", type=int, nargs="+", default=[1],
+                    help="agents per process, K (as --agents-per-process K: an agent host per K agents)")
+    ap.add_argument("--scenario", help="a scenario file's agents at their starts instead of the grid (-n ignored)")
+    for hidden in ("--port", "--start", "--end"):
         ap.add_argument(hidden, type=int, help=argparse.SUPPRESS)
+    ap.add_argument("--ids", help=argparse.SUPPRESS)
     ap.add_argument("--run", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.role == "agent":
-        return agent_main(args.port, args.run, args.agents[0], args.id, args.pattern[0], args.start, args.end)
+        return agent_main(args.port, args.run, scenario_of(args.agents[0], args.scenario),
+                          [int(a) for a in args.ids.split(",")], args.pattern[0], args.start, args.end)
     if args.role == "world":
-        return world_main(args.port, args.run, args.agents[0], args.start, args.end)
-    print(f"# floor: router + world + N agents (zenoh clients), msgpack only, {args.ticks} ticks measured")
+        return world_main(args.port, args.run, scenario_of(args.agents[0], args.scenario), args.start, args.end)
+    print(f"# floor: router + world + N agents (zenoh clients, K per process), msgpack only, {args.ticks} ticks "
+          f"measured{' on ' + args.scenario if args.scenario else ''}")
     print(f"# {machine()}")
-    print(f"{'pattern':>8s} {'N':>4s} {'ticks/s':>7s} {'agent':>7s} {'agents':>8s} {'world':>7s} {'router':>7s} "
-          f"{'msgs in':>7s} {'wakeups':>7s} {'ctxsw':>6s} {'heard':>5s}")
-    for n in args.agents:
+    print(f"{'pattern':>8s} {'N':>4s} {'K':>3s} {'ticks/s':>7s} {'agent':>7s} {'agents':>8s} {'world':>7s} "
+          f"{'router':>7s} {'msgs in':>7s} {'wakeups':>7s} {'ctxsw':>6s} {'heard':>5s}")
+    for n in args.agents if not args.scenario else [0]:
         for pat in args.pattern:
-            r = floor_run(n, pat, args.ticks, args.warmup)
-            print(f"{pat:>8s} {n:4d} {r['ticks_per_s']:7.1f} {r['agent_ms']:7.2f} {r['agents_ms']:8.1f} "
-                  f"{r['world_ms']:7.2f} {r['router_ms']:7.2f} {r['msgs_in']:7.1f} {r['wakeups']:7.1f} "
-                  f"{r['switches']:6.1f} {r['heard']:5.0f}", flush=True)
+            for per in args.per_process:
+                r = floor_run(n, pat, args.ticks, args.warmup, per_process=per, scenario=args.scenario)
+                print(f"{pat:>8s} {r['n']:4d} {per:3d} {r['ticks_per_s']:7.1f} {r['agent_ms']:7.2f} "
+                      f"{r['agents_ms']:8.1f} {r['world_ms']:7.2f} {r['router_ms']:7.2f} {r['msgs_in']:7.1f} "
+                      f"{r['wakeups']:7.1f} {r['switches']:6.1f} {r['heard']:5.0f}", flush=True)
     return 0
 
 

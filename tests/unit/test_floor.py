@@ -1,4 +1,4 @@
-"""The floor benchmark (bench/floor.py) mirrors the real protocol: the beacons an agent waits for in the
+"""The floor benchmark (bench/floor.py, its pattern in bench/floor_pattern.py) mirrors the real protocol: the beacons an agent waits for in the
 `cells` pattern are those a real agent's tick waits for on the grid (agent/neighbours.py: its wait set plus
 the peers it hears anyway), and its payloads are the wire messages' maps, byte for byte as long."""
 
@@ -13,7 +13,7 @@ from agent.neighbours import Neighbourhood
 from reconswarm.net import wire
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
-import floor
+import floor_pattern as floor
 from grid import grid_scenario
 
 
