@@ -1,6 +1,7 @@
-"""The floor benchmark (bench/floor.py, its pattern in bench/floor_pattern.py) mirrors the real protocol: the beacons an agent waits for in the
-`cells` pattern are those a real agent's tick waits for on the grid (agent/neighbours.py: its wait set plus
-the peers it hears anyway), and its payloads are the wire messages' maps, byte for byte as long."""
+"""The floor benchmark (bench/floor.py, its pattern in bench/floor_pattern.py) mirrors the real protocol: the
+beacons an agent waits for in the `cells` pattern are those a real agent's tick waits for on the grid
+(agent/neighbours.py: its wait set plus the peers it hears anyway), and its payloads are the wire messages'
+maps, byte for byte as long."""
 
 from __future__ import annotations
 

@@ -35,7 +35,19 @@ def test_flood_of_malformed_messages(out: Path) -> None:
     assert p.returncode == 0, p.stderr[-3000:]
     s = json.loads(p.stdout)
     assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
-    assert s["convergence_time_s"] == 222.25  # malformed input changed nothing
+    if s["deterministic"]:
+        assert s["convergence_time_s"] == 222.25  # malformed input changed nothing
+    else:
+        # The flood is also about 1.2 GB (one payload in 8 is over 1 MiB, each fanned out to every receiver): on
+        # a slow machine it can hold the swarm's messages up longer than an agent waits (agent_wait_timeout_s),
+        # which then acts without them and says so. Never because it believed a malformed message: every
+        # agent's first guess is a wait that ran out, after the flood began.
+        (_, flood_t, _), = faults_log(out)
+        assert s["determinism_lost_at_s"] >= flood_t, s
+        firsts = [next(line for line in f.read_text().splitlines() if "no longer deterministic" in line)
+                  for f in sorted((out / "logs").glob("agent-*.log")) if "no longer deterministic" in f.read_text()]
+        assert firsts and all("acting without them" in line and any(
+            w in line for w in ("silent for", "gave up waiting", "clock never came")) for line in firsts), firsts
     sent = json.loads((out / "logs" / "flood.log").read_text().strip().splitlines()[-1])
     assert sent["total"] == 10_000
     # Who receives each key (agents never receive their own announcements, but do check anyone else's).
