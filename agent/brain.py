@@ -7,8 +7,8 @@ reproduces `reconswarm sim` (see reconswarm_bringup/engine.py for the tick order
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from typing import NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,9 +26,18 @@ from reconswarm.scenario.model import PlannerKind, Scenario
 Array = NDArray[np.float64]
 
 
-@dataclass(frozen=True)
-class Peer:
-    """What an agent knows of another: its last announced head point and radius."""
+class Located(Protocol):
+    """Anything with a head point: a Peer, a beacon."""
+
+    @property
+    def px(self) -> float: ...
+    @property
+    def py(self) -> float: ...
+
+
+class Peer(NamedTuple):
+    """What an agent knows of another: its last announced head point and radius (a tuple: dozens are made per
+    agent and tick)."""
 
     id: int
     px: float
@@ -70,11 +79,15 @@ class AgentBrain:
 
     def linked(self, p: Array, peers: list[Peer]) -> list[int]:
         """Ids of peers within link range of head point p (2,): whose obstacle sets we merge."""
-        if not peers:
+        return self.linked_at(p, {x.id: x for x in peers})
+
+    def linked_at(self, p: Array, at: Mapping[int, Located]) -> list[int]:
+        """Those of the peers in `at` (id -> its head point) within link range of p (2,), in the order of `at`."""
+        if not at:
             return []
-        q = np.array([[x.px, x.py] for x in peers])
-        d = norm2(p[None, :] - q)
-        return [peers[k].id for k in np.flatnonzero(linked(d, self.cfg.link_range_m))]
+        ids = list(at)
+        d = norm2(p[None, :] - np.array([(b.px, b.py) for b in at.values()]))  # (P,)
+        return [ids[k] for k in np.flatnonzero(linked(d, self.cfg.link_range_m))]
 
     def tick(self, k: int, p: Array, scan: dict[str, Array], peers: list[Peer],
              shared: list[dict[str, Array]], swarm_sets: list[dict[str, Array]] | None = None,

@@ -137,20 +137,20 @@ class Neighbourhood:
         if own is None:
             return frozenset()
         out = set()
-        # (after tick 0 only peers with a beacon of k-1 or back in the mission can be near: not the whole swarm)
-        for a in self.peers if k == 0 else self.peers.intersection(prev.keys() | self.joined):
-            b = prev.get(a)
-            # A peer that joined again is placed by its beacons once its beacon of k-1 is in (not by any beacon of
-            # it: one of k may come before our state of k, and the wait set must not depend on that order).
-            if b is not None:
-                self.joined.discard(a)
-                pos: XY | None = (b.px, b.py)
-            elif k == 0 or a in self.joined:  # not moved since we knew it (its agent was away)
-                seen = last_seen.get(a)
-                pos = (seen.px, seen.py) if seen is not None else self.start.get(a)
-            else:
-                continue
-            if pos is not None and self.grid.may_matter(own, pos):
+        ox, oy, far = own[0], own[1], self.grid.reach_m + 2.0 * self.grid.step_m  # (CellGrid.may_matter, inline)
+        hypot, peers, joined = math.hypot, self.peers, self.joined
+        # A peer with a beacon of k-1 is placed by it; one that joined again, by its beacons once its beacon of k-1
+        # is in (not by any beacon of it: one of k may come before our state of k, and the wait set must not depend
+        # on that order); after tick 0 nobody else can be near: not the whole swarm.
+        for a, b in prev.items():
+            if a in peers and hypot(ox - b.px, oy - b.py) <= far:
+                out.add(a)
+        back = [a for a in (peers if k == 0 else joined) if a in peers and a not in prev]
+        joined.difference_update(prev.keys())
+        for a in back:  # not moved since we knew it (its agent was away)
+            seen = last_seen.get(a)
+            pos = (seen.px, seen.py) if seen is not None else self.start.get(a)
+            if pos is not None and hypot(ox - pos[0], oy - pos[1]) <= far:
                 out.add(a)
         return frozenset(out)
 

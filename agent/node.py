@@ -124,7 +124,7 @@ class AgentNode:
                 self.guessed_k = m.k
                 log.warning("agent %d: tick %d: %s; lockstep is no longer deterministic", self.id, m.k,
                             self.nb.unexpected(m))
-            if m.id not in self.last_seen or m.k >= self.last_seen[m.id].k:
+            if (seen := self.last_seen.get(m.id)) is None or m.k >= seen.k:
                 self.last_seen[m.id] = m
         elif isinstance(m, Token) and m.role is Role.AGENT and m.agent is not None:
             (self.alive.add if m.up else self.alive.discard)(m.agent)
@@ -193,19 +193,20 @@ class AgentNode:
         return self.alive if clock is None else clock.alive_set - self.gone if self.gone else clock.alive_set
 
     def _peers(self, k: int) -> tuple[list[Peer], list[Peer]]:
-        """Whom tick k plans with, (live, lost). Live: every beacon of k; the latest beacon of a peer it
-        waited for but lacks (a guess); not an alive peer that may not matter at k (it adds nothing, and its
-        position would be stale; realtime: not heard lately). Lost (not `_living`: the world's clock is not
-        fooled by a forged token): where their robots stopped, by the latest beacon or the world's scan."""
+        """Whom tick k plans with, (live, lost). Live: every beacon of k; the latest of a peer it waited for but
+        lacks (a guess); not a live peer that may not matter at k (realtime: not heard lately). Lost (not `_living`:
+        the world's clock is not fooled by a forged token): where their robots stopped (latest beacon, or scan)."""
         fresh, st = self.beacons.get(k, {}), self.states[k]
         clock = self.clocks.get(k) or self.clocks.get(max(self.clocks, default=-1))  # (realtime: the newest)
         rt, p, living = self.mode == "realtime", (st.px, st.py), self._living(clock)
         wanted = self._expected(k, None) if not rt else self._lately()
         live, lost = list[Peer](), list[Peer]()
         for a, b in self.last_seen.items():
-            b = fresh.get(a, b)
-            if a in fresh or a not in living or (a in wanted and (not rt or self.nb.audible(p, b))):
-                (live if a in fresh or a in living else lost).append(Peer(b.id, b.px, b.py, b.radius))
+            if (f := fresh.get(a)) is not None or (a in living and a in wanted and (not rt or self.nb.audible(p, b))):
+                b = f or b
+                live.append(Peer(a, b.px, b.py, b.radius))
+            elif a not in living:
+                lost.append(Peer(a, b.px, b.py, b.radius))
         return live, lost
 
     def _lately(self) -> set[int]:
@@ -217,8 +218,7 @@ class AgentNode:
     def _link(self, k: int, p: np.ndarray) -> None:
         """Which peers' sets tick k merges: those within link range of p by their beacons at k."""
         fresh = self.beacons.get(k, {})
-        fresh_peers = [Peer(a, b.px, b.py, b.radius) for a, b in fresh.items()]
-        self._linked = (k, {a: fresh[a].rev for a in self.brain.linked(p, fresh_peers)})
+        self._linked = (k, {a: fresh[a].rev for a in self.brain.linked_at(p, fresh)})
 
     def _ready_lockstep(self, k: int, now: float) -> bool:
         """True once everything tick k needs is in (or the wait timed out)."""

@@ -315,8 +315,10 @@ class IntrusionTally:
 
     rows: dict[tuple[str, str], list[float]] = field(default_factory=dict)  # -> [count, first_t]
     max_rows: int = 256
+    total: int = 0  # every intrusion counted (the rows' counts summed)
 
     def add(self, i: Intrusion, t: float) -> bool:
+        self.total += 1
         k = (i.kind.value, i.source)
         row = self.rows.get(k)
         if row is None:
@@ -327,10 +329,6 @@ class IntrusionTally:
                 row = self.rows[k] = [0, t]
         row[0] += 1
         return row[0] == 1
-
-    @property
-    def total(self) -> int:
-        return int(sum(r[0] for r in self.rows.values()))
 
     def as_rows(self) -> list[tuple[str, str, int, float]]:
         """(kind, source, count, first_t), as the run record stores them."""
