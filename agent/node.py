@@ -203,7 +203,7 @@ class AgentNode:
         live, lost = list[Peer](), list[Peer]()
         for a, b in self.last_seen.items():
             if (f := fresh.get(a)) is not None or (a in living and a in wanted and (not rt or self.nb.audible(p, b))):
-                b = f or b
+                b = f if f is not None else b
                 live.append(Peer(a, b.px, b.py, b.radius))
             elif a not in living:
                 lost.append(Peer(a, b.px, b.py, b.radius))
