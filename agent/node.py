@@ -8,7 +8,6 @@ at k (agent/neighbours.py: the cells it listens to and its wait set; every live 
 leader) and the obstacle sets of those within link range (all for the virtual leader), then plans and
 commands. Realtime: it acts shortly after each new state on whatever it has (latest beacons, sets). A lost
 peer stays where last seen or where the world's scan reports it held; a live one out of our cells is dropped.
-
 A new session of its process (`reconnected`) keeps the node: peers, lost peers, knowledge, revisions, escape state.
 """
 
@@ -38,15 +37,12 @@ class AgentNode:
         self.nb = Neighbourhood(s, agent_id)  # our cells and whom a tick waits for (agent/neighbours.py)
         self.radius = float(self.brain.r[0])
         self.rejected = 0  # messages dropped so far (in our reports)
-        self.states: dict[int, wire.State] = {}
-        self.scans: dict[int, wire.Scan] = {}
-        self.clocks: dict[int, wire.Clock] = {}
+        self.states, self.scans, self.clocks = dict[int, wire.State](), dict[int, wire.Scan](), dict[int, wire.Clock]()
         self.beacons: dict[int, dict[int, wire.Beacon]] = {}  # tick -> peer -> its beacon at that tick
         self.last_seen: dict[int, wire.Beacon] = {}  # peer -> its newest beacon (a lost peer stays there)
         ps = self.peer_sets = PeerSets()  # peers' sets by revision, and the revisions merged (agent/sets.py)
         self.sets, self.merged, self.merged_union = ps.sets, ps.merged, ps.merged_union
-        self.alive: set[int] = set()
-        self.gone: set[int] = set()  # peers whose token we saw go (and not come back)
+        self.alive, self.gone = set[int](), set[int]()  # (gone: peers whose token we saw go, and not come back)
         self.k, self.beacon_sent = -1, -1  # last tick commanded, last tick announced
         self.wait_since: float | None = None
         self.guessed_k = -1  # lockstep: the first tick acted on without all its data (-1: none)
@@ -54,7 +50,7 @@ class AgentNode:
         self.mode = "lockstep"
         self.period_s, self.now = 0.0, now_s  # (now: the wall time of the latest step or awaiting call)
         self.act_at: float | None = None
-        self.last_clock, self.ended = now_s, False
+        self.last_clock, self.world_at, self.ended = now_s, now_s, False  # (world_at: its latest clock or our state)
         self.clock_in: wire.Clock | None = None  # the latest clock received: an end stands if nothing came after it
         self.world_gone = False  # the world's token went away and no clock came since (a stalled world)
         self.started = False  # the mission began (first clock): the watches run from then on
@@ -86,8 +82,7 @@ class AgentNode:
         return out
 
     def reconnected(self, now_s: float) -> None:
-        """The process opened a new session: give it `resubscribe_s` to bring the commands back; put our obstacle
-        set in the new session's cache (for peers that join later) at the next step."""
+        """A new session: `resubscribe_s` to bring the commands back; our set in its cache at the next step."""
         self.last_act = self.acted = now_s
         self._announce_set = self.brain.rev > 0
 
@@ -140,15 +135,16 @@ class AgentNode:
         elif isinstance(m, Invalid):
             self.rejected += 1
         elif isinstance(m, wire.Clock):
+            self._world_back(now)
             self.clocks[m.k], self.clock_in, self.last_clock = m, m, now
             for a in set(m.alive) - self.alive - self.gone - {self.id}:  # counted before its token reached us:
                 self.heard.setdefault(a, now)  # its silence counts from now
-            self._world_back(now)
             self.mode = m.mode
             self.period_s = self.s.meta.dt_s / m.speed if m.speed > 0 else 0.0
         elif isinstance(m, wire.State):
             if m.id != self.id:
                 return
+            self._world_back(now)
             if m.k == self.k and self.last_cmd is not None:  # the world missed a command: ours again (we hear it)
                 self._out.append(self.last_cmd)
                 self.last_act = now
@@ -168,11 +164,18 @@ class AgentNode:
             self.peer_sets.add(m)
 
     def _world_back(self, now: float) -> None:
-        """The world is back from a stall: our wait for a command (before a new session) starts now, and so
-        does every peer's silence (no peer has a state to announce while the world stalls)."""
-        if self.world_gone:
+        """The world speaks (a clock, our state). Back from a stall (`_quiet`), every wait starts now: for a command
+        (before a new session), for a tick's data, and each peer's silence (nobody had a state to announce)."""
+        if self._quiet(now):
             self.world_gone, self.last_act, self.acted = False, max(self.last_act, now), max(self.acted, now)
             self.heard = {a: max(at, now) for a, at in self.heard.items()}
+            self.state_at = {k: max(at, now) for k, at in self.state_at.items()}
+            self.wait_since = None if self.wait_since is None else max(self.wait_since, now)
+        self.world_at = now
+
+    def _quiet(self, now: float) -> bool:
+        """The world stalls: its token is gone, or (lockstep) it said nothing for `world_quiet_s`."""
+        return self.world_gone or (self.mode != "realtime" and now - self.world_at > self.timing.world_quiet_s)
 
     # --------------------------------------------------------------------------------------- planning
 
@@ -242,23 +245,23 @@ class AgentNode:
             self.beacon_again = now + t.beacon_again_s * 2 ** self._again_n
         # Each way on without some of the tick's data is a guess: the command may differ from the in-process
         # engine's from here on, so the node says so (`guessed_k` in its reports, then the record's summary).
-        self._guess = ""
+        self._guess, quiet = "", self._quiet(now)  # (none while the world stalls: a peer may lack only its state)
         if clock is None:
             # The tick's clock may have been lost (an outage): after a while, go on without it (the newest
             # clock's list of agents).
             first = self.state_at.setdefault(k, now)
-            if now - first < t.agent_wait_timeout_s or not self.clocks:
+            if now - first < t.agent_wait_timeout_s or not self.clocks or quiet:
                 return False
             clock = self.clocks[max(self.clocks)]
             self._guess = "the tick's clock never came"
-        if self.wait_since is not None and now - self.wait_since > t.agent_wait_timeout_s:
+        if self.wait_since is not None and now - self.wait_since > t.agent_wait_timeout_s and not quiet:
             self._guess = f"gave up waiting {t.agent_wait_timeout_s:g} s for peers' data"
             return True
         fresh = self.beacons.get(k, {})
         # Peers alive by their tokens that may matter at k whose beacon for k is not in: wait, unless one has
         # said nothing for peer_silent_s (a token without data: a frozen process before its lease ends, forged).
         missing = sorted(a for a in self._expected(k, clock) if a not in fresh)
-        if any(now - self.heard.get(a, now) < t.peer_silent_s for a in missing):
+        if any(now - self.heard.get(a, now) < t.peer_silent_s for a in missing) or (quiet and bool(missing)):
             return False
         if missing:
             self._guess = f"agents {missing} alive but silent for {t.peer_silent_s:g} s"
@@ -328,8 +331,7 @@ class AgentNode:
         if k not in self.states:
             newest = max(self.states, default=None), max(self.clocks, default=None)
             return f"tick {k}: no state yet (newest state {newest[0]}, newest clock {newest[1]})"
-        clock = self.clocks.get(k)
-        fresh = self.beacons.get(k, {})
+        clock, fresh = self.clocks.get(k), self.beacons.get(k, {})
         peers = sorted(a for a in self._expected(k, clock) if a not in fresh)
         sets = sorted(a for a, rev in self._linked[1].items() if rev and rev not in self.sets.get(a, ()))
         missing = (["clock"] * (clock is None) + [f"beacons of {peers}"] * bool(peers)
@@ -355,9 +357,7 @@ class AgentNode:
     def _advance(self, now: float) -> None:
         """Act on every tick the data allows."""
         if self.mode == "realtime":  # act on the newest state once the peers' beacons for it are in, or
-            if not self.states:      # at the deadline a fraction of a period after it arrived
-                return
-            k = max(self.states)
+            k = max(self.states, default=-1)  # at the deadline a fraction of a period after it arrived
             if k <= self.k:
                 return
             if self.beacon_sent < k:

@@ -20,6 +20,10 @@ class Timing:
     # A peer whose beacons stopped this long ago (alive by its token, but silent) is not waited for (a guess
     # too); longer than the lease for the same reason.
     peer_silent_s: float = 3.0
+    # Lockstep: the world publishes a tick it waits on again every `republish_s`; nothing from it (a clock, our
+    # state) for this long, or its token gone: it stalls (frozen mid-tick, starved), nobody can have a new state
+    # to announce, so no wait above is given up, and every wait starts afresh once it speaks again.
+    world_quiet_s: float = 1.5
     # Lockstep: while stuck on a tick, announce the beacon (and obstacle set) again this often.
     beacon_again_s: float = 0.5
     # No command for this long (each time the world re-sends the tick we commanded, every `republish_s` while it

@@ -1,13 +1,17 @@
 """The agent node's waits (agent/node.py, lockstep) on their own clocks: the wait for a lost clock counts from
 when the tick's state came (not from 0), the wait for peers gives up after agent_wait_timeout_s even while a
 peer keeps talking (its beacon for the tick never comes), and a stuck tick's beacon goes out again after
-beacon_again_s, then 2, 4, 8 x that (never at every step)."""
+beacon_again_s, then 2, 4, 8 x that (never at every step). While the world stalls (its token gone, or nothing from
+it for world_quiet_s though it publishes a tick it waits on again every republish_s) no wait is given up, and
+every wait starts afresh when it speaks again."""
 
 from __future__ import annotations
 
 import dataclasses
 
 from agent.node import AgentNode
+from reconswarm.net.timing import Timing
+from tests.support import world_token
 from tests.unit.test_agent_node import A, B, S, T, beacon, beacons, clock, cmds, joined, state
 
 
@@ -55,3 +59,60 @@ def test_a_stuck_ticks_beacon_backs_off_doubling() -> None:
         want.append(round(t, 2))
     assert sent_at[:4] == want
     assert node.k == -1  # (still waiting for B: no command)
+
+
+W = Timing()  # (T takes the world to speak throughout: these tests are about its silence)
+
+
+def frozen_mid_tick() -> AgentNode:
+    """A and B acted on tick 0; the world published tick 1's clock and A's state, then froze (SIGSTOP) before
+    B's state: B has nothing to announce until the world is back."""
+    node = AgentNode(S, A, 0.0, W)
+    node.step([joined(A), joined(B)], 0.0)
+    node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 110.0, 0.0)], 0.0)
+    assert node.k == 0
+    node.step([clock(1, (A, B)), state(1, 100.1, 0.0)], 0.1)
+    return node
+
+
+def test_a_world_frozen_mid_tick_past_its_lease_is_waited_out_not_guessed_through() -> None:
+    node = frozen_mid_tick()
+    for now in (1.0, 2.0, 3.2, 5.0, 9.9):  # past agent_wait_timeout_s and peer_silent_s: nothing given up
+        if now == 2.0:
+            assert not cmds(node.step([world_token(False)], now))  # the world's lease ended
+        assert not cmds(node.step([], now)), now
+    # Back (10 s frozen): its token, then the rest of tick 1 and tick 1 again; every wait starts afresh.
+    assert not cmds(node.step([world_token(True), clock(1, (A, B)), state(1, 100.1, 0.0)], 10.1))
+    assert not cmds(node.step([], 10.1 + min(W.agent_wait_timeout_s, W.peer_silent_s) - 0.1))
+    out = node.step([beacon(B, 1, 110.1, 0.0)], 13.0)  # B got its state and announced it
+    assert [c.k for c in cmds(out)] == [1] and node.guessed_k == -1  # deterministic
+
+
+def test_a_world_silent_for_world_quiet_s_is_a_stall_though_its_token_stays() -> None:
+    """Frozen shorter than its lease (or its token's end not yet with us): the world's silence alone says it
+    stalls. Once it speaks again and keeps publishing the tick, a peer still silent is given up, from its return."""
+    node = frozen_mid_tick()
+    assert W.world_quiet_s < W.agent_wait_timeout_s and W.world_quiet_s < W.peer_silent_s
+    for now in (1.0, 3.2):
+        assert not cmds(node.step([], now)), now
+    now = 4.0  # back: tick 1 again, then every republish_s; B still silent
+    assert not cmds(node.step([clock(1, (A, B)), state(1, 100.1, 0.0)], now))
+    while now + W.republish_s < 4.0 + min(W.agent_wait_timeout_s, W.peer_silent_s):
+        now = round(now + W.republish_s, 2)
+        assert not cmds(node.step([clock(1, (A, B)), state(1, 100.1, 0.0)], now)), now
+    out = node.step([clock(1, (A, B)), state(1, 100.1, 0.0)], 4.0 + W.agent_wait_timeout_s + 0.05)
+    assert [c.k for c in cmds(out)] == [1] and node.guessed_k == 1  # a silent peer of a speaking world: a guess
+
+
+def test_a_lost_clock_is_not_given_up_while_the_world_is_silent() -> None:
+    node = AgentNode(S, A, 0.0, W)
+    node.step([joined(A)], 0.0)
+    node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
+    node.step([state(1, 100.1, 0.0)], 0.1)  # clock 1 lost, then the world froze
+    assert not cmds(node.step([], 0.1 + W.agent_wait_timeout_s + 0.5))
+    now = 0.1 + W.agent_wait_timeout_s + 1.0
+    node.step([state(1, 100.1, 0.0)], now)  # back: our state again (its clock lost again)
+    assert not cmds(node.step([], now + W.republish_s))
+    for i in range(2, 8):
+        out = node.step([state(1, 100.1, 0.0)], now + i * W.republish_s)
+    assert [c.k for c in cmds(out)] == [1] and node.guessed_k == 1
