@@ -137,7 +137,7 @@ class Neighbourhood:
         if own is None:
             return frozenset()
         out = set()
-        ox, oy, far = own[0], own[1], self.grid.reach_m + 2.0 * self.grid.step_m  # (CellGrid.may_matter, inline)
+        ox, oy, far = own[0], own[1], self.grid.matter_m  # (CellGrid.may_matter, inline)
         hypot, peers, joined = math.hypot, self.peers, self.joined
         # A peer with a beacon of k-1 is placed by it; one that joined again, by its beacons once its beacon of k-1
         # is in (not by any beacon of it: one of k may come before our state of k, and the wait set must not depend

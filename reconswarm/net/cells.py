@@ -66,10 +66,15 @@ class CellGrid:
                     out.add((cx, cy))
         return frozenset(out)
 
+    @property
+    def matter_m(self) -> float:
+        """reach + 2 V dt: the farthest centre distance at k-1 from which a peer can be within reach at k."""
+        return self.reach_m + 2.0 * self.step_m
+
     def may_matter(self, own: tuple[float, float], peer: tuple[float, float]) -> bool:
         """Can a peer at `peer` at tick k-1 be within reach of us at tick k (we at `own` at k-1)?"""
         # (hypot: a distance beyond the float range is inf, not an OverflowError as a square of 1e308 is)
-        return math.hypot(own[0] - peer[0], own[1] - peer[1]) <= self.reach_m + 2.0 * self.step_m
+        return math.hypot(own[0] - peer[0], own[1] - peer[1]) <= self.matter_m
 
 
 def cell_chunk(c: Cell) -> str:
