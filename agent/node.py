@@ -52,7 +52,7 @@ class AgentNode:
         self.act_at: float | None = None
         self.last_clock, self.world_at, self.ended = now_s, now_s, False  # (world_at: its latest clock or our state)
         self.clock_in: wire.Clock | None = None  # the latest clock received: an end stands if nothing came after it
-        self.world_gone = False  # the world's token went away and no clock came since (a stalled world)
+        self.world_gone = False  # the world's token went away and nothing came from it since (a stalled world)
         self.started = False  # the mission began (first clock): the watches run from then on
         self.last_cmd: wire.Cmd | None = None
         self.heard: dict[int, float] = {}  # wall time of each peer's latest beacon (or of its token), the newest last
