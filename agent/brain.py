@@ -7,6 +7,7 @@ reproduces `reconswarm sim` (see reconswarm_bringup/engine.py for the tick order
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import NamedTuple, Protocol
 
@@ -18,7 +19,6 @@ from reconswarm.paper.blocked import blocked_hulls, pass_gap_m
 from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
 from reconswarm.paper.knowledge import KnownObstacles, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
-from reconswarm.paper.link import linked
 from reconswarm.paper.planner import Neighbours, ObstacleView, command, errors, repulsion
 from reconswarm.plant.unicycle import inputs
 from reconswarm.scenario.model import PlannerKind, Scenario
@@ -82,21 +82,24 @@ class AgentBrain:
         return self.linked_at(p, {x.id: x for x in peers})
 
     def linked_at(self, p: Array, at: Mapping[int, Located]) -> list[int]:
-        """Those of the peers in `at` (id -> its head point) within link range of p (2,), in the order of `at`."""
-        if not at:
-            return []
-        ids = list(at)
-        d = norm2(p[None, :] - np.array([(b.px, b.py) for b in at.values()]))  # (P,)
-        return [ids[k] for k in np.flatnonzero(linked(d, self.cfg.link_range_m))]
+        """Those of the peers in `at` (id -> its head point) within link range of p (2,), in the order of `at`.
+        One peer at a time (a handful, where numpy's cost per call dominates): the same IEEE operations as
+        norm2 and reconswarm.paper.link.linked, so the same answer to the last bit."""
+        px, py, link_m, out = float(p[0]), float(p[1]), self.cfg.link_range_m, []
+        for a, b in at.items():
+            dx, dy = px - b.px, py - b.py
+            if math.sqrt(dx * dx + dy * dy) <= link_m:
+                out.append(a)
+        return out
 
-    def tick(self, k: int, p: Array, scan: dict[str, Array], peers: list[Peer],
+    def tick(self, k: int, p: Array, scan: Mapping[str, Array | Sequence[tuple[float, float]]], peers: list[Peer],
              shared: list[dict[str, Array]], swarm_sets: list[dict[str, Array]] | None = None,
              lost: Sequence[Peer] = ()) -> tuple[Array, bool]:
         """Plan tick k. Returns (u (2,), whether the obstacle set grew).
 
-        p (2,) own head point at k; scan: obstacle id -> contour points (P, 2) sensed at k; peers: every
-        other agent's last announcement (at k when fresh); shared: the obstacle sets at k-1 of the peers
-        within link range; swarm_sets (virtual leader only): every agent's set at k-1, own excluded;
+        p (2,) own head point at k; scan: obstacle id -> contour points sensed at k ((P, 2), or (x, y) pairs);
+        peers: every other agent's last announcement (at k when fresh); shared: the obstacle sets at k-1 of
+        the peers within link range; swarm_sets (virtual leader only): every agent's set at k-1, own excluded;
         lost: where the robots of peers whose agents are gone stand (still, for good).
         """
         c = self.cfg
@@ -178,10 +181,12 @@ class AgentBrain:
         m = edges.ax.shape[0]
         return obstacle_view(pos, 1, m, np.zeros(m, dtype=np.int64), np.arange(m), edges), alone
 
-    def _new_points(self, scan: dict[str, Array]) -> dict[str, Array]:
+    def _new_points(self, scan: Mapping[str, Array | Sequence[tuple[float, float]]]) -> dict[str, Array]:
+        """The scanned points not merged before (merging a point again is a no-op), by obstacle."""
         out = {}
         for oid, pts in scan.items():
-            fresh = [(x, y) for x, y in pts.tolist() if (x, y) not in self._seen]
+            fresh = [xy for xy in map(tuple, pts.tolist() if isinstance(pts, np.ndarray) else pts)
+                     if xy not in self._seen]
             if fresh:
                 self._seen.update(fresh)
                 out[oid] = np.array(fresh, dtype=np.float64)

@@ -47,15 +47,16 @@ class PeerSets:
                 del revs[r]
 
 
-def scan_sets(scans: dict[int, wire.Scan], k_from: int, k_to: int) -> ObstacleSets:
-    """The points of our scans of ticks k_from..k_to by obstacle (those scans are taken out of `scans`)."""
+def scan_sets(scans: dict[int, wire.Scan], k_from: int, k_to: int) -> dict[str, list[tuple[float, float]]]:
+    """The points (x, y) of our scans of ticks k_from..k_to by obstacle, in scan order (those scans are taken
+    out of `scans`); kept as the wire's tuples: most of them were seen already (agent/brain.py)."""
     pts: dict[str, list[tuple[float, float]]] = {}
     for kk in range(k_from, k_to + 1):
         sc = scans.pop(kk, None)
         if sc is not None:
             for x, y, oid in sc.points:
                 pts.setdefault(oid, []).append((x, y))
-    return {oid: np.array(v, dtype=np.float64) for oid, v in pts.items()}
+    return pts
 
 
 def own_set(agent_id: int, k: int, rev: int, hulls: ObstacleSets) -> wire.ObstacleSet:

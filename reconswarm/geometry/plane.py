@@ -106,8 +106,7 @@ def points_inside_hull(points: Array, hull: Array) -> NDArray[np.bool_]:
     if hull.shape[0] < 3:
         return np.zeros(points.shape[0], dtype=bool)
     a = hull
-    b = np.roll(hull, -1, axis=0)
-    ab = b - a  # (V, 2)
+    ab = np.concatenate((hull[1:], hull[:1])) - a  # (V, 2): each vertex to the next
     ap = points[:, None, :] - a[None, :, :]  # (P, V, 2)
     cross = ab[None, :, 0] * ap[..., 1] - ab[None, :, 1] * ap[..., 0]
     return np.all(cross >= 0.0, axis=1)

@@ -11,8 +11,12 @@ the engine's u row with `==`.
 from __future__ import annotations
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from agent.brain import AgentBrain, Peer
+from reconswarm.geometry.plane import norm2
+from reconswarm.paper.link import linked
 from reconswarm.scenario.model import load
 from reconswarm_bringup.engine import Engine
 from tests.support import PAPER
@@ -44,7 +48,8 @@ def test_agent_brain_tick_equals_the_engine_row_bit_for_bit() -> None:
             pts: dict[str, list[tuple[float, float]]] = {}
             for q in qs[qa == i].tolist():
                 pts.setdefault(f.ids[int(f.owner[q])], []).append((float(f.samples[q, 0]), float(f.samples[q, 1])))
-            scan = {oid: np.array(v, dtype=np.float64) for oid, v in pts.items()}
+            # As arrays, or as the wire's (x, y) pairs (what an agent node hands its brain): both forms, alternately.
+            scan = {oid: np.array(v, dtype=np.float64) for oid, v in pts.items()} if i % 2 else pts
             peers = [Peer(ids[j], float(p[j, 0]), float(p[j, 1]), float(eng.r[j])) for j in range(n) if j != i]
             shared = []
             for a in sorted(brains[i].linked(p[i], peers)):
@@ -61,3 +66,22 @@ def test_agent_brain_tick_equals_the_engine_row_bit_for_bit() -> None:
     # The check covered knowledge received only from peers and commands with known obstacles around.
     assert shared_grew > 0 and obstacle_rows > 1000
     assert np.min(eng.field.true_distances(eng.p)[:, 0] - eng.r) < c.d_max_m
+
+
+_coord = st.floats(-50.0, 50.0, allow_nan=False)
+
+
+@settings(max_examples=200, deadline=None)
+@given(p=st.tuples(_coord, _coord), peers=st.lists(st.tuples(_coord, _coord), max_size=12),
+       on_edge=st.lists(st.floats(0.0, 6.283), max_size=4))
+def test_linked_at_is_the_link_rule_of_the_engine(p: tuple[float, float], peers: list[tuple[float, float]],
+                                                  on_edge: list[float]) -> None:
+    """AgentBrain.linked_at (one peer at a time) picks exactly the peers that reconswarm.paper.link.linked picks
+    from norm2 distances (the engine's rule), peers at the link range's edge included."""
+    s = load(PAPER)
+    brain, link_m = AgentBrain(s, int(s.ids[0])), s.planner.link_range_m
+    at_edge = [(p[0] + link_m * float(np.cos(a)), p[1] + link_m * float(np.sin(a))) for a in on_edge]
+    at = {j: Peer(j, x, y, 0.5) for j, (x, y) in enumerate([*peers, *at_edge])}
+    q = np.array([(b.px, b.py) for b in at.values()]).reshape(-1, 2)
+    want = [j for j, ok in zip(at, linked(norm2(np.array(p)[None, :] - q), link_m), strict=True) if ok]
+    assert brain.linked_at(np.array(p), at) == want
