@@ -28,6 +28,9 @@ class Plant:
         self.theta = s.headings.copy()
         self.l = s.head_offsets
         self.field = ContourField.from_scenario(s)
+        # Every contour sample as a scan reports it, (x, y, obstacle id), made once: obstacles do not move. (S,)
+        self.sample_points = [(x, y, self.field.ids[o]) for (x, y), o in
+                              zip(self.field.samples.tolist(), self.field.owner.tolist(), strict=True)]
         grid = CellGrid.for_scenario(s)
         # Held robots (agents gone) are reported in the scans of agents this near: nearer than anything that
         # can matter to them within the next tick (an agent hears only its cells' beacons).
@@ -56,11 +59,8 @@ class Plant:
         scans: list[wire.Scan | None] = [None] * len(self.ids)
         starts = np.searchsorted(qa, np.arange(len(self.ids)))
         ends = np.searchsorted(qa, np.arange(len(self.ids)), side="right")
-        names = self.field.ids
         for i in map(int, np.flatnonzero(counts)):
-            idx = qs[starts[i]:ends[i]]
-            pts = tuple(zip(*self.field.samples[idx].T.tolist(),
-                            [names[o] for o in self.field.owner[idx].tolist()], strict=True))
+            pts = tuple(map(self.sample_points.__getitem__, qs[starts[i]:ends[i]].tolist()))
             scans[i] = wire.Scan(self.ids[i], k, t, pts, bodies[i])
         states = [wire.State(a, k, t, float(c[i, 0]), float(c[i, 1]), float(self.theta[i]), float(self.p[i, 0]),
                              float(self.p[i, 1]), scans[i]) for i, a in enumerate(self.ids)]
