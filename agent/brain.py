@@ -136,15 +136,17 @@ class AgentBrain:
 
     def _neighbours(self, pos: Array, peers: list[Peer]) -> Neighbours:
         """Peers within d_max,ij, in increasing id (entries beyond it would add exact zeros)."""
-        if not peers:
+        # One peer at a time (a handful): the same IEEE operations as norm2(pos - q) <= r + r_j + d_max over arrays.
+        px, py, r, d_max = float(pos[0, 0]), float(pos[0, 1]), float(self.r[0]), self.cfg.d_max_m
+        near = []
+        for x in sorted(peers, key=lambda x: x.id):
+            dx, dy = px - x.px, py - x.py
+            if math.sqrt(dx * dx + dy * dy) <= r + x.radius + d_max:
+                near.append(x)
+        if not near:
             return Neighbours.empty(1)
-        near = sorted(peers, key=lambda x: x.id)
-        q = np.array([[x.px, x.py] for x in near])
-        rr = np.array([x.radius for x in near])
-        keep = norm2(pos - q) <= self.r[0] + rr + self.cfg.d_max_m
-        if not keep.any():
-            return Neighbours.empty(1)
-        q, rr = q[keep], rr[keep]
+        q = np.array([[x.px, x.py] for x in near], dtype=np.float64)
+        rr = np.array([x.radius for x in near], dtype=np.float64)
         return Neighbours(q.reshape(1, -1, 2), rr.reshape(1, -1), np.ones((1, q.shape[0]), dtype=bool))
 
     def _obstacles(self, pos: Array) -> ObstacleView:

@@ -85,3 +85,26 @@ def test_linked_at_is_the_link_rule_of_the_engine(p: tuple[float, float], peers:
     q = np.array([(b.px, b.py) for b in at.values()]).reshape(-1, 2)
     want = [j for j, ok in zip(at, linked(norm2(np.array(p)[None, :] - q), link_m), strict=True) if ok]
     assert brain.linked_at(np.array(p), at) == want
+
+
+@settings(max_examples=200, deadline=None)
+@given(p=st.tuples(_coord, _coord), peers=st.lists(st.tuples(_coord, _coord, st.floats(0.1, 2.0)), max_size=12),
+       on_edge=st.lists(st.floats(0.0, 6.283), max_size=4))
+def test_neighbours_are_the_planners_reach(p: tuple[float, float], peers: list[tuple[float, float, float]],
+                                           on_edge: list[float]) -> None:
+    """AgentBrain._neighbours (one peer at a time) keeps exactly the peers within r_i + r_j + d_max by norm2 over
+    arrays, in increasing id, peers at the reach's edge included."""
+    s = load(PAPER)
+    brain = AgentBrain(s, int(s.ids[0]))
+    r, d_max = float(brain.r[0]), s.planner.d_max_m
+    at_edge = [(p[0] + (2 * r + d_max) * float(np.cos(a)), p[1] + (2 * r + d_max) * float(np.sin(a)), r)
+               for a in on_edge]
+    everyone = [Peer(j, x, y, rad) for j, (x, y, rad) in reversed(list(enumerate([*peers, *at_edge])))]
+    pos = np.array([p])
+    q = np.array([(b.px, b.py) for b in everyone]).reshape(-1, 2)
+    rr = np.array([b.radius for b in everyone])
+    keep = norm2(pos - q) <= brain.r[0] + rr + d_max
+    want = sorted((b for b, k in zip(everyone, keep, strict=True) if k), key=lambda b: b.id)
+    got = brain._neighbours(pos, everyone)
+    assert got.p.reshape(-1, 2).tolist() == [[b.px, b.py] for b in want]
+    assert got.r.reshape(-1).tolist() == [b.radius for b in want]
