@@ -137,7 +137,7 @@ class AgentNode:
         elif isinstance(m, wire.Clock):
             self._world_back(now)
             self.clocks[m.k], self.clock_in, self.last_clock = m, m, now
-            for a in set(m.alive) - self.alive - self.gone - {self.id}:  # counted before its token reached us:
+            for a in m.alive_set.difference(self.alive, self.gone) - {self.id}:  # counted before its token came:
                 self.heard.setdefault(a, now)  # its silence counts from now
             self.mode = m.mode
             self.period_s = self.s.meta.dt_s / m.speed if m.speed > 0 else 0.0
