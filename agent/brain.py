@@ -45,6 +45,19 @@ class Peer(NamedTuple):
     radius: float
 
 
+class Plan(NamedTuple):
+    """One agent's tick k, ready for the law (AgentBrain.plan): rows (1, ...) of the planner's batched inputs."""
+
+    brain: AgentBrain
+    k: int
+    pos: Array  # (1, 2) head point at k
+    center: Array  # (1, 2) the target's centre, or this agent's copy of the virtual leader
+    lead_vel: Array | None  # (1, 2) the leader's velocity (virtual leader), else None
+    nb: Neighbours  # (1, K) peers within d_max,ij, in increasing id
+    ob: ObstacleView  # (1, M) known hulls
+    grew: bool  # the obstacle set grew at k
+
+
 class AgentBrain:
     def __init__(self, s: Scenario, agent_id: int) -> None:
         self.s = s
@@ -95,14 +108,20 @@ class AgentBrain:
     def tick(self, k: int, p: Array, scan: Mapping[str, Array | Sequence[tuple[float, float]]], peers: list[Peer],
              shared: list[dict[str, Array]], swarm_sets: list[dict[str, Array]] | None = None,
              lost: Sequence[Peer] = ()) -> tuple[Array, bool]:
-        """Plan tick k. Returns (u (2,), whether the obstacle set grew).
+        """Plan tick k: `plan`, then the law for this agent alone. Returns (u (2,), whether the obstacle set grew)."""
+        plan = self.plan(k, p, scan, peers, shared, swarm_sets, lost)
+        return law([plan])[0], plan.grew
+
+    def plan(self, k: int, p: Array, scan: Mapping[str, Array | Sequence[tuple[float, float]]], peers: list[Peer],
+             shared: list[dict[str, Array]], swarm_sets: list[dict[str, Array]] | None = None,
+             lost: Sequence[Peer] = ()) -> Plan:
+        """Everything tick k's law needs, knowledge merged: `law` turns plans into commands, one or many at once.
 
         p (2,) own head point at k; scan: obstacle id -> contour points sensed at k ((P, 2), or (x, y) pairs);
         peers: every other agent's last announcement (at k when fresh); shared: the obstacle sets at k-1 of
         the peers within link range; swarm_sets (virtual leader only): every agent's set at k-1, own excluded;
         lost: where the robots of peers whose agents are gone stand (still, for good).
         """
-        c = self.cfg
         pos = p.reshape(1, 2)
         if self.leader is not None:
             for sets in swarm_sets or []:
@@ -110,8 +129,7 @@ class AgentBrain:
             if self._union_rev != self.rev:
                 self.union.merge_all(self.known.hulls)
                 self._union_rev = self.rev
-            v, vel = self.leader.step(k, [h for _, h in self.union.sorted_items()])
-            center, lead_vel = v, vel
+            center, lead_vel = self.leader.step(k, [h for _, h in self.union.sorted_items()])
         else:
             center, lead_vel = self.target.reshape(1, 2), None
         grew = self.known.merge_all(self._new_points(scan))
@@ -119,20 +137,13 @@ class AgentBrain:
             grew |= self.known.merge_all(sets)
         if grew:
             self.rev += 1
-
         if lost:  # robots whose agents are gone: obstacles where they block a passage (reconswarm.paper.blocked)
             ob, alone = self._obstacles_with_lost(pos, lost)
             nb = self._neighbours(pos, [*peers, *alone])
         else:
             nb = self._neighbours(pos, peers)
             ob = self._obstacles(pos)
-        e = errors(pos, center.reshape(-1, 2)[0], self.offset)
-        rep = repulsion(c, pos, self.r, nb, ob)
-        push = rep[0] + rep[1]
-        pert = stall_step(self.stall, k, pos, e, c.perturbation_mps, c.k_att, c.target_radius_m, c.converge_tol_m,
-                          self.s.meta.dt_s, push)
-        u = command(c, pos, self.r, self.offset, center, nb, ob, pert, lead_vel, rep)
-        return u[0], grew
+        return Plan(self, k, pos, center.reshape(1, 2), lead_vel, nb, ob, grew)
 
     def _neighbours(self, pos: Array, peers: list[Peer]) -> Neighbours:
         """Peers within d_max,ij, in increasing id (entries beyond it would add exact zeros)."""
@@ -196,3 +207,33 @@ class AgentBrain:
 
     def obstacle_sets(self) -> dict[str, Array]:
         return dict(self.known.hulls)
+
+
+def law(plans: Sequence[Plan]) -> Array:
+    """Eq. (7) and Remark 1's escape for several agents' ticks at once: their commands u (P, 2), row by row.
+
+    The rows are the planner's batched inputs stacked (neighbour and obstacle tables padded with invalid
+    columns, which add nothing), and each agent's stall history is its own row: every row is the same bit for
+    bit as one agent's alone (reconswarm/paper/planner.py sums column by column from zero; the in-process
+    engine computes everyone this way). The agents must share one scenario (a host's do) and tick k."""
+    one, n = plans[0], len(plans)
+    c, dt_s = one.brain.cfg, one.brain.s.meta.dt_s
+    if n == 1:  # (one agent: its own arrays)
+        pos, r, offset, center, lead = one.pos, one.brain.r, one.brain.offset, one.center, one.lead_vel
+        nb, ob, st = one.nb, one.ob, one.brain.stall
+    else:
+        pos = np.concatenate([x.pos for x in plans])  # (P, 2)
+        r = np.concatenate([x.brain.r for x in plans])  # (P,)
+        offset = np.concatenate([x.brain.offset for x in plans])  # (P, 2)
+        center = np.concatenate([x.center for x in plans])  # (P, 2)
+        lead = None if one.lead_vel is None else np.concatenate([x.lead_vel for x in plans if x.lead_vel is not None])
+        nb, ob = Neighbours.stack([x.nb for x in plans]), ObstacleView.stack([x.ob for x in plans])
+        st = StallState.stack([x.brain.stall for x in plans])
+    e = errors(pos, center, offset)
+    rep = repulsion(c, pos, r, nb, ob)
+    push = rep[0] + rep[1]
+    pert = stall_step(st, one.k, pos, e, c.perturbation_mps, c.k_att, c.target_radius_m, c.converge_tol_m,
+                      dt_s, push)
+    if n > 1:
+        st.unstack([x.brain.stall for x in plans])
+    return command(c, pos, r, offset, center, nb, ob, pert, lead, rep)

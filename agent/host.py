@@ -10,7 +10,10 @@ is for, through one inbox and one loop that steps every hosted node (agent/node.
   listening to a cell the host already hears gets the newest set of each publisher there (what its own
   advanced subscriber's history would have brought), from the host's copy;
 - per agent: its state (urgent: it starts a tick; in ROS 2 mode its odometry and its scan);
-- a sample is decoded once; each agent takes it through its own link (agent/link.py: its gate, counters).
+- a sample is decoded once; each agent takes it through its own link (agent/link.py: its gate, counters);
+- the law: each hosted agent's node returns its tick's plan (agent/brain.py `Plan`); once every node of a
+  round has been stepped, the plans of one tick are computed in one call of `law` (the planner batched over
+  them, each row the same bit for bit as the agent's alone) and each node takes its command back (`Law`).
 
 Co-hosted agents hear each other in the process: a beacon or set one of them publishes is handed, as the
 same bytes with the session as source, to the others that listen to its cell, at once (the subscriptions
@@ -31,8 +34,9 @@ from typing import Any
 import zenoh
 from zenoh import ext
 
+from agent.brain import Plan, law
 from agent.link import AgentLink, Decoded, decode_sample
-from agent.messages import Input, Reconnect
+from agent.messages import Input, Law, Reconnect
 from agent.neighbours import Cells
 from reconswarm.net import wire
 from reconswarm.net.cells import Cell, chunk_cell
@@ -121,6 +125,7 @@ class AgentHost:
         self.by_cell: dict[Cell | None, set[int]] = {}  # cell -> the agents listening to it (None: to all)
         self._heard_by: dict[Cell | None, list[int]] = {}  # cell -> `_listeners` (until listening or `active` change)
         self.cell_subs: dict[Cell | None, tuple[Any, Any]] = {}  # the host's subscriptions (None: every cell)
+        self.plans: list[tuple[int, Plan]] = []  # the hosted agents' plans of this round, for `answers`
         self.sets: dict[int, tuple[Tag, Item]] = {}  # agent -> its newest obstacle set heard (its cell in its key)
         self.replay: list[tuple[int, Tag, Item]] = []  # (agent, tag, obstacle set) for that agent alone (replayed)
         self._cells: dict[str, Cell | None] = {}  # key -> the cell in it (None: not a cell key)
@@ -285,6 +290,12 @@ class AgentHost:
         poll_s = min(n.timing.agent_poll_s for n in nodes.values())
         rt = Runtime(self.z, who, stop, self.inbox, poll_s)
         exits = rt.run(nodes, self, started=lambda: any(n.started for n in nodes.values()))
+        if rt.interrupted:  # (plans of the interrupted round: their commands, before this session goes)
+            now = time.monotonic()
+            for aid, inputs in self.answers(now).items():
+                for out in nodes[aid].step(inputs, now):
+                    if not isinstance(out, Exit | Reconnect):
+                        self.act(aid, out, now)
         return RECONNECT if rt.interrupted else max((e.code for e in exits.values()), default=0)
 
     def pending(self) -> dict[int, int]:
@@ -298,6 +309,20 @@ class AgentHost:
                 if aid != tag[1]:
                     held[aid] = held.get(aid, 0) + 1
         return held
+
+    def answers(self, now_s: float) -> dict[int, list[Input]]:
+        """The law of every plan the hosted agents returned in this round, computed at once for those of one tick
+        (agent/brain.py `law`: each row the same bit for bit as the agent's alone)."""
+        by_tick: dict[int, list[tuple[int, Plan]]] = {}
+        for aid, plan in self.plans:
+            by_tick.setdefault(plan.k, []).append((aid, plan))
+        self.plans = []
+        out: dict[int, list[Input]] = {}
+        for k, plans in by_tick.items():
+            u = law([p for _aid, p in plans])  # (P, 2)
+            for row, (aid, _p) in enumerate(plans):
+                out[aid] = [Law(k, u[row])]
+        return out
 
     def idle(self, who: int, now_s: float) -> None:
         self.links[who].report()
@@ -313,6 +338,9 @@ class AgentHost:
             link.close()
 
     def act(self, aid: int, out: Any, now_s: float) -> bool:
+        if isinstance(out, Plan):  # (its law, with the other plans of this round: `answers`)
+            self.plans.append((aid, out))
+            return False
         if isinstance(out, Reconnect):
             return True
         if isinstance(out, Cells):

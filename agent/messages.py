@@ -5,13 +5,28 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+from numpy.typing import NDArray
+
+from agent.brain import Plan
 from agent.neighbours import Cells
 from reconswarm.net import wire
 from reconswarm.net.node import Exit, Invalid, RouterLink, Stop, Token
 
+
+@dataclass(frozen=True)
+class Law:
+    """The command u (2,) of tick k from our `Plan`, computed by our host with its other agents' (agent/host.py)."""
+
+    k: int
+    u: NDArray[np.float64]
+
+
 # inputs: the wire messages an agent reads, plus the runtime's (reconswarm/net/node.py): a peer's or the world's
 # token (Token with Role.AGENT and its id, or Role.WORLD), a message dropped as invalid, our router link, a signal
-Input = wire.State | wire.Scan | wire.Clock | wire.Beacon | wire.ObstacleSet | Token | Invalid | RouterLink | Stop
+# (all that a sample or the runtime brings: Heard); in a host of several agents, the law its host computed for our plan
+Heard = wire.State | wire.Scan | wire.Clock | wire.Beacon | wire.ObstacleSet | Token | Invalid | RouterLink | Stop
+Input = Heard | Law
 
 
 # ----------------------------------------------------------------------------------------- outputs
@@ -20,4 +35,5 @@ class Reconnect:
     """No command for `resubscribe_s` though the mission goes on: open a new session (keep this node)."""
 
 
-Output = Cells | wire.Beacon | wire.ObstacleSet | wire.Cmd | Reconnect | Exit
+# Plan: a hosted agent's tick ready for the law, which its host computes for all its agents at once (then `Law`)
+Output = Cells | wire.Beacon | wire.ObstacleSet | wire.Cmd | Reconnect | Exit | Plan

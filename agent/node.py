@@ -9,6 +9,9 @@ leader) and the obstacle sets of those within link range (all for the virtual le
 commands. Realtime: it acts shortly after each new state on whatever it has (latest beacons, sets). A lost
 peer stays where last seen or where the world's scan reports it held; a live one out of our cells is dropped.
 A new session of its process (`reconnected`) keeps the node: peers, lost peers, knowledge, revisions, escape state.
+What it heard is agent/heard.py's. Hosted with other agents (`batched`), a tick's last step, the law, is its
+host's: the node returns its `Plan` and takes the command back as `Law` (agent/host.py computes every plan of a
+round at once).
 """
 
 from __future__ import annotations
@@ -18,8 +21,9 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from agent.brain import AgentBrain, Peer
-from agent.messages import Input, Output, Reconnect
+from agent.brain import AgentBrain, Peer, law
+from agent.heard import Heard
+from agent.messages import Input, Law, Output, Reconnect
 from agent.neighbours import Neighbourhood
 from agent.sets import PeerSets, own_set, scan_sets
 from reconswarm.net import wire
@@ -31,18 +35,17 @@ log = logging.getLogger("reconswarm.agent")
 
 
 class AgentNode:
-    def __init__(self, s: Scenario, agent_id: int, now_s: float, timing: Timing = TIMING) -> None:
+    def __init__(self, s: Scenario, agent_id: int, now_s: float, timing: Timing = TIMING,
+                 batched: bool = False) -> None:
         self.s, self.id, self.timing = s, agent_id, timing
+        self.batched, self.planning = batched, -1  # batched: our plan out, its `Law` from our host (planning: its tick)
         self.brain = AgentBrain(s, agent_id)
         self.nb = Neighbourhood(s, agent_id)  # our cells and whom a tick waits for (agent/neighbours.py)
         self.radius = float(self.brain.r[0])
         self.rejected = 0  # messages dropped so far (in our reports)
-        self.states, self.scans, self.clocks = dict[int, wire.State](), dict[int, wire.Scan](), dict[int, wire.Clock]()
-        self.beacons: dict[int, dict[int, wire.Beacon]] = {}  # tick -> peer -> its beacon at that tick
-        self.last_seen: dict[int, wire.Beacon] = {}  # peer -> its newest beacon (a lost peer stays there)
+        self.h = Heard(agent_id)  # the states, scans, clocks, beacons we heard by tick, who is alive (agent/heard.py)
         ps = self.peer_sets = PeerSets()  # peers' sets by revision, and the revisions merged (agent/sets.py)
         self.sets, self.merged, self.merged_union = ps.sets, ps.merged, ps.merged_union
-        self.alive, self.gone = set[int](), set[int]()  # (gone: peers whose token we saw go, and not come back)
         self.k, self.beacon_sent = -1, -1  # last tick commanded, last tick announced
         self.wait_since: float | None = None
         self.guessed_k = -1  # lockstep: the first tick acted on without all its data (-1: none)
@@ -55,9 +58,7 @@ class AgentNode:
         self.world_gone = False  # the world's token went away and nothing came from it since (a stalled world)
         self.started = False  # the mission began (first clock): the watches run from then on
         self.last_cmd: wire.Cmd | None = None
-        self.heard: dict[int, float] = {}  # wall time of each peer's latest beacon (or of its token), the newest last
         self.last_act = self.acted = now_s  # wall time of our latest command, re-sent or not (acted: of a new tick)
-        self.state_at: dict[int, float] = {}  # wall time each tick's state arrived (while waiting for the rest)
         self._linked: tuple[int, dict[int, int]] = (-1, {})  # (tick, linked peer -> its set's revision)
         self.beacon_again, self._again_n, self.told_waiting = 0.0, 0, 0.0  # announce again at; how often; logged
         self._out: list[Output] = []
@@ -77,7 +78,8 @@ class AgentNode:
                 return [Exit(0, "stopped")]
             self._take(m, now_s)
         self._advance(now_s)
-        self._watch(now_s)
+        if self.planning < 0:  # (a plan out: the watch waits for its law)
+            self._watch(now_s)
         out, self._out = self._out, []
         return out
 
@@ -89,16 +91,16 @@ class AgentNode:
     def awaiting(self, now_s: float) -> int | None:
         """How many more messages the next tick needs at least (the runtime sleeps until that many are in, or
         its own state, or a timeout); None: nothing but our own state will let us act."""
-        newest, self.now = max(self.states, default=-1), now_s
-        k = self.k + 1 if self.mode != "realtime" and self.k >= 0 and (self.k + 1) in self.states else newest
-        st = self.states.get(k)
+        newest, self.now = max(self.h.states, default=-1), now_s
+        k = self.k + 1 if self.mode != "realtime" and self.k >= 0 and (self.k + 1) in self.h.states else newest
+        st = self.h.states.get(k)
         if st is None or k <= self.k:
             return None
-        fresh, clock, silent = self.beacons.get(k, {}), self.clocks.get(k), self.timing.peer_silent_s
+        fresh, clock, silent = self.h.beacons.get(k, {}), self.h.clocks.get(k), self.timing.peer_silent_s
         waited = self._expected(k, clock)
-        need = sum(1 for a in waited if a not in fresh and now_s - self.heard.get(a, now_s) < silent)
+        need = sum(1 for a in waited if a not in fresh and now_s - self.h.heard.get(a, now_s) < silent)
         if self.mode != "realtime":
-            need += self.nb.also_heard(self.alive, self.beacons.get(k - 1, {}), fresh, waited)
+            need += self.nb.also_heard(self.h.alive, self.h.beacons.get(k - 1, {}), fresh, waited)
             need += clock is None
             if self._linked[0] == k:
                 need += sum(1 for a, rev in self._linked[1].items() if rev and rev not in self.sets.get(a, ()))
@@ -112,20 +114,14 @@ class AgentNode:
 
     def _take(self, m: Input, now: float) -> None:
         if isinstance(m, wire.Beacon):  # (most of what arrives: first)
-            self.beacons.setdefault(m.k, {})[m.id] = m
-            self.heard.pop(m.id, None)  # (kept in the order of its times: the newest last)
-            self.heard[m.id] = now
+            self.h.beacon(m, now)
             if m.k <= self.k and self.guessed_k < 0 and self.nb.intruder(m.k, m):  # too late: we acted without it
                 self.guessed_k = m.k
                 log.warning("agent %d: tick %d: %s; lockstep is no longer deterministic", self.id, m.k,
                             self.nb.unexpected(m))
-            if (seen := self.last_seen.get(m.id)) is None or m.k >= seen.k:
-                self.last_seen[m.id] = m
         elif isinstance(m, Token) and m.role is Role.AGENT and m.agent is not None:
-            (self.alive.add if m.up else self.alive.discard)(m.agent)
-            (self.gone.discard if m.up else self.gone.add)(m.agent)
+            self.h.token(m.agent, m.up, now)
             if m.up:
-                self.heard.setdefault(m.agent, now)
                 self.nb.peer_joined(m.agent, self.k >= 0)
         elif isinstance(m, Token) and m.role is Role.WORLD:
             if m.up:
@@ -136,9 +132,8 @@ class AgentNode:
             self.rejected += 1
         elif isinstance(m, wire.Clock):
             self._world_back(now)
-            self.clocks[m.k], self.clock_in, self.last_clock = m, m, now
-            for a in m.alive_set.difference(self.alive, self.gone) - {self.id}:  # counted before its token came:
-                self.heard.setdefault(a, now)  # its silence counts from now
+            self.h.clock(m, now)
+            self.clock_in, self.last_clock = m, now
             self.mode = m.mode
             self.period_s = self.s.meta.dt_s / m.speed if m.speed > 0 else 0.0
         elif isinstance(m, wire.State):
@@ -149,27 +144,26 @@ class AgentNode:
                 self._out.append(self.last_cmd)
                 self.last_act = now
                 return
-            self.states[m.k] = m
+            self.h.states[m.k] = m
             if m.scan is not None:
                 self._take(m.scan, now)
             if self.mode == "realtime":
                 self.act_at = now + self.timing.realtime_act_fraction * self.period_s
         elif isinstance(m, wire.Scan):  # (in its state; in ROS 2 mode on its own key)
             if m.id == self.id:
-                self.scans[m.k] = m
-                # Held robots near us (the world says their agents are gone; maybe never heard: lost far away).
-                self.last_seen.update((a, wire.Beacon(a, m.k, m.t, x, y, self.nb.radius[a])) for a, x, y in m.bodies
-                                      if a in self.nb.radius and a != self.id)
+                self.h.scan(m, self.nb.radius)
         elif isinstance(m, wire.ObstacleSet):
             self.peer_sets.add(m)
+        elif isinstance(m, Law) and m.k == self.planning:
+            self.planning = -1
+            self._command(m.k, m.u, now)
 
     def _world_back(self, now: float) -> None:
         """The world speaks (a clock, our state). Back from a stall (`_quiet`), every wait starts now: for a command
         (before a new session), for a tick's data, and each peer's silence (nobody had a state to announce)."""
         if self._quiet(now):
             self.world_gone, self.last_act, self.acted = False, max(self.last_act, now), max(self.acted, now)
-            self.heard = {a: max(at, now) for a, at in self.heard.items()}
-            self.state_at = {k: max(at, now) for k, at in self.state_at.items()}
+            self.h.silent_since(now)
             self.wait_since = None if self.wait_since is None else max(self.wait_since, now)
         self.world_at = now
 
@@ -182,29 +176,23 @@ class AgentNode:
     def _expected(self, k: int, clock: wire.Clock | None) -> set[int]:
         """The live peers tick k waits for: those that may matter (agent/neighbours.py) and that the world
         counts alive at k (lockstep); realtime: those whose latest beacon may matter."""
-        p = (self.states[k].px, self.states[k].py)
+        p = (self.h.states[k].px, self.h.states[k].py)
         if self.mode == "realtime":
-            return self.nb.near_now(p, self._lately(), self.last_seen)
+            return self.nb.near_now(p, self._lately(), self.h.last_seen)
         self.nb.own.setdefault(k, p)
-        return set(self.nb.wait_set(k, self._living(clock), self.beacons.get(k - 1, {}), self.last_seen))
-
-    def _living(self, clock: wire.Clock | None) -> set[int] | frozenset[int]:
-        """The one notion of a live peer: alive by its token; once a clock says, counted by the world's clock
-        and not seen going by its token. Not `alive` there: the world saw its token, whose news to us may come
-        after the clock (zenoh-python runs each subscriber's callbacks on a thread of its own, so no order
-        holds between the liveliness and the data subscribers)."""
-        return self.alive if clock is None else clock.alive_set - self.gone if self.gone else clock.alive_set
+        return set(self.nb.wait_set(k, self.h.living(clock), self.h.beacons.get(k - 1, {}), self.h.last_seen))
 
     def _peers(self, k: int) -> tuple[list[Peer], list[Peer]]:
         """Whom tick k plans with, (live, lost). Live: every beacon of k; the latest of a peer it waited for but
-        lacks (a guess); not a live peer that may not matter at k (realtime: not heard lately). Lost (not `_living`:
-        the world's clock is not fooled by a forged token): where their robots stopped (latest beacon, or scan)."""
-        fresh, st = self.beacons.get(k, {}), self.states[k]
-        clock = self.clocks.get(k) or self.clocks.get(max(self.clocks, default=-1))  # (realtime: the newest)
-        rt, p, living = self.mode == "realtime", (st.px, st.py), self._living(clock)
+        lacks (a guess); not a live peer that may not matter at k (realtime: not heard lately). Lost (not
+        `Heard.living`: the world's clock is not fooled by a forged token): where their robots stopped (latest
+        beacon, or scan)."""
+        fresh, st = self.h.beacons.get(k, {}), self.h.states[k]
+        clock = self.h.clocks.get(k) or self.h.newest_clock()  # (realtime: the newest)
+        rt, p, living = self.mode == "realtime", (st.px, st.py), self.h.living(clock)
         wanted = self._expected(k, None) if not rt else self._lately()
         live, lost = list[Peer](), list[Peer]()
-        for a, b in self.last_seen.items():
+        for a, b in self.h.last_seen.items():
             if (f := fresh.get(a)) is not None or (a in living and a in wanted and (not rt or self.nb.audible(p, b))):
                 b = f if f is not None else b
                 live.append(Peer(a, b.px, b.py, b.radius))
@@ -213,20 +201,20 @@ class AgentNode:
         return live, lost
 
     def _lately(self) -> set[int]:
-        return self.nb.heard_lately(self.alive, self.heard, self.now, self.period_s)
+        return self.nb.heard_lately(self.h.alive, self.h.heard, self.now, self.period_s)
 
     def _beacon(self, st: wire.State) -> wire.Beacon:
         return wire.Beacon(self.id, st.k, st.t, st.px, st.py, self.radius, self.brain.rev)
 
     def _link(self, k: int, p: np.ndarray) -> None:
         """Which peers' sets tick k merges: those within link range of p by their beacons at k."""
-        fresh = self.beacons.get(k, {})
+        fresh = self.h.beacons.get(k, {})
         self._linked = (k, {a: fresh[a].rev for a in self.brain.linked_at(p, fresh)})
 
     def _ready_lockstep(self, k: int, now: float) -> bool:
         """True once everything tick k needs is in (or the wait timed out)."""
         t = self.timing
-        st, clock = self.states.get(k), self.clocks.get(k)
+        st, clock = self.h.states.get(k), self.h.clocks.get(k)
         if st is None:
             return False
         # Our beacon goes out as soon as our state is in: the peers wait for it (it does not need the clock).
@@ -249,19 +237,19 @@ class AgentNode:
         if clock is None:
             # The tick's clock may have been lost (an outage): after a while, go on without it (the newest
             # clock's list of agents).
-            first = self.state_at.setdefault(k, now)
-            if now - first < t.agent_wait_timeout_s or not self.clocks or quiet:
+            first = self.h.state_at.setdefault(k, now)
+            if now - first < t.agent_wait_timeout_s or not self.h.clocks or quiet:
                 return False
-            clock = self.clocks[max(self.clocks)]
+            clock = self.h.clocks[max(self.h.clocks)]
             self._guess = "the tick's clock never came"
         if self.wait_since is not None and now - self.wait_since > t.agent_wait_timeout_s and not quiet:
             self._guess = f"gave up waiting {t.agent_wait_timeout_s:g} s for peers' data"
             return True
-        fresh = self.beacons.get(k, {})
+        fresh = self.h.beacons.get(k, {})
         # Peers alive by their tokens that may matter at k whose beacon for k is not in: wait, unless one has
         # said nothing for peer_silent_s (a token without data: a frozen process before its lease ends, forged).
         missing = sorted(a for a in self._expected(k, clock) if a not in fresh)
-        if any(now - self.heard.get(a, now) < t.peer_silent_s for a in missing) or (quiet and bool(missing)):
+        if any(now - self.h.heard.get(a, now) < t.peer_silent_s for a in missing) or (quiet and bool(missing)):
             return False
         if missing:
             self._guess = f"agents {missing} alive but silent for {t.peer_silent_s:g} s"
@@ -287,9 +275,9 @@ class AgentNode:
                 self._out.append(self._obstacle_set(max(self.k, 0)))
 
     def _act(self, k: int, now: float) -> None:
-        st = self.states[k]
+        st = self.h.states[k]
         if self.mode == "lockstep" and not self._guess:
-            late = self.nb.intruders(k, self.beacons.get(k, {}))
+            late = self.nb.intruders(k, self.h.beacons.get(k, {}))
             self._guess = self.nb.unexpected(late[0]) if late else ""
         if self._guess and self.guessed_k < 0:
             self.guessed_k = k
@@ -302,20 +290,28 @@ class AgentNode:
             if self._linked[0] != k:  # (the wait gave up before all beacons came)
                 self._link(k, p)
             linked = self._linked[1]
-            every = {a: b.rev for a, b in self.beacons.get(k, {}).items()}
+            every = {a: b.rev for a, b in self.h.beacons.get(k, {}).items()}
         else:  # realtime: whatever is latest
             linked = {a: max(self.sets.get(a, {0: {}})) for a in self.brain.linked(p, [*peers, *lost])}
-            every = {a: max(revs) for a, revs in self.sets.items() if revs}
+            every = self.peer_sets.newest()
         if self.k < 0 and k > 0:  # joining a mission under way: catch up on everything peers have cached
-            linked = {a: max(revs) for a, revs in self.sets.items() if revs}
+            linked = self.peer_sets.newest()
             log.info("agent %d: joining at tick %d; cached obstacle sets from agents %s: %s", self.id, k,
                      sorted(linked), sorted({o for revs in self.sets.values() for v in revs.values() for o in v}))
         shared = self.peer_sets.unmerged(linked, self.merged)
         swarm = self.peer_sets.unmerged(every, self.merged_union) if self.brain.leader is not None else None
-        scan = scan_sets(self.scans, self.k + 1 if self.k >= 0 else k, k)
-        u, grew = self.brain.tick(k, p, scan, peers, shared, swarm, lost)
-        if grew:
+        scan = scan_sets(self.h.scans, self.k + 1 if self.k >= 0 else k, k)
+        plan = self.brain.plan(k, p, scan, peers, shared, swarm, lost)
+        if plan.grew:
             self._out.append(self._obstacle_set(k))
+        if self.batched:  # our host computes the law with its other agents' plans, then hands it to us
+            self.planning = k
+            self._out.append(plan)
+        else:
+            self._command(k, law([plan])[0], now)
+
+    def _command(self, k: int, u: np.ndarray, now: float) -> None:
+        st = self.h.states[k]
         self.last_cmd = wire.Cmd(self.id, k, *self.brain.inputs(u, st.theta))  # (v, ω) at our heading θ_k
         self._out.append(self.last_cmd)
         cells = self.nb.after_command(k)
@@ -328,10 +324,10 @@ class AgentNode:
     def waiting_for(self) -> str:
         """What the next tick still lacks (for the log while we wait)."""
         k = self.k + 1
-        if k not in self.states:
-            newest = max(self.states, default=None), max(self.clocks, default=None)
+        if k not in self.h.states:
+            newest = max(self.h.states, default=None), max(self.h.clocks, default=None)
             return f"tick {k}: no state yet (newest state {newest[0]}, newest clock {newest[1]})"
-        clock, fresh = self.clocks.get(k), self.beacons.get(k, {})
+        clock, fresh = self.h.clocks.get(k), self.h.beacons.get(k, {})
         peers = sorted(a for a in self._expected(k, clock) if a not in fresh)
         sets = sorted(a for a, rev in self._linked[1].items() if rev and rev not in self.sets.get(a, ()))
         missing = (["clock"] * (clock is None) + [f"beacons of {peers}"] * bool(peers)
@@ -342,45 +338,47 @@ class AgentNode:
         return own_set(self.id, k, self.brain.rev, self.brain.obstacle_sets())
 
     def _prune(self, k: int) -> None:
-        for store in (self.states, self.clocks, self.beacons, self.scans, self.state_at):
-            for kk in [x for x in store if x < k - 2]:
-                del store[kk]
+        self.h.prune(k)
         self.nb.prune(k)
         # Stale: out of our cells, or alive by the world's clock (commanding) yet unheard peer_silent_s of ticks.
-        p, stale_k = (self.states[k].px, self.states[k].py), k - round(self.timing.peer_silent_s / self.s.meta.dt_s)
-        living = self._living(self.clocks.get(k)) if self.mode == "lockstep" else set()
-        for a in [a for a, b in self.last_seen.items()
-                  if a in self.alive and (not self.nb.audible(p, b) or (a in living and b.k < stale_k))]:
-            del self.last_seen[a]
+        p, stale_k = (self.h.states[k].px, self.h.states[k].py), k - round(self.timing.peer_silent_s / self.s.meta.dt_s)
+        living = self.h.living(self.h.clocks.get(k)) if self.mode == "lockstep" else set()
+        for a in [a for a, b in self.h.last_seen.items()
+                  if a in self.h.alive and (not self.nb.audible(p, b) or (a in living and b.k < stale_k))]:
+            del self.h.last_seen[a]
         self.peer_sets.prune(self.brain.leader is not None)
 
     def _advance(self, now: float) -> None:
-        """Act on every tick the data allows."""
+        """Act on every tick the data allows (none while our plan waits for its law)."""
+        if self.planning >= 0:
+            return
         if self.mode == "realtime":  # act on the newest state once the peers' beacons for it are in, or
-            k = max(self.states, default=-1)  # at the deadline a fraction of a period after it arrived
+            k = max(self.h.states, default=-1)  # at the deadline a fraction of a period after it arrived
             if k <= self.k:
                 return
             if self.beacon_sent < k:
-                self._move(k, self.states[k])
-                self._out.append(self._beacon(self.states[k]))
+                self._move(k, self.h.states[k])
+                self._out.append(self._beacon(self.h.states[k]))
                 self.beacon_sent = k
-            fresh = self.beacons.get(k, {})
+            fresh = self.h.beacons.get(k, {})
             due = self.act_at is not None and now >= self.act_at
             if due or all(a in fresh for a in self._expected(k, None)):
                 self.act_at = None
                 self._act(k, now)
             return
-        while self.states:
-            newest = max(self.states)
-            k = self.k + 1 if self.k >= 0 and (self.k + 1) in self.states else newest
+        while self.h.states:
+            newest = max(self.h.states)
+            k = self.k + 1 if self.k >= 0 and (self.k + 1) in self.h.states else newest
             if k <= self.k or not self._ready_lockstep(k, now):
                 return
             self._act(k, now)
+            if self.planning >= 0:
+                return
 
     def _watch(self, now: float) -> None:
         """The safety nets: a silent world (exit 3), no command for long (a new session), the waiting log."""
         t = self.timing
-        if not self.started and self.clocks:  # the mission began: the watch starts now
+        if not self.started and self.h.clocks:  # the mission began: the watch starts now
             self.started, self.last_act, self.acted = True, now, now
         if self.started and now - self.last_clock > t.world_silence_s:
             log.error("agent %d: no clock from the world for %.0f s", self.id, t.world_silence_s)

@@ -69,7 +69,7 @@ def run(cfg: AgentConfig) -> int:
     if cfg.ros2_domain_id is not None and len(ids) > 1:
         raise BadInput("--ros2: one agent per process (--id I), not several")
     # Kept across new sessions: each agent's node, gate and rejection count.
-    nodes = {a: AgentNode(s, a, time.monotonic(), cfg.timing) for a in ids}
+    nodes = {a: AgentNode(s, a, time.monotonic(), cfg.timing, batched=len(ids) > 1) for a in ids}
     gates = {a: Gate(s, f"agent-{a}") for a in ids}
     rejs = {a: Rejections(f"agent {a}") for a in ids}
     keys = Keys(cfg.run_id or s.meta.name)

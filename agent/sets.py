@@ -32,6 +32,10 @@ class PeerSets:
             merged[a] = rev
         return out
 
+    def newest(self) -> dict[int, int]:
+        """Each peer's newest revision held."""
+        return {a: max(revs) for a, revs in self.sets.items() if revs}
+
     def latest(self, peer: int, rev: int | None) -> ObstacleSets:
         revs = self.sets.get(peer, {})
         if rev is not None and rev in revs:

@@ -157,6 +157,9 @@ class MonitorPort(Member):
     def pending(self) -> dict[Any, int]:
         return {}
 
+    def answers(self, now_s: float) -> dict[Any, list[Any]]:
+        return {}
+
     # ------------------------------------------------------------------------------------ views
 
     def serve(self, view: LiveView) -> None:

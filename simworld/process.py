@@ -152,6 +152,9 @@ class WorldPort(Member):
     def pending(self) -> dict[Any, int]:
         return {}
 
+    def answers(self, now_s: float) -> dict[Any, list[Any]]:
+        return {}
+
     def report(self, final: bool = False) -> None:
         r = self.gate.report(time.monotonic(), final)
         if r is not None:

@@ -12,6 +12,8 @@ with admission and rejection counting: what a node is given is believed), `act` 
   the nearest node timer is due (`wake_at_s`), or `poll_s` passed; at once if what the port holds is all a
   node still needs;
 - a node is stepped when it has inputs, when its timer is due, or every `poll_s` (its timers);
+- after a round of steps the port may answer what the nodes asked in it, together (`answers`: an agent host's
+  law for all its agents' plans at once): those nodes are stepped with the answers at once, until none is left;
 - our own session's router link going or coming back reaches every node as `RouterLink` (net/uplink.py);
 - SIGINT/SIGTERM (the `Stopper`) reach every node as `Stop`: each winds down and says what happened (its
   `Exit`); a node's `Exit` takes it out of the loop, the others go on;
@@ -65,6 +67,11 @@ class Port(Protocol):
         next batch has them, whenever it comes."""
         ...
 
+    def answers(self, now_s: float) -> Mapping[Any, list[Any]]:
+        """After a round of steps: inputs the port computed for nodes from what they returned in it, together (an
+        agent host's law for all its agents' plans at once); the nodes are stepped with them at once."""
+        ...
+
 
 class Runtime:
     """The loop around the nodes of one process, on one session (see the module's notes)."""
@@ -101,21 +108,33 @@ class Runtime:
                 stopping = True
                 shared.append(Stop())
             batches = port.route(items, now)
-            for who, node in list(active.items()):
-                batch = [*shared, *batches.get(who, ())]
-                now, wake = time.monotonic(), node.wake_at_s()
-                if not batch and now - stepped.get(who, -math.inf) < self.poll_s and (wake is None or now < wake):
-                    continue  # nothing new for it, and none of its timers due
-                stepped[who] = now
-                for out in node.step(batch, now):
-                    if isinstance(out, Exit):
-                        self.exits[who] = out
-                        del active[who]
-                        port.exited(who, out, now)
-                        break
-                    if port.act(who, out, now):
-                        self.interrupted = True
-                        return self.exits
-                else:
-                    port.idle(who, now)
+            if self._round(list(active), active, port, batches, shared, stepped):
+                return self.exits
+            while answers := port.answers(time.monotonic()):  # (a node's answer may lead it to ask again)
+                if self._round([w for w in active if w in answers], active, port, answers, [], stepped):
+                    return self.exits
         return self.exits
+
+    def _round(self, who_steps: list[Any], active: dict[Any, Node[Any, Any]], port: Port,
+               batches: Mapping[Any, Sequence[Any]], shared: list[Any], stepped: dict[Any, float]) -> bool:
+        """Step those of the active nodes with inputs (or timers due) and do what each returns, in order; a node that
+        exits leaves `active`. True: the port stopped the loop."""
+        for who in who_steps:
+            node = active[who]
+            batch = [*shared, *batches.get(who, ())]
+            now, wake = time.monotonic(), node.wake_at_s()
+            if not batch and now - stepped.get(who, -math.inf) < self.poll_s and (wake is None or now < wake):
+                continue  # nothing new for it, and none of its timers due
+            stepped[who] = now
+            for out in node.step(batch, now):
+                if isinstance(out, Exit):
+                    self.exits[who] = out
+                    del active[who]
+                    port.exited(who, out, now)
+                    break
+                if port.act(who, out, now):
+                    self.interrupted = True
+                    return True
+            else:
+                port.idle(who, now)
+        return False

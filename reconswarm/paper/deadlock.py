@@ -55,6 +55,29 @@ class StallState:
                           np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n), np.zeros((n, 2)))
 
 
+    @staticmethod
+    def stack(states: list[StallState]) -> StallState:
+        """Several states' rows as one (copies: write the rows back with `unstack`)."""
+        cat = np.concatenate
+        return StallState(cat([s.hist_p for s in states], axis=1), cat([s.hist_e for s in states], axis=1),
+                          cat([s.filled for s in states]), cat([s.pert for s in states]),
+                          cat([s.hold for s in states]), [g for s in states for g in s.rngs],
+                          cat([s.stalls for s in states]), cat([s.side for s in states]),
+                          cat([s.turned for s in states]), cat([s.e0 for s in states]),
+                          cat([s.free_dir for s in states]))
+
+    def unstack(self, states: list[StallState]) -> None:
+        """Write this state's rows back into the states it was stacked from (in their order)."""
+        at = 0
+        for s in states:
+            n = s.filled.shape[0]
+            rows = slice(at, at + n)
+            s.hist_p, s.hist_e = self.hist_p[:, rows], self.hist_e[:, rows]
+            s.filled, s.pert, s.hold, s.stalls = self.filled[rows], self.pert[rows], self.hold[rows], self.stalls[rows]
+            s.side, s.turned, s.e0, s.free_dir = self.side[rows], self.turned[rows], self.e0[rows], self.free_dir[rows]
+            at += n
+
+
 ESCAPE_WINDOWS = 6
 
 

@@ -11,6 +11,7 @@ agent's row is bit-identical whichever way it is computed.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -151,6 +152,21 @@ class Neighbours:
     def empty(n: int) -> Neighbours:
         return Neighbours(np.zeros((n, 0, 2)), np.zeros((n, 0)), np.zeros((n, 0), dtype=bool))
 
+    @staticmethod
+    def stack(tables: Sequence[Neighbours]) -> Neighbours:
+        """Several tables' rows as one (sum N_t, max K_t), each padded with invalid columns (adding nothing)."""
+        k = max(t.valid.shape[1] for t in tables)
+        if all(t.valid.shape[1] == k for t in tables):
+            return Neighbours(np.concatenate([t.p for t in tables]), np.concatenate([t.r for t in tables]),
+                              np.concatenate([t.valid for t in tables]))
+        n = sum(t.valid.shape[0] for t in tables)
+        out, at = Neighbours(np.zeros((n, k, 2)), np.zeros((n, k)), np.zeros((n, k), dtype=bool)), 0
+        for t in tables:
+            rows, cols = t.valid.shape
+            out.p[at:at + rows, :cols], out.r[at:at + rows, :cols], out.valid[at:at + rows, :cols] = t.p, t.r, t.valid
+            at += rows
+        return out
+
 
 @dataclass
 class ObstacleView:
@@ -163,6 +179,21 @@ class ObstacleView:
     @staticmethod
     def empty(n: int) -> ObstacleView:
         return ObstacleView(np.zeros((n, 0)), np.zeros((n, 0, 2)), np.zeros((n, 0), dtype=bool))
+
+    @staticmethod
+    def stack(views: Sequence[ObstacleView]) -> ObstacleView:
+        """Several views' rows as one (sum N_v, max M_v), each padded with invalid columns (adding nothing)."""
+        m = max(v.valid.shape[1] for v in views)
+        if all(v.valid.shape[1] == m for v in views):
+            return ObstacleView(np.concatenate([v.d for v in views]), np.concatenate([v.n for v in views]),
+                                np.concatenate([v.valid for v in views]))
+        n = sum(v.valid.shape[0] for v in views)
+        out, at = ObstacleView(np.zeros((n, m)), np.zeros((n, m, 2)), np.zeros((n, m), dtype=bool)), 0
+        for v in views:
+            rows, cols = v.valid.shape
+            out.d[at:at + rows, :cols], out.n[at:at + rows, :cols], out.valid[at:at + rows, :cols] = v.d, v.n, v.valid
+            at += rows
+        return out
 
 
 def repulsion(cfg: PlannerConfig, p: Array, r: Array, nb: Neighbours, ob: ObstacleView) -> tuple[Array, Array]:

@@ -236,7 +236,7 @@ def test_pruning_keeps_only_recent_ticks_and_the_merged_revision() -> None:
         if k in (0, 10):
             batch.append(sets[rev])
         assert cmds(node.step(batch, k * 0.01))[0].k == k
-    assert min(node.states) == 18 and list(node.sets[B]) == [2]
+    assert min(node.h.states) == 18 and list(node.sets[B]) == [2]
 
 
 # -------------------------------------------------------------------- restart, reconnect (issue 11 path 1)
@@ -523,7 +523,7 @@ def test_lockstep_a_live_peer_that_left_our_cells_while_we_were_frozen_is_not_a_
     out = node.step([clock(k + 1), state(k + 1, 100.0, 0.0), beacon(B, k + 1, 104.0, 0.0)], now + 0.05)
     want = reference(k + 1, (100.0, 0.0), [Peer(B, 104.0, 0.0, RADIUS[B])], brain=ref)
     assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(k + 1, *want)]
-    assert C not in node.last_seen
+    assert C not in node.h.last_seen
     assert want != reference(k + 1, (100.0, 0.0), ghost, brain=AgentBrain(S, A))  # (C's old place would push us)
 
 
@@ -534,11 +534,11 @@ def test_lockstep_a_live_peer_silent_for_fewer_ticks_is_still_where_last_heard()
     node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 104.0, 0.0), beacon(C, 0, 110.0, 0.0)], 0.0)
     k = 40  # (a prune tick; 40 ticks < peer_silent_s / dt)
     node.step([clock(k), state(k, 100.0, 0.0), beacon(B, k, 104.0, 0.0)], 20.0)
-    assert C in node.last_seen
+    assert C in node.h.last_seen
     node = started(peers=(B, C))
     node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 104.0, 0.0), beacon(C, 0, 110.0, 0.0)], 0.0)
     node.step([clock(80, (A, B)), state(80, 100.0, 0.0), beacon(B, 80, 104.0, 0.0)], 20.0)  # C not counted: lost
-    assert node.last_seen[C].px == 110.0
+    assert node.h.last_seen[C].px == 110.0
 
 
 def test_a_stop_leaves_at_once_with_exit_0_whatever_else_came() -> None:

@@ -303,7 +303,7 @@ def test_the_worlds_scan_reports_other_robots_never_our_own() -> None:
     out = node.step([clock(0, (A, B)), state(0, 100.0, 0.0, scan=held), beacon(B, 0, 110.0, 0.0)], 0.01)
     assert vw(out) == [Ref().tick(0, (100.0, 0.0), [peer(B, 110.0)], lost=[peer(C, 104.0)])]
     node.step([joined(C), beacon(C, 1, 104.0, 0.0)], 0.02)  # C's agent is back and talks: its beacon replaces it
-    assert node.last_seen[C].k == 1 and node.last_seen[C].id == C
+    assert node.h.last_seen[C].k == 1 and node.h.last_seen[C].id == C
     node = started(peers=(B,))  # the world's clock does not count us (held): our own robot is still no obstacle
     held = wire.Scan(A, 0, 0.0, (), ((A, 100.0, 0.0),))
     out = node.step([clock(0, (B,)), state(0, 100.0, 0.0, scan=held), beacon(B, 0, 110.0, 0.0)], 0.01)

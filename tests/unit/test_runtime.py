@@ -102,6 +102,40 @@ class Port:
     def pending(self) -> dict[Any, int]:
         return self.local
 
+    def answers(self, now_s: float) -> dict[Any, list[Any]]:
+        return {}
+
+
+class AskingPort(Port):
+    """Answers ("ask", x) outputs after the round, all at once: ("answer", x, how many were asked together)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.asked: list[tuple[Any, Any]] = []
+
+    def act(self, who: Any, out: Any, now_s: float) -> bool:
+        if out[0] == "ask":
+            self.asked.append((who, out[1]))
+            return False
+        return super().act(who, out, now_s)
+
+    def answers(self, now_s: float) -> dict[Any, list[Any]]:
+        asked, self.asked = self.asked, []
+        return {who: [("answer", x, len(asked))] for who, x in asked}
+
+
+class AskingNode(Node):
+    """("job", x) -> asks ("ask", x); ("answer", x, n) -> ("say", (x, n)), or asks again once for x < 0."""
+
+    def step(self, inputs: Sequence[Any], now_s: float) -> list[Any]:
+        out = super().step(inputs, now_s)
+        for m in inputs:
+            if not isinstance(m, Stop) and m[0] == "job":
+                out.append(("ask", m[1]))
+            elif not isinstance(m, Stop) and m[0] == "answer":
+                out.append(("ask", -m[1]) if m[1] < 0 else ("say", (m[1], m[2])))
+        return out
+
 
 def runtime(inbox: Inbox, stop: Stopper | None = None, poll_s: float = 1000.0) -> Runtime:
     return Runtime(NoRouters(), "test", stop or Stopper(), inbox, poll_s)  # type: ignore[arg-type]
@@ -198,3 +232,20 @@ def test_a_port_can_stop_the_whole_loop() -> None:
     exits = rt.run({1: a, 2: b}, port)
     assert rt.interrupted and exits == {}
     assert port.acted == [(1, ("say", "new session"))] and b.steps == []  # nothing after the request
+
+
+def test_what_nodes_ask_in_a_round_is_answered_together_before_the_next_take() -> None:
+    """An agent host's law: every node's plan of a round is answered at once, and the nodes are stepped with
+    the answers before the inbox is read again; an answer that leads to another question is answered too."""
+    a, b, c = AskingNode(), AskingNode(), AskingNode()
+    takes: list[int] = []
+    port = AskingPort()
+    inbox = Inbox([[("to", 1, ("job", 5)), ("to", 2, ("job", -6))],
+                   [("to", 1, ("exit", 0)), ("to", 2, ("exit", 0)), ("to", 3, ("exit", 0))]],
+                  on_take=lambda n: takes.append(len(port.acted)))
+    runtime(inbox).run({1: a, 2: b, 3: c}, port)
+    assert a.steps[1] == [("answer", 5, 2)] and b.steps[1] == [("answer", -6, 2)]  # (asked together: 2)
+    assert b.steps[2] == [("answer", 6, 1)]  # its second question, answered alone
+    assert port.acted == [(1, ("say", (5, 2))), (2, ("say", (6, 1)))]
+    assert takes == [0, 2]  # both answered and acted before the second take
+    assert c.steps == [[], [("exit", 0)]]  # (asked nothing: not stepped with the answers)

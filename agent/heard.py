@@ -1,0 +1,68 @@
+"""What an agent has heard, by tick (pure: no clock, no I/O): the world's states, scans and clocks for it, the
+peers' beacons and each peer's newest, when each peer was last heard, and who is alive.
+
+"Alive" is decided here once (`living`): by its token; once a clock says, counted by the world's clock and not
+seen going by its token. Not the tokens alone there: the world saw a token whose news to us may come after the
+clock (zenoh-python runs each subscriber's callbacks on a thread of its own, so no order holds between the
+liveliness and the data subscribers), and a forged token does not fool the world's clock.
+"""
+
+from __future__ import annotations
+
+from reconswarm.net import wire
+
+
+class Heard:
+    def __init__(self, agent_id: int) -> None:
+        self.id = agent_id
+        self.states, self.scans, self.clocks = dict[int, wire.State](), dict[int, wire.Scan](), dict[int, wire.Clock]()
+        self.beacons: dict[int, dict[int, wire.Beacon]] = {}  # tick -> peer -> its beacon at that tick
+        self.last_seen: dict[int, wire.Beacon] = {}  # peer -> its newest beacon (a lost peer stays there)
+        self.alive, self.gone = set[int](), set[int]()  # (gone: peers whose token we saw go, and not come back)
+        self.heard: dict[int, float] = {}  # wall time of each peer's latest beacon (or of its token), the newest last
+        self.state_at: dict[int, float] = {}  # wall time each tick's state arrived (lockstep: while its clock is due)
+
+    def beacon(self, m: wire.Beacon, now: float) -> None:
+        self.beacons.setdefault(m.k, {})[m.id] = m
+        self.heard.pop(m.id, None)  # (kept in the order of its times: the newest last)
+        self.heard[m.id] = now
+        if (seen := self.last_seen.get(m.id)) is None or m.k >= seen.k:
+            self.last_seen[m.id] = m
+
+    def token(self, agent: int, up: bool, now: float) -> None:
+        """A peer's token came (up) or went."""
+        (self.alive.add if up else self.alive.discard)(agent)
+        (self.gone.discard if up else self.gone.add)(agent)
+        if up:
+            self.heard.setdefault(agent, now)
+
+    def scan(self, m: wire.Scan, radius: dict[int, float]) -> None:
+        """Our scan; the robots it says are held near us (their agents gone; maybe never heard: lost far away)."""
+        self.scans[m.k] = m
+        self.last_seen.update((a, wire.Beacon(a, m.k, m.t, x, y, radius[a])) for a, x, y in m.bodies
+                              if a in radius and a != self.id)
+
+    def clock(self, m: wire.Clock, now: float) -> None:
+        self.clocks[m.k] = m
+        for a in m.alive_set.difference(self.alive, self.gone) - {self.id}:  # counted before its token came:
+            self.heard.setdefault(a, now)  # its silence counts from now
+
+    def living(self, clock: wire.Clock | None) -> set[int] | frozenset[int]:
+        """The one notion of a live peer (see the module's notes); clock: the tick's (None: tokens alone)."""
+        return self.alive if clock is None else clock.alive_set - self.gone if self.gone else clock.alive_set
+
+    def newest_clock(self) -> wire.Clock | None:
+        return self.clocks.get(max(self.clocks, default=-1))
+
+    def silent_since(self, now: float) -> None:
+        """Every peer's silence, and every wait for a tick's data, counts from now at the earliest (the world
+        stalled: nobody had a state to announce)."""
+        for store in (self.heard, self.state_at):
+            for a, at in store.items():
+                store[a] = max(at, now)
+
+    def prune(self, k: int) -> None:
+        """Forget the ticks before k - 2."""
+        for store in (self.states, self.clocks, self.beacons, self.scans, self.state_at):
+            for kk in [x for x in store if x < k - 2]:
+                del store[kk]
