@@ -56,6 +56,7 @@ class Plan(NamedTuple):
     nb: Neighbours  # (1, K) peers within d_max,ij, in increasing id
     ob: ObstacleView  # (1, M) known hulls
     grew: bool  # the obstacle set grew at k
+    theta: float  # heading at k (radians): the command goes out as the unicycle's (v, ω) there
 
 
 class AgentBrain:
@@ -114,13 +115,13 @@ class AgentBrain:
 
     def plan(self, k: int, p: Array, scan: Mapping[str, Array | Sequence[tuple[float, float]]], peers: list[Peer],
              shared: list[dict[str, Array]], swarm_sets: list[dict[str, Array]] | None = None,
-             lost: Sequence[Peer] = ()) -> Plan:
+             lost: Sequence[Peer] = (), theta: float = 0.0) -> Plan:
         """Everything tick k's law needs, knowledge merged: `law` turns plans into commands, one or many at once.
 
         p (2,) own head point at k; scan: obstacle id -> contour points sensed at k ((P, 2), or (x, y) pairs);
         peers: every other agent's last announcement (at k when fresh); shared: the obstacle sets at k-1 of
         the peers within link range; swarm_sets (virtual leader only): every agent's set at k-1, own excluded;
-        lost: where the robots of peers whose agents are gone stand (still, for good).
+        lost: where the robots of peers whose agents are gone stand (still, for good); theta: heading at k.
         """
         pos = p.reshape(1, 2)
         if self.leader is not None:
@@ -143,7 +144,7 @@ class AgentBrain:
         else:
             nb = self._neighbours(pos, peers)
             ob = self._obstacles(pos)
-        return Plan(self, k, pos, center.reshape(1, 2), lead_vel, nb, ob, grew)
+        return Plan(self, k, pos, center.reshape(1, 2), lead_vel, nb, ob, grew, theta)
 
     def _neighbours(self, pos: Array, peers: list[Peer]) -> Neighbours:
         """Peers within d_max,ij, in increasing id (entries beyond it would add exact zeros)."""
@@ -237,3 +238,13 @@ def law(plans: Sequence[Plan]) -> Array:
     if n > 1:
         st.unstack([x.brain.stall for x in plans])
     return command(c, pos, r, offset, center, nb, ob, pert, lead, rep)
+
+
+def commands(plans: Sequence[Plan]) -> list[tuple[float, float]]:
+    """`law`'s commands as each unicycle's own inputs (v, ω) at its heading: eq. 3 inverted for all rows at once
+    (reconswarm.plant.unicycle.inputs, element by element: each row the same as `AgentBrain.inputs` alone)."""
+    u = law(plans)  # (P, 2)
+    theta = np.array([x.theta for x in plans], dtype=np.float64)  # (P,)
+    l_m = plans[0].brain.l if len(plans) == 1 else np.concatenate([x.brain.l for x in plans])  # (P,)
+    v, w = inputs(u, theta, l_m)
+    return list(zip(v.tolist(), w.tolist(), strict=True))

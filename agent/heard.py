@@ -9,6 +9,9 @@ liveliness and the data subscribers), and a forged token does not fool the world
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from collections.abc import Set as AbstractSet
+
 from reconswarm.net import wire
 
 
@@ -19,6 +22,7 @@ class Heard:
         self.beacons: dict[int, dict[int, wire.Beacon]] = {}  # tick -> peer -> its beacon at that tick
         self.last_seen: dict[int, wire.Beacon] = {}  # peer -> its newest beacon (a lost peer stays there)
         self.alive, self.gone = set[int](), set[int]()  # (gone: peers whose token we saw go, and not come back)
+        self.tokens = 0  # how many token changes came (what `living` says changes only with one, or a new clock)
         self.heard: dict[int, float] = {}  # wall time of each peer's latest beacon (or of its token), the newest last
         self.state_at: dict[int, float] = {}  # wall time each tick's state arrived (lockstep: while its clock is due)
 
@@ -31,6 +35,7 @@ class Heard:
 
     def token(self, agent: int, up: bool, now: float) -> None:
         """A peer's token came (up) or went."""
+        self.tokens += 1
         (self.alive.add if up else self.alive.discard)(agent)
         (self.gone.discard if up else self.gone.add)(agent)
         if up:
@@ -60,6 +65,13 @@ class Heard:
         for store in (self.heard, self.state_at):
             for a, at in store.items():
                 store[a] = max(at, now)
+
+    def forget_stale(self, audible: Callable[[wire.Beacon], bool], living: AbstractSet[int], stale_k: int) -> None:
+        """Forget where live peers (by token) were last heard once stale: out of the cells we listen to (not
+        `audible`), or alive by the world's clock (commanding: `living`) yet unheard since before tick stale_k."""
+        for a in [a for a, b in self.last_seen.items()
+                  if a in self.alive and (not audible(b) or (a in living and b.k < stale_k))]:
+            del self.last_seen[a]
 
     def prune(self, k: int) -> None:
         """Forget the ticks before k - 2."""

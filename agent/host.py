@@ -34,7 +34,7 @@ from typing import Any
 import zenoh
 from zenoh import ext
 
-from agent.brain import Plan, law
+from agent.brain import Plan, commands
 from agent.link import AgentLink, Decoded, decode_sample
 from agent.messages import Input, Law, Reconnect
 from agent.neighbours import Cells
@@ -312,16 +312,15 @@ class AgentHost:
 
     def answers(self, now_s: float) -> dict[int, list[Input]]:
         """The law of every plan the hosted agents returned in this round, computed at once for those of one tick
-        (agent/brain.py `law`: each row the same bit for bit as the agent's alone)."""
+        (agent/brain.py `commands`: each row the same bit for bit as the agent's alone)."""
         by_tick: dict[int, list[tuple[int, Plan]]] = {}
         for aid, plan in self.plans:
             by_tick.setdefault(plan.k, []).append((aid, plan))
         self.plans = []
         out: dict[int, list[Input]] = {}
         for k, plans in by_tick.items():
-            u = law([p for _aid, p in plans])  # (P, 2)
-            for row, (aid, _p) in enumerate(plans):
-                out[aid] = [Law(k, u[row])]
+            for (aid, _p), (v, w) in zip(plans, commands([p for _aid, p in plans]), strict=True):
+                out[aid] = [Law(k, v, w)]
         return out
 
     def idle(self, who: int, now_s: float) -> None:

@@ -5,9 +5,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-from numpy.typing import NDArray
-
 from agent.brain import Plan
 from agent.neighbours import Cells
 from reconswarm.net import wire
@@ -16,10 +13,12 @@ from reconswarm.net.node import Exit, Invalid, RouterLink, Stop, Token
 
 @dataclass(frozen=True)
 class Law:
-    """The command u (2,) of tick k from our `Plan`, computed by our host with its other agents' (agent/host.py)."""
+    """The command of tick k from our `Plan`, as our unicycle's (v, ω), computed by our host with its other agents'
+    (agent/host.py, agent/brain.py `commands`)."""
 
     k: int
-    u: NDArray[np.float64]
+    v_mps: float
+    omega_radps: float
 
 
 # inputs: the wire messages an agent reads, plus the runtime's (reconswarm/net/node.py): a peer's or the world's

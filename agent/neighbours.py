@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Container, Iterable, Mapping
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass
 
 from reconswarm.net import wire
@@ -192,7 +193,7 @@ class Neighbourhood:
         return [] if near is None else [b for a, b in fresh.items() if a not in near and self.intruder(k, b)]
 
     def also_heard(self, alive: set[int], prev: Mapping[int, wire.Beacon], fresh: Mapping[int, wire.Beacon],
-                   waited: set[int]) -> int:
+                   waited: AbstractSet[int]) -> int:
         """How many beacons of this tick will come from peers we do not wait for (they published the tick
         before in a cell we listen to): the runtime sleeps until they are in too, instead of waking early."""
         cells = self.listen

@@ -9,19 +9,19 @@ leader) and the obstacle sets of those within link range (all for the virtual le
 commands. Realtime: it acts shortly after each new state on whatever it has (latest beacons, sets). A lost
 peer stays where last seen or where the world's scan reports it held; a live one out of our cells is dropped.
 A new session of its process (`reconnected`) keeps the node: peers, lost peers, knowledge, revisions, escape state.
-What it heard is agent/heard.py's. Hosted with other agents (`batched`), a tick's last step, the law, is its
-host's: the node returns its `Plan` and takes the command back as `Law` (agent/host.py computes every plan of a
-round at once).
+What it heard is agent/heard.py's. Hosted with others (`batched`), it returns its tick's `Plan` and takes its
+command back as `Law`: its host computes the law of every plan of a round at once (agent/host.py).
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Iterable
+from collections.abc import Set as AbstractSet
 
 import numpy as np
 
-from agent.brain import AgentBrain, Peer, law
+from agent.brain import AgentBrain, Peer, commands
 from agent.heard import Heard
 from agent.messages import Input, Law, Output, Reconnect
 from agent.neighbours import Neighbourhood
@@ -59,6 +59,7 @@ class AgentNode:
         self.started = False  # the mission began (first clock): the watches run from then on
         self.last_cmd: wire.Cmd | None = None
         self.last_act = self.acted = now_s  # wall time of our latest command, re-sent or not (acted: of a new tick)
+        self._waited: dict[tuple[int, int, bool], tuple[wire.Clock | None, frozenset[int]]] = {}  # `_expected`'s
         self._linked: tuple[int, dict[int, int]] = (-1, {})  # (tick, linked peer -> its set's revision)
         self.beacon_again, self._again_n, self.told_waiting = 0.0, 0, 0.0  # announce again at; how often; logged
         self._out: list[Output] = []
@@ -156,7 +157,7 @@ class AgentNode:
             self.peer_sets.add(m)
         elif isinstance(m, Law) and m.k == self.planning:
             self.planning = -1
-            self._command(m.k, m.u, now)
+            self._command(m.k, m.v_mps, m.omega_radps, now)
 
     def _world_back(self, now: float) -> None:
         """The world speaks (a clock, our state). Back from a stall (`_quiet`), every wait starts now: for a command
@@ -173,14 +174,18 @@ class AgentNode:
 
     # --------------------------------------------------------------------------------------- planning
 
-    def _expected(self, k: int, clock: wire.Clock | None) -> set[int]:
-        """The live peers tick k waits for: those that may matter (agent/neighbours.py) and that the world
-        counts alive at k (lockstep); realtime: those whose latest beacon may matter."""
+    def _expected(self, k: int, clock: wire.Clock | None) -> AbstractSet[int]:
+        """The live peers tick k waits for: those that may matter (agent/neighbours.py) and the world counts alive
+        at k (lockstep: kept until the clock or a token changes); realtime: those whose latest beacon may matter."""
         p = (self.h.states[k].px, self.h.states[k].py)
         if self.mode == "realtime":
             return self.nb.near_now(p, self._lately(), self.h.last_seen)
-        self.nb.own.setdefault(k, p)
-        return set(self.nb.wait_set(k, self.h.living(clock), self.h.beacons.get(k - 1, {}), self.h.last_seen))
+        key = (k, self.h.tokens, clock is None)
+        if (got := self._waited.get(key)) is None or got[0] is not clock:
+            self.nb.own.setdefault(k, p)
+            prev = self.h.beacons.get(k - 1, {})
+            got = self._waited[key] = (clock, self.nb.wait_set(k, self.h.living(clock), prev, self.h.last_seen))
+        return got[1]
 
     def _peers(self, k: int) -> tuple[list[Peer], list[Peer]]:
         """Whom tick k plans with, (live, lost). Live: every beacon of k; the latest of a peer it waited for but
@@ -301,18 +306,17 @@ class AgentNode:
         shared = self.peer_sets.unmerged(linked, self.merged)
         swarm = self.peer_sets.unmerged(every, self.merged_union) if self.brain.leader is not None else None
         scan = scan_sets(self.h.scans, self.k + 1 if self.k >= 0 else k, k)
-        plan = self.brain.plan(k, p, scan, peers, shared, swarm, lost)
+        plan = self.brain.plan(k, p, scan, peers, shared, swarm, lost, st.theta)
         if plan.grew:
             self._out.append(self._obstacle_set(k))
         if self.batched:  # our host computes the law with its other agents' plans, then hands it to us
             self.planning = k
             self._out.append(plan)
         else:
-            self._command(k, law([plan])[0], now)
+            self._command(k, *commands([plan])[0], now)
 
-    def _command(self, k: int, u: np.ndarray, now: float) -> None:
-        st = self.h.states[k]
-        self.last_cmd = wire.Cmd(self.id, k, *self.brain.inputs(u, st.theta))  # (v, ω) at our heading θ_k
+    def _command(self, k: int, v_mps: float, omega_radps: float, now: float) -> None:
+        self.last_cmd = wire.Cmd(self.id, k, v_mps, omega_radps)  # (v, ω) at our heading θ_k
         self._out.append(self.last_cmd)
         cells = self.nb.after_command(k)
         if cells is not None:
@@ -339,13 +343,11 @@ class AgentNode:
 
     def _prune(self, k: int) -> None:
         self.h.prune(k)
+        self._waited.clear()
         self.nb.prune(k)
-        # Stale: out of our cells, or alive by the world's clock (commanding) yet unheard peer_silent_s of ticks.
         p, stale_k = (self.h.states[k].px, self.h.states[k].py), k - round(self.timing.peer_silent_s / self.s.meta.dt_s)
         living = self.h.living(self.h.clocks.get(k)) if self.mode == "lockstep" else set()
-        for a in [a for a, b in self.h.last_seen.items()
-                  if a in self.h.alive and (not self.nb.audible(p, b) or (a in living and b.k < stale_k))]:
-            del self.h.last_seen[a]
+        self.h.forget_stale(lambda b: self.nb.audible(p, b), living, stale_k)
         self.peer_sets.prune(self.brain.leader is not None)
 
     def _advance(self, now: float) -> None:

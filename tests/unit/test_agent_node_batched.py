@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from agent.brain import Plan, law
+from agent.brain import Plan, commands
 from agent.messages import Law
 from agent.node import AgentNode
 from reconswarm.net import wire
@@ -39,7 +39,7 @@ def test_a_batched_node_returns_its_plan_and_on_its_law_does_what_it_does_alone(
         assert len(plans) == 1 and got[-1] is plans[0] and not cmds(got)  # the plan last, no command yet
         assert hosted.planning == plans[0].k and hosted.k == plans[0].k - 1
         # (its host: the law of this plan, alone or with others' rows: the same bits, test_law_batched)
-        rest = hosted.step([Law(plans[0].k, law(plans)[0])], now)
+        rest = hosted.step([Law(plans[0].k, *commands(plans)[0])], now)
         assert [*got[:-1], *rest] == want  # the same outputs, in the same order: set, command, cells
         assert hosted.planning == -1 and hosted.k == alone.k
     assert alone.k == 3 and alone.brain.rev == hosted.brain.rev == 2
@@ -54,6 +54,6 @@ def test_while_its_plan_waits_for_the_law_the_node_acts_on_nothing_else() -> Non
     # (not the runtime's order, which answers at once: the next tick's data while the plan is out)
     assert hosted.step([clock(1), state(1, 100.05, 0.0), beacon(B, 1, 104.1, 0.0), beacon(C, 1, 109.0, 1.1)],
                        0.1) == []
-    assert hosted.step([Law(5, law([out[-1]])[0])], 0.2) == []  # a law for another tick: not ours
-    rest = hosted.step([Law(0, law([out[-1]])[0])], 0.3)
+    assert hosted.step([Law(5, *commands([out[-1]])[0])], 0.2) == []  # a law for another tick: not ours
+    rest = hosted.step([Law(0, *commands([out[-1]])[0])], 0.3)
     assert [c.k for c in cmds(rest)] == [0] and isinstance(rest[-1], Plan) and rest[-1].k == 1  # then tick 1

@@ -11,8 +11,8 @@ import dataclasses
 
 from agent.node import AgentNode
 from reconswarm.net.timing import Timing
-from tests.support import world_token
-from tests.unit.test_agent_node import A, B, S, T, beacon, beacons, clock, cmds, joined, state
+from tests.support import left, world_token
+from tests.unit.test_agent_node import A, B, C, S, T, beacon, beacons, clock, cmds, joined, started, state
 
 
 def test_the_wait_for_a_lost_clock_counts_from_the_states_arrival() -> None:
@@ -116,3 +116,23 @@ def test_a_lost_clock_is_not_given_up_while_the_world_is_silent() -> None:
     for i in range(2, 8):
         out = node.step([state(1, 100.1, 0.0)], now + i * W.republish_s)
     assert [c.k for c in cmds(out)] == [1] and node.guessed_k == 1
+
+
+def test_a_peer_whose_token_goes_while_we_wait_is_waited_for_no_more() -> None:
+    """The wait set of a tick is kept between steps (`_expected`) until the clock or a token changes: C's token
+    going while we wait for its beacon ends the wait at once (its robot: a lost one, where last seen)."""
+    node = started()
+    assert cmds(node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 105.0, 0.0), beacon(C, 0, 109.0, 0.0)],
+                          0.0))
+    assert not cmds(node.step([clock(1), state(1, 100.05, 0.0), beacon(B, 1, 105.0, 0.0)], 0.1))
+    assert node.awaiting(0.1) == 1 and not cmds(node.step([], 0.15))  # C's beacon
+    assert [c.k for c in cmds(node.step([left(C)], 0.2))] == [1]
+
+
+def test_a_tick_whose_clock_comes_again_without_a_peer_is_waited_for_by_the_new_clock() -> None:
+    """The world publishes a tick's clock again (its list of agents may have changed: C's process died and the
+    world no longer counts it): the wait follows the newest clock of the tick, not the first."""
+    node = started()
+    node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 105.0, 0.0), beacon(C, 0, 109.0, 0.0)], 0.0)
+    assert not cmds(node.step([clock(1), state(1, 100.05, 0.0), beacon(B, 1, 105.0, 0.0)], 0.1))
+    assert [c.k for c in cmds(node.step([clock(1, (A, B))], 0.2))] == [1]

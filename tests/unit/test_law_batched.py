@@ -11,7 +11,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.brain import AgentBrain, Peer, law
+from agent.brain import AgentBrain, Peer, commands
 from reconswarm.paper.deadlock import StallState, generator
 from reconswarm.paper.planner import Neighbours, ObstacleView
 from reconswarm.scenario.model import load
@@ -55,11 +55,12 @@ DIAMOND = S.polygon(0)  # (4, 2) around (300, 0)
 
 @settings(max_examples=15, deadline=None)
 @given(spots=st.lists(st.tuples(st.floats(240.0, 360.0), st.floats(-60.0, 60.0)), min_size=2, max_size=6),
-       acting=st.lists(st.integers(1, 63), min_size=200, max_size=200))
-def test_the_law_of_many_plans_is_each_agents_alone(spots: list[tuple[float, float]], acting: list[int]) -> None:
+       acting=st.lists(st.integers(1, 63), min_size=200, max_size=200), heading=st.floats(-3.2, 3.2))
+def test_the_law_of_many_plans_is_each_agents_alone(spots: list[tuple[float, float]], acting: list[int],
+                                                    heading: float) -> None:
     """Agents held still beside the diamond (so they stall and escape: W = 10 ticks, episodes of 60, turning
-    round once), a different subset of them acting at each tick: the rows of one `law` call equal each agent's
-    own call, tick after tick, and so do their stall histories."""
+    round once), a different subset of them acting at each tick: the commands (v, ω) of one `commands` call
+    (the law, then eq. 3 inverted) equal each agent's own, tick after tick, and so do their stall histories."""
     ids = [int(a) for a in ESCAPING.ids[:len(spots)]]
     together = [AgentBrain(ESCAPING, a) for a in ids]
     alone = copy.deepcopy(together)
@@ -70,11 +71,11 @@ def test_the_law_of_many_plans_is_each_agents_alone(spots: list[tuple[float, flo
         for i in who:
             p = np.array(spots[i])
             peers = [Peer(ids[j], *spots[j], 0.5) for j in range(len(ids)) if j != i]
-            plans.append(together[i].plan(k, p, scan, peers, []))
+            theta = heading + 0.1 * i
+            plans.append(together[i].plan(k, p, scan, peers, [], theta=theta))
             u_i, _grew = alone[i].tick(k, p, scan, peers, [])
-            solo.append(u_i)
-        u = law(plans)
-        assert [row.tolist() for row in u] == [x.tolist() for x in solo], k
+            solo.append(alone[i].inputs(u_i, theta))
+        assert commands(plans) == solo, k
     for a, b in zip(together, alone, strict=True):
         for f in ("hist_p", "hist_e", "filled", "pert", "hold", "stalls", "side", "turned", "e0", "free_dir"):
             assert getattr(a.stall, f).tolist() == getattr(b.stall, f).tolist(), f
