@@ -317,6 +317,7 @@ class AgentNode:
 
     def _command(self, k: int, v_mps: float, omega_radps: float, now: float) -> None:
         self.last_cmd = wire.Cmd(self.id, k, v_mps, omega_radps)  # (v, ω) at our heading θ_k
+        self._waited.clear()  # (tick k's)
         self._out.append(self.last_cmd)
         cells = self.nb.after_command(k)
         if cells is not None:
@@ -343,7 +344,6 @@ class AgentNode:
 
     def _prune(self, k: int) -> None:
         self.h.prune(k)
-        self._waited.clear()
         self.nb.prune(k)
         p, stale_k = (self.h.states[k].px, self.h.states[k].py), k - round(self.timing.peer_silent_s / self.s.meta.dt_s)
         living = self.h.living(self.h.clocks.get(k)) if self.mode == "lockstep" else set()
