@@ -155,17 +155,7 @@ class Neighbours:
     @staticmethod
     def stack(tables: Sequence[Neighbours]) -> Neighbours:
         """Several tables' rows as one (sum N_t, max K_t), each padded with invalid columns (adding nothing)."""
-        k = max(t.valid.shape[1] for t in tables)
-        if all(t.valid.shape[1] == k for t in tables):
-            return Neighbours(np.concatenate([t.p for t in tables]), np.concatenate([t.r for t in tables]),
-                              np.concatenate([t.valid for t in tables]))
-        n = sum(t.valid.shape[0] for t in tables)
-        out, at = Neighbours(np.zeros((n, k, 2)), np.zeros((n, k)), np.zeros((n, k), dtype=bool)), 0
-        for t in tables:
-            rows, cols = t.valid.shape
-            out.p[at:at + rows, :cols], out.r[at:at + rows, :cols], out.valid[at:at + rows, :cols] = t.p, t.r, t.valid
-            at += rows
-        return out
+        return Neighbours(*_stack_padded([(t.p, t.r, t.valid) for t in tables]))
 
 
 @dataclass
@@ -183,17 +173,25 @@ class ObstacleView:
     @staticmethod
     def stack(views: Sequence[ObstacleView]) -> ObstacleView:
         """Several views' rows as one (sum N_v, max M_v), each padded with invalid columns (adding nothing)."""
-        m = max(v.valid.shape[1] for v in views)
-        if all(v.valid.shape[1] == m for v in views):
-            return ObstacleView(np.concatenate([v.d for v in views]), np.concatenate([v.n for v in views]),
-                                np.concatenate([v.valid for v in views]))
-        n = sum(v.valid.shape[0] for v in views)
-        out, at = ObstacleView(np.zeros((n, m)), np.zeros((n, m, 2)), np.zeros((n, m), dtype=bool)), 0
-        for v in views:
-            rows, cols = v.valid.shape
-            out.d[at:at + rows, :cols], out.n[at:at + rows, :cols], out.valid[at:at + rows, :cols] = v.d, v.n, v.valid
-            at += rows
-        return out
+        return ObstacleView(*_stack_padded([(v.d, v.n, v.valid) for v in views]))
+
+
+def _stack_padded(parts: Sequence[tuple[Array, Array, Mask]]) -> tuple[Array, Array, Mask]:
+    """Tables of the same fields (rows N_t, columns C_t, any trailing axes) as one: (sum N_t, max C_t, ...), the
+    missing columns zeros (for the mask: False, so they add nothing). One width: concatenated as they are."""
+    width = max(part[2].shape[1] for part in parts)
+    if all(part[2].shape[1] == width for part in parts):
+        a, b, c = (np.concatenate([part[f] for part in parts]) for f in range(3))
+        return a, b, c
+    n = sum(part[2].shape[0] for part in parts)
+    out = tuple(np.zeros((n, width, *x.shape[2:]), dtype=x.dtype) for x in parts[0])
+    at = 0
+    for part in parts:
+        rows, cols = part[2].shape
+        for dst, src in zip(out, part, strict=True):
+            dst[at:at + rows, :cols] = src
+        at += rows
+    return out[0], out[1], out[2]
 
 
 def repulsion(cfg: PlannerConfig, p: Array, r: Array, nb: Neighbours, ob: ObstacleView) -> tuple[Array, Array]:
