@@ -9,7 +9,7 @@ liveliness and the data subscribers), and a forged token does not fool the world
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from collections.abc import Set as AbstractSet
 
 from reconswarm.net import wire
@@ -25,6 +25,7 @@ class Heard:
         self.tokens = 0  # how many token changes came (what `living` says changes only with one, or a new clock)
         self.heard: dict[int, float] = {}  # wall time of each peer's latest beacon (or of its token), the newest last
         self.state_at: dict[int, float] = {}  # wall time each tick's state arrived (lockstep: while its clock is due)
+        self._counted: tuple[int, ...] | None = None  # the newest clock's live agents (`clock`)
 
     def beacon(self, m: wire.Beacon, now: float) -> None:
         self.beacons.setdefault(m.k, {})[m.id] = m
@@ -49,12 +50,29 @@ class Heard:
 
     def clock(self, m: wire.Clock, now: float) -> None:
         self.clocks[m.k] = m
+        if m.alive == self._counted:  # (each was heard since, or is alive or gone by its token: nothing new)
+            return
+        self._counted = m.alive
         for a in m.alive_set.difference(self.alive, self.gone) - {self.id}:  # counted before its token came:
             self.heard.setdefault(a, now)  # its silence counts from now
 
     def living(self, clock: wire.Clock | None) -> set[int] | frozenset[int]:
         """The one notion of a live peer (see the module's notes); clock: the tick's (None: tokens alone)."""
         return self.alive if clock is None else clock.alive_set - self.gone if self.gone else clock.alive_set
+
+    def lacks(self, k: int, waited: AbstractSet[int], linked: Mapping[int, int],
+              sets: Mapping[int, Mapping[int, object]]) -> str:
+        """What tick k still lacks (for the log): its state, its clock, the beacons of the peers it waits for,
+        the sets of the linked peers' revisions (peer -> revision) not in `sets` (peer -> revision -> set)."""
+        if k not in self.states:
+            newest = max(self.states, default=None), max(self.clocks, default=None)
+            return f"tick {k}: no state yet (newest state {newest[0]}, newest clock {newest[1]})"
+        fresh = self.beacons.get(k, {})
+        peers = sorted(a for a in waited if a not in fresh)
+        missing = sorted(a for a, rev in linked.items() if rev not in sets.get(a, ()))
+        what = (["clock"] * (k not in self.clocks) + [f"beacons of {peers}"] * bool(peers)
+                + [f"obstacle sets of {missing}"] * bool(missing))
+        return f"tick {k}: waiting for {', '.join(what) or 'nothing'}"
 
     def newest_clock(self) -> wire.Clock | None:
         return self.clocks.get(max(self.clocks, default=-1))

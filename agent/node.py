@@ -16,6 +16,7 @@ command back as `Law`: its host computes the law of every plan of a round at onc
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Iterable
 from collections.abc import Set as AbstractSet
 
@@ -63,6 +64,7 @@ class AgentNode:
         self._linked: tuple[int, dict[int, int]] = (-1, {})  # (tick, linked peer -> its set's revision)
         self.beacon_again, self._again_n, self.told_waiting = 0.0, 0, 0.0  # announce again at; how often; logged
         self._out: list[Output] = []
+        self._awaited: tuple[float, int | None] = (-math.inf, None)  # `awaiting`'s: when, and what it said
         self._announce_set = False  # after a new session: publish our obstacle set again (its cache is new)
 
     # ------------------------------------------------------------------------------------- interface
@@ -70,7 +72,7 @@ class AgentNode:
     def step(self, batch: Iterable[Input], now_s: float) -> list[Output]:
         """Take the messages that arrived, advance as far as the data allows, watch the world and our
         own progress. Returns what to publish or do, in order."""
-        self._out, self.now = [], now_s
+        self._out, self.now, self._awaited = [], now_s, (-math.inf, None)
         if self._announce_set:
             self._announce_set = False
             self._out.append(self._obstacle_set(max(self.k, 0)))
@@ -90,8 +92,12 @@ class AgentNode:
         self._announce_set = self.brain.rev > 0
 
     def awaiting(self, now_s: float) -> int | None:
-        """How many more messages the next tick needs at least (the runtime sleeps until that many are in, or
-        its own state, or a timeout); None: nothing but our own state will let us act."""
+        """How many more messages the next tick needs at least (the runtime sleeps until that many are in, or its
+        own state, or a timeout); None: only our own state lets us act. Lockstep: kept until our next step, or for
+        `agent_poll_s` (meanwhile only a peer's silence could lower it)."""
+        if now_s - self._awaited[0] < self.timing.agent_poll_s:
+            return self._awaited[1]
+        self._awaited = (now_s if self.mode != "realtime" else -math.inf, None)
         newest, self.now = max(self.h.states, default=-1), now_s
         k = self.k + 1 if self.mode != "realtime" and self.k >= 0 and (self.k + 1) in self.h.states else newest
         st = self.h.states.get(k)
@@ -105,7 +111,8 @@ class AgentNode:
             need += clock is None
             if self._linked[0] == k:
                 need += sum(1 for a, rev in self._linked[1].items() if rev and rev not in self.sets.get(a, ()))
-        return max(1, need)
+        self._awaited = (self._awaited[0], max(1, need))
+        return self._awaited[1]
 
     def wake_at_s(self) -> float | None:
         """Realtime: when to step at the latest even if nothing arrives (None: no deadline)."""
@@ -329,15 +336,8 @@ class AgentNode:
     def waiting_for(self) -> str:
         """What the next tick still lacks (for the log while we wait)."""
         k = self.k + 1
-        if k not in self.h.states:
-            newest = max(self.h.states, default=None), max(self.h.clocks, default=None)
-            return f"tick {k}: no state yet (newest state {newest[0]}, newest clock {newest[1]})"
-        clock, fresh = self.h.clocks.get(k), self.h.beacons.get(k, {})
-        peers = sorted(a for a in self._expected(k, clock) if a not in fresh)
-        sets = sorted(a for a, rev in self._linked[1].items() if rev and rev not in self.sets.get(a, ()))
-        missing = (["clock"] * (clock is None) + [f"beacons of {peers}"] * bool(peers)
-                   + [f"obstacle sets of {sets}"] * bool(sets))
-        return f"tick {k}: waiting for {', '.join(missing) or 'nothing'}"
+        waited = self._expected(k, self.h.clocks.get(k)) if k in self.h.states else frozenset()
+        return self.h.lacks(k, waited, {a: rev for a, rev in self._linked[1].items() if rev}, self.sets)
 
     def _obstacle_set(self, k: int) -> wire.ObstacleSet:
         return own_set(self.id, k, self.brain.rev, self.brain.obstacle_sets())

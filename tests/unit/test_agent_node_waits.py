@@ -136,3 +136,20 @@ def test_a_tick_whose_clock_comes_again_without_a_peer_is_waited_for_by_the_new_
     node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 105.0, 0.0), beacon(C, 0, 109.0, 0.0)], 0.0)
     assert not cmds(node.step([clock(1), state(1, 100.05, 0.0), beacon(B, 1, 105.0, 0.0)], 0.1))
     assert [c.k for c in cmds(node.step([clock(1, (A, B))], 0.2))] == [1]
+
+
+def test_awaiting_is_kept_until_the_next_step_or_for_agent_poll_s() -> None:
+    """What `awaiting` said is kept (the runtime asks every node at every wake-up): a step forgets it at once
+    (B's beacon in: one fewer), and without one it is asked anew after agent_poll_s (C silent by then: not
+    counted). In between, the count stays what it was."""
+    t0 = 100.0
+    node = AgentNode(S, A, t0, T)
+    node.step([joined(A), joined(B), joined(C)], t0)
+    node.step([state(0, 100.0, 0.0)], t0)
+    assert node.awaiting(t0) == 3  # B's beacon, C's beacon and the clock
+    node.step([beacon(B, 0, 105.0, 0.0)], t0 + 0.01)
+    assert node.awaiting(t0 + 0.01) == 2  # the step forgot what it said
+    silent = t0 + T.peer_silent_s  # C silent from then (heard by its token at t0); B heard at t0 + 0.01
+    assert node.awaiting(silent - 0.02) == 2
+    assert node.awaiting(silent + 0.02) == 2  # asked again within agent_poll_s: kept, though C fell silent
+    assert node.awaiting(silent - 0.02 + T.agent_poll_s + 0.001) == 1  # after it: anew (only the clock)
