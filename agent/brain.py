@@ -35,6 +35,15 @@ class Located(Protocol):
     def py(self) -> float: ...
 
 
+class Body(Located, Protocol):
+    """Another agent's robot as a tick plans with it: a Peer, or the beacon it announced."""
+
+    @property
+    def id(self) -> int: ...
+    @property
+    def radius(self) -> float: ...
+
+
 class Peer(NamedTuple):
     """What an agent knows of another: its last announced head point and radius (a tuple: dozens are made per
     agent and tick)."""
@@ -79,7 +88,7 @@ class AgentBrain:
         self._centres = np.zeros((0, 2))
         self._reach = np.zeros(0)
         self._blocked_key: tuple[int, tuple[tuple[int, float, float, float], ...]] = (-1, ())
-        self._blocked: tuple[Edges | None, list[Peer]] = (None, [])  # (the hulls with lost robots, the rest)
+        self._blocked: tuple[Edges | None, list[Body]] = (None, [])  # (the hulls with lost robots, the rest)
         self._seen: set[tuple[float, float]] = set()  # contour points already merged (merging again is a no-op)
         w = window_ticks(self.cfg.stall_window_s, s.meta.dt_s)
         self.stall = StallState.create(1, w, [generator(s.meta.seed, agent_id)])
@@ -91,7 +100,7 @@ class AgentBrain:
         v, w = inputs(u[None, :], np.array([theta]), self.l)
         return float(v[0]), float(w[0])
 
-    def linked(self, p: Array, peers: list[Peer]) -> list[int]:
+    def linked(self, p: Array, peers: Sequence[Body]) -> list[int]:
         """Ids of peers within link range of head point p (2,): whose obstacle sets we merge."""
         return self.linked_at(p, {x.id: x for x in peers})
 
@@ -106,16 +115,16 @@ class AgentBrain:
                 out.append(a)
         return out
 
-    def tick(self, k: int, p: Array, scan: Mapping[str, Array | Sequence[tuple[float, float]]], peers: list[Peer],
+    def tick(self, k: int, p: Array, scan: Mapping[str, Array | Sequence[tuple[float, float]]], peers: Sequence[Body],
              shared: list[dict[str, Array]], swarm_sets: list[dict[str, Array]] | None = None,
-             lost: Sequence[Peer] = ()) -> tuple[Array, bool]:
+             lost: Sequence[Body] = ()) -> tuple[Array, bool]:
         """Plan tick k: `plan`, then the law for this agent alone. Returns (u (2,), whether the obstacle set grew)."""
         plan = self.plan(k, p, scan, peers, shared, swarm_sets, lost)
         return law([plan])[0], plan.grew
 
-    def plan(self, k: int, p: Array, scan: Mapping[str, Array | Sequence[tuple[float, float]]], peers: list[Peer],
+    def plan(self, k: int, p: Array, scan: Mapping[str, Array | Sequence[tuple[float, float]]], peers: Sequence[Body],
              shared: list[dict[str, Array]], swarm_sets: list[dict[str, Array]] | None = None,
-             lost: Sequence[Peer] = (), theta: float = 0.0) -> Plan:
+             lost: Sequence[Body] = (), theta: float = 0.0) -> Plan:
         """Everything tick k's law needs, knowledge merged: `law` turns plans into commands, one or many at once.
 
         p (2,) own head point at k; scan: obstacle id -> contour points sensed at k ((P, 2), or (x, y) pairs);
@@ -146,7 +155,7 @@ class AgentBrain:
             ob = self._obstacles(pos)
         return Plan(self, k, pos, center.reshape(1, 2), lead_vel, nb, ob, grew, theta)
 
-    def _neighbours(self, pos: Array, peers: list[Peer]) -> Neighbours:
+    def _neighbours(self, pos: Array, peers: Sequence[Body]) -> Neighbours:
         """Peers within d_max,ij, in increasing id (entries beyond it would add exact zeros)."""
         # One peer at a time (a handful): the same IEEE operations as norm2(pos - q) <= r + r_j + d_max over arrays.
         px, py, r, d_max = float(pos[0, 0]), float(pos[0, 1]), float(self.r[0]), self.cfg.d_max_m
@@ -178,7 +187,7 @@ class AgentBrain:
         m = self._edges.ax.shape[0]
         return obstacle_view(pos, 1, m, np.zeros(m, dtype=np.int64), np.arange(m), self._edges)
 
-    def _obstacles_with_lost(self, pos: Array, lost: Sequence[Peer]) -> tuple[ObstacleView, list[Peer]]:
+    def _obstacles_with_lost(self, pos: Array, lost: Sequence[Body]) -> tuple[ObstacleView, list[Body]]:
         """The known hulls with each lost robot that blocks a passage merged into one convex obstacle with
         what it blocks; the lost robots that block nothing, to be avoided as neighbours."""
         key = (self.rev, tuple(sorted((b.id, b.px, b.py, b.radius) for b in lost)))

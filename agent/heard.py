@@ -28,7 +28,9 @@ class Heard:
         self._counted: tuple[int, ...] | None = None  # the newest clock's live agents (`clock`)
 
     def beacon(self, m: wire.Beacon, now: float) -> None:
-        self.beacons.setdefault(m.k, {})[m.id] = m
+        if (tick := self.beacons.get(m.k)) is None:
+            tick = self.beacons[m.k] = {}
+        tick[m.id] = m
         self.heard.pop(m.id, None)  # (kept in the order of its times: the newest last)
         self.heard[m.id] = now
         if (seen := self.last_seen.get(m.id)) is None or m.k >= seen.k:

@@ -189,8 +189,11 @@ class Neighbourhood:
 
     def intruders(self, k: int, fresh: Mapping[int, wire.Beacon]) -> list[wire.Beacon]:
         """The intruders among tick k's beacons `fresh` (by peer), reading only the peers we did not wait for."""
-        near = self.near.get(k)
-        return [] if near is None else [b for a, b in fresh.items() if a not in near and self.intruder(k, b)]
+        near, own = self.near.get(k), self.own.get(k)
+        if self.everyone or near is None or own is None:
+            return []
+        ox, oy, reach2 = own[0], own[1], self.grid.reach_m ** 2  # (`intruder`, inline)
+        return [b for a, b in fresh.items() if a not in near and (b.px - ox) ** 2 + (b.py - oy) ** 2 <= reach2]
 
     def also_heard(self, alive: set[int], prev: Mapping[int, wire.Beacon], fresh: Mapping[int, wire.Beacon],
                    waited: AbstractSet[int]) -> int:

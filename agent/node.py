@@ -22,7 +22,7 @@ from collections.abc import Set as AbstractSet
 
 import numpy as np
 
-from agent.brain import AgentBrain, Peer, commands
+from agent.brain import AgentBrain, Body, commands
 from agent.heard import Heard
 from agent.messages import Input, Law, Output, Reconnect
 from agent.neighbours import Neighbourhood
@@ -194,7 +194,7 @@ class AgentNode:
             got = self._waited[key] = (clock, self.nb.wait_set(k, self.h.living(clock), prev, self.h.last_seen))
         return got[1]
 
-    def _peers(self, k: int) -> tuple[list[Peer], list[Peer]]:
+    def _peers(self, k: int) -> tuple[list[Body], list[Body]]:
         """Whom tick k plans with, (live, lost). Live: every beacon of k; the latest of a peer it waited for but
         lacks (a guess); not a live peer that may not matter at k (realtime: not heard lately). Lost (not
         `Heard.living`: the world's clock is not fooled by a forged token): where their robots stopped (latest
@@ -203,13 +203,12 @@ class AgentNode:
         clock = self.h.clocks.get(k) or self.h.newest_clock()  # (realtime: the newest)
         rt, p, living = self.mode == "realtime", (st.px, st.py), self.h.living(clock)
         wanted = self._expected(k, None) if not rt else self._lately()
-        live, lost = list[Peer](), list[Peer]()
+        live, lost = list[Body](), list[Body]()  # (the beacons themselves: each names its peer, head point, radius)
         for a, b in self.h.last_seen.items():
             if (f := fresh.get(a)) is not None or (a in living and a in wanted and (not rt or self.nb.audible(p, b))):
-                b = f if f is not None else b
-                live.append(Peer(a, b.px, b.py, b.radius))
+                live.append(f if f is not None else b)
             elif a not in living:
-                lost.append(Peer(a, b.px, b.py, b.radius))
+                lost.append(b)
         return live, lost
 
     def _lately(self) -> set[int]:
@@ -302,16 +301,16 @@ class AgentNode:
             if self._linked[0] != k:  # (the wait gave up before all beacons came)
                 self._link(k, p)
             linked = self._linked[1]
-            every = {a: b.rev for a, b in self.h.beacons.get(k, {}).items()}
         else:  # realtime: whatever is latest
             linked = {a: max(self.sets.get(a, {0: {}})) for a in self.brain.linked(p, [*peers, *lost])}
-            every = self.peer_sets.newest()
         if self.k < 0 and k > 0:  # joining a mission under way: catch up on everything peers have cached
             linked = self.peer_sets.newest()
             log.info("agent %d: joining at tick %d; cached obstacle sets from agents %s: %s", self.id, k,
                      sorted(linked), sorted({o for revs in self.sets.values() for v in revs.values() for o in v}))
         shared = self.peer_sets.unmerged(linked, self.merged)
-        swarm = self.peer_sets.unmerged(every, self.merged_union) if self.brain.leader is not None else None
+        swarm = None if self.brain.leader is None else self.peer_sets.unmerged(  # (every peer's set: at k-1, as
+            {a: b.rev for a, b in self.h.beacons.get(k, {}).items()} if self.mode == "lockstep"  # announced at k)
+            else self.peer_sets.newest(), self.merged_union)
         scan = scan_sets(self.h.scans, self.k + 1 if self.k >= 0 else k, k)
         plan = self.brain.plan(k, p, scan, peers, shared, swarm, lost, st.theta)
         if plan.grew:
