@@ -52,7 +52,7 @@ class Heard:
 
     def clock(self, m: wire.Clock, now: float) -> None:
         self.clocks[m.k] = m
-        if m.alive == self._counted:  # (each was heard since, or is alive or gone by its token: nothing new)
+        if m.alive is self._counted or m.alive == self._counted:  # (each heard since, or alive or gone by its token)
             return
         self._counted = m.alive
         for a in m.alive_set.difference(self.alive, self.gone) - {self.id}:  # counted before its token came:

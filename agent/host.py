@@ -23,6 +23,7 @@ input, a deadline, or every `agent_poll_s` (its timers).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import threading
@@ -129,6 +130,7 @@ class AgentHost:
         self.sets: dict[int, tuple[Tag, Item]] = {}  # agent -> its newest obstacle set heard (its cell in its key)
         self.replay: list[tuple[int, Tag, Item]] = []  # (agent, tag, obstacle set) for that agent alone (replayed)
         self._cells: dict[str, Cell | None] = {}  # key -> the cell in it (None: not a cell key)
+        self._alive: tuple[int, ...] = ()  # the newest clock's live agents (one tuple while they stay the same)
         self.known = {a.id for a in next(iter(links.values())).node.s.agents}
         # The cells around the hosted agents' starts, declared with every cell's subscription: an agent that listens
         # to every cell until its first command then finds its own cells declared (not declared all at once, on
@@ -263,6 +265,10 @@ class AgentHost:
             if not who:
                 return
         m: Decoded = decode_sample(self.keys, key, payload, kind)
+        if isinstance(m, wire.Clock):  # (the live agents of the clock before, if the same: one tuple, known at once)
+            if m.alive == self._alive:
+                m = dataclasses.replace(m, alive=self._alive)
+            self._alive = m.alive
         if isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known and self._cell(key) is not None:
             self.sets[m.id] = (tag, item)  # (for an agent that starts listening to its cell later)
         if cohosted:

@@ -188,20 +188,22 @@ class Neighbourhood:
         return (b.px - own[0]) ** 2 + (b.py - own[1]) ** 2 <= self.grid.reach_m ** 2
 
     def intruders(self, k: int, fresh: Mapping[int, wire.Beacon]) -> list[wire.Beacon]:
-        """The intruders among tick k's beacons `fresh` (by peer), reading only the peers we did not wait for."""
+        """The intruders among tick k's beacons `fresh` (by peer), in id order, reading only the peers we did not
+        wait for."""
         near, own = self.near.get(k), self.own.get(k)
         if self.everyone or near is None or own is None:
             return []
         ox, oy, reach2 = own[0], own[1], self.grid.reach_m ** 2  # (`intruder`, inline)
-        return [b for a, b in fresh.items() if a not in near and (b.px - ox) ** 2 + (b.py - oy) ** 2 <= reach2]
+        others = [fresh[a] for a in sorted(fresh.keys() - near)]  # (in id order)
+        return [b for b in others if (b.px - ox) ** 2 + (b.py - oy) ** 2 <= reach2]
 
     def also_heard(self, alive: set[int], prev: Mapping[int, wire.Beacon], fresh: Mapping[int, wire.Beacon],
                    waited: AbstractSet[int]) -> int:
         """How many beacons of this tick will come from peers we do not wait for (they published the tick
         before in a cell we listen to): the runtime sleeps until they are in too, instead of waking early."""
-        cells = self.listen
-        return sum(1 for a, b in prev.items() if a in alive and a not in waited and a not in fresh
-                   and (cells is None or self.grid.cell_of(b.px, b.py) in cells))
+        cells, cell_of = self.listen, self.grid.cell_of
+        return sum(1 for a in prev.keys() - waited - fresh.keys()
+                   if a in alive and (cells is None or cell_of(prev[a].px, prev[a].py) in cells))
 
     def unexpected(self, b: wire.Beacon) -> str:
         """Why an intruder's beacon makes the tick a guess (for the log)."""

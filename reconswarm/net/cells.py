@@ -56,15 +56,11 @@ class CellGrid:
         w = self.width_m
         x0, x1 = math.floor((x - rad) / w), math.floor((x + rad) / w)
         y0, y1 = math.floor((y - rad) / w), math.floor((y + rad) / w)
-        out = set()
-        for cx in range(x0, x1 + 1):
-            for cy in range(y0, y1 + 1):
-                # nearest point of the cell's square to (x, y)
-                nx = min(max(x, cx * w), (cx + 1) * w)
-                ny = min(max(y, cy * w), (cy + 1) * w)
-                if (nx - x) ** 2 + (ny - y) ** 2 <= rad * rad:
-                    out.add((cx, cy))
-        return frozenset(out)
+        # The nearest point of a cell's square to (x, y), one axis at a time: squared distances by column, by row.
+        xs = [(cx, (min(max(x, cx * w), (cx + 1) * w) - x) ** 2) for cx in range(x0, x1 + 1)]
+        ys = [(cy, (min(max(y, cy * w), (cy + 1) * w) - y) ** 2) for cy in range(y0, y1 + 1)]
+        r2 = rad * rad
+        return frozenset((cx, cy) for cx, dx2 in xs for cy, dy2 in ys if dx2 + dy2 <= r2)
 
     @property
     def matter_m(self) -> float:
