@@ -71,7 +71,7 @@ class Neighbourhood:
         # gets every peer's cached obstacle set and hears the beacons of the tick before its first.
         self.home: Cell = self.grid.cell_of(*self.start[agent_id])
         self.listen: frozenset[Cell] | None = None
-        self._last_around: tuple[XY | None, frozenset[Cell]] = (None, frozenset())
+        self._last_around: tuple[XY, frozenset[Cell], float] = ((math.inf, math.inf), frozenset(), -1.0)
 
     # ------------------------------------------------------------------------------------ membership
 
@@ -110,10 +110,13 @@ class Neighbourhood:
         return Cells(self.home, listen)
 
     def _around(self, p: XY) -> frozenset[Cell]:
-        """The cells to listen to from p (computed once per position: on_state and after_command share it)."""
-        if self._last_around[0] != p:
-            self._last_around = (p, self.grid.listen_cells(*p))
-        return self._last_around[1]
+        """The cells to listen to from p (computed again only once p leaves the margin around where they were)."""
+        (x0, y0), cells, margin_m = self._last_around
+        # (the same cells while p stays within the margin, kept 1 µm clear of rounding: `listen_cells` exactly)
+        if p != (x0, y0) and not math.hypot(p[0] - x0, p[1] - y0) < margin_m - 1e-6:
+            cells = self.grid.listen_cells(*p)
+            self._last_around = (p, cells, self.grid.listen_margin_m(*p))
+        return cells
 
     # ----------------------------------------------------------------------------------- wait set
 

@@ -62,6 +62,17 @@ class CellGrid:
         r2 = rad * rad
         return frozenset((cx, cy) for cx, dx2 in xs for cy, dy2 in ys if dx2 + dy2 <= r2)
 
+    def listen_margin_m(self, x: float, y: float) -> float:
+        """How far (x, y) can move and `listen_cells` stay the same: the smallest gap between the radius and a
+        cell's distance, over the cells it names and the ring around them (those beyond are a cell width
+        farther), at most a cell width. A distance to a square changes no more than the point moves."""
+        rad, w = self.reach_m + 3.0 * self.step_m, self.width_m
+        x0, x1 = math.floor((x - rad) / w) - 1, math.floor((x + rad) / w) + 1
+        y0, y1 = math.floor((y - rad) / w) - 1, math.floor((y + rad) / w) + 1
+        xs = [(min(max(x, cx * w), (cx + 1) * w) - x) ** 2 for cx in range(x0, x1 + 1)]
+        ys = [(min(max(y, cy * w), (cy + 1) * w) - y) ** 2 for cy in range(y0, y1 + 1)]
+        return min(w, min(abs(math.sqrt(dx2 + dy2) - rad) for dx2 in xs for dy2 in ys))
+
     @property
     def matter_m(self) -> float:
         """reach + 2 V dt: the farthest centre distance at k-1 from which a peer can be within reach at k."""

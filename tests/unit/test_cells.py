@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -60,3 +61,39 @@ def test_chunk_round_trip(c):
 def test_bad_chunks_are_refused(bad):
     with pytest.raises(ValueError):
         chunk_cell(bad)
+
+
+def listen_cells_by_cell(g: CellGrid, x: float, y: float) -> frozenset[tuple[int, int]]:
+    """Every cell whose square's nearest point to (x, y) is within reach + 3 V dt: the definition, cell by cell."""
+    rad, w = g.reach_m + 3 * g.step_m, g.width_m
+    out = set()
+    for cx in range(math.floor((x - rad) / w) - 2, math.floor((x + rad) / w) + 3):
+        for cy in range(math.floor((y - rad) / w) - 2, math.floor((y + rad) / w) + 3):
+            nx, ny = min(max(x, cx * w), (cx + 1) * w), min(max(y, cy * w), (cy + 1) * w)
+            if (nx - x) ** 2 + (ny - y) ** 2 <= rad * rad:
+                out.add((cx, cy))
+    return frozenset(out)
+
+
+@settings(max_examples=400, deadline=None)
+@given(coord, coord, st.floats(0, 1), st.floats(0, 2 * math.pi))
+def test_the_cells_stay_the_same_within_the_margin(x, y, r, a):
+    """listen_cells is the definition; moved by less than listen_margin_m, the cells are the same."""
+    g = GRID
+    cells = g.listen_cells(x, y)
+    assert cells == listen_cells_by_cell(g, x, y)
+    m = g.listen_margin_m(x, y)
+    assert 0.0 <= m <= g.width_m
+    d = max(0.0, m - 1e-6) * r
+    assert g.listen_cells(x + d * math.cos(a), y + d * math.sin(a)) == cells
+
+
+@pytest.mark.parametrize("x", [0.0, 10.0, 25.3, GRID.width_m - 1e-3])
+def test_the_margin_is_the_distance_to_the_nearest_change(x):
+    """Just past the margin, some way of moving changes the cells (the margin is not a loose bound)."""
+    g = GRID
+    m = g.listen_margin_m(x, 0.5)
+    assert m < g.width_m
+    d = 1.01 * m + 1e-6  # (1 % past it: a direction within 8 degrees of the nearest change's crosses it)
+    moved = [g.listen_cells(x + d * math.cos(t), 0.5 + d * math.sin(t)) for t in np.linspace(0, 2 * math.pi, 720)]
+    assert any(c != g.listen_cells(x, 0.5) for c in moved)

@@ -242,3 +242,17 @@ def test_the_intruders_of_a_tick_are_the_peers_within_reach_it_did_not_wait_for(
     assert nb.intruders(5, {C: beacon(C, 5, G.reach_m + 1.0, 0.0)}) == []  # (out of reach: no matter)
     assert nb.intruders(6, fresh) == []  # (no wait set for 6 yet: nobody is an intruder)
     assert [b for b in fresh.values() if nb.intruder(5, b)] == nb.intruders(5, fresh)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.floats(0, 4 * G.step_m), st.floats(0, 2 * math.pi)), min_size=1, max_size=120))
+def test_the_cells_around_a_moving_agent_are_listen_cells_at_every_step(moves):
+    """`_around` keeps its cells while the agent stays within their margin: at every tick of a walk they are
+    exactly the cells CellGrid.listen_cells names where the agent is."""
+    nb = Neighbourhood(S, A)
+    x, y = 100.0, 0.0
+    for k, (d, a) in enumerate(moves):
+        x, y = x + d * math.cos(a), y + d * math.sin(a)
+        nb.on_state(k, (x, y))
+        nb.after_command(k)
+        assert nb.listen == G.listen_cells(x, y)
