@@ -20,7 +20,7 @@
 `--agents-per-process K ...` (default 1) measures each row with K agents per process (agent hosts; `auto`
 too), side by side; an agent host's CPU, messages and wake-ups count a K-th to each of its agents.
 `--checkout DIR` (repeatable) measures another checkout (a git worktree of an older commit with its own
-.venv) in the same run, row by row beside this one.
+.venv) in the same run, row by row beside this one (at each K if it has agent hosts).
 
     .venv/bin/python bench/bench_deploy.py --paper
     .venv/bin/python bench/bench_deploy.py --paper --equal-paper --agents-per-process 1 5 10 --grid-agents
@@ -92,6 +92,12 @@ def peak_rss_mb(out: Path) -> tuple[float, int]:
     rss = [ast.literal_eval(m[-1]).get("max_rss_mb", 0.0) for log in (out / "logs").glob("*.log")
            if (m := re.findall(r"usage: (\{.*\})", log.read_text(errors="replace")))]
     return float(sum(rss)), len(rss)
+
+
+def hosts_agents(checkout: Path) -> bool:
+    """Has that checkout agent hosts (`--agents-per-process`)?"""
+    cli = checkout / "reconswarm_bringup" / "cli_launch.py"
+    return cli.exists() and "--agents-per-process" in cli.read_text()
 
 
 def launcher_cmd(checkout: Path | None) -> tuple[list[str], Path]:
@@ -217,10 +223,12 @@ def main() -> int:
     print("# bench_deploy: real processes (router, simworld, monitor, N agents) on 127.0.0.1")
     print(f"# {machine()}")
     print(f"# reproduce: {command_line()}")
-    # (name, checkout, launcher options): this checkout at each K, then other checkouts (one process per agent)
-    versions: list[tuple[str, Path | None, tuple[str, ...]]] = [
-        ("this" if k == "1" else f"this K={k}", None, () if k == "1" else ("--agents-per-process", k))
-        for k in args.agents_per_process] + [(str(c), c, ()) for c in args.checkout]
+    # (name, checkout, launcher options): this checkout at each K, then other checkouts at each K if they host
+    # agents (else one process per agent)
+    versions: list[tuple[str, Path | None, tuple[str, ...]]] = []
+    for name, co in [("this", None), *((str(c), c) for c in args.checkout)]:
+        for k in args.agents_per_process if co is None or hosts_agents(co) else ["1"]:
+            versions.append((name, co, ()) if k == "1" else (f"{name} K={k}", co, ("--agents-per-process", k)))
     with tempfile.TemporaryDirectory(prefix="bench_deploy_") as t:
         tmp = Path(t)
         if args.grid_agents:
