@@ -196,16 +196,18 @@ class AgentNode:
 
     def _peers(self, k: int) -> tuple[list[Body], list[Body]]:
         """Whom tick k plans with, (live, lost). Live: every beacon of k; the latest of a peer it waited for but
-        lacks (a guess); not a live peer that may not matter at k (realtime: not heard lately). Lost (not
-        `Heard.living`: the world's clock is not fooled by a forged token): where their robots stopped (latest
-        beacon, or scan)."""
+        lacks (a guess); not a live peer that may not matter at k (realtime: not heard lately, unless our scan
+        says its robot is held near us). Lost (not `Heard.living`, which a forged token does not fool): where
+        their robots stopped (latest beacon, or scan)."""
         fresh, st = self.h.beacons.get(k, {}), self.h.states[k]
         clock = self.h.clocks.get(k) or self.h.newest_clock()  # (realtime: the newest)
         rt, p, living = self.mode == "realtime", (st.px, st.py), self.h.living(clock)
-        wanted = self._expected(k, None) if not rt else self._lately()
+        held = {a for a, _x, _y in sc.bodies} if rt and (sc := self.h.scans.get(k)) is not None else set()
+        wanted = self._expected(k, None) if not rt else self._lately() | held
         live, lost = list[Body](), list[Body]()  # (the beacons themselves: each names its peer, head point, radius)
         for a, b in self.h.last_seen.items():
-            if (f := fresh.get(a)) is not None or (a in living and a in wanted and (not rt or self.nb.audible(p, b))):
+            if (f := fresh.get(a)) is not None or (a in living and a in wanted and (
+                    not rt or a in held or self.nb.audible(p, b))):
                 live.append(f if f is not None else b)
             elif a not in living:
                 lost.append(b)
@@ -246,8 +248,7 @@ class AgentNode:
         # engine's from here on, so the node says so (`guessed_k` in its reports, then the record's summary).
         self._guess, quiet = "", self._quiet(now)  # (none while the world stalls: a peer may lack only its state)
         if clock is None:
-            # The tick's clock may have been lost (an outage): after a while, go on without it (the newest
-            # clock's list of agents).
+            # The tick's clock may have been lost (an outage): after a while, go on with the newest clock's agents.
             first = self.h.state_at.setdefault(k, now)
             if now - first < t.agent_wait_timeout_s or not self.h.clocks or quiet:
                 return False

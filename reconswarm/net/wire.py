@@ -52,9 +52,9 @@ class Scan:
     k: int
     t: float
     points: tuple[tuple[float, float, str], ...]
-    # Held robots in range: (agent id, head point x, y) of robots whose agents are gone (the world holds them
-    # where they stopped). With spatial cells an agent hears only its neighbourhood, so a robot lost far
-    # away is known to it only once it comes near: the world's range sensing tells it.
+    # Held robots in range: (agent id, head point x, y) of robots whose agents are gone or whose commands stopped
+    # (the world holds them where they stopped). With spatial cells an agent hears only its neighbourhood, so a
+    # robot lost far away is known to it only once it comes near: the world's range sensing tells it.
     bodies: tuple[tuple[int, float, float], ...] = ()
 
 

@@ -189,6 +189,19 @@ def test_realtime_a_peer_the_newest_clock_counts_gone_is_lost_though_its_token_s
     assert vw(out) == [ref.tick(2, (100.0, 0.0), [peer(B, 110.0)], lost=[peer(C, 104.0)])]
 
 
+def test_realtime_a_silent_peer_the_scan_says_is_held_near_us_is_planned_with_where_it_stands() -> None:
+    """B's agent is alive (its token, the clock) but said nothing for longer than realtime's silence (its
+    process stalled): not a peer heard lately, yet the world's scan says its robot stands held beside us. The
+    tick plans with it there (planning without it drove a robot through it at --speed 10 under a flood)."""
+    node, ref = started(peers=(B,)), Ref()
+    out = node.step([clock(0, (A, B), **RT), state(0, 100.0, 0.0), beacon(B, 0, 140.0, 0.0)], 0.0)
+    assert vw(out) == [ref.tick(0, (100.0, 0.0), [peer(B, 140.0)])]
+    held = wire.Scan(A, 40, 40 * DT, (), ((B, 106.0, 0.0),))
+    out = node.step([clock(40, (A, B), **RT), state(40, 100.0, 0.0, scan=held)], 2.0)  # B silent for 2 s
+    out += node.step([], node.wake_at_s() or 2.1)
+    assert vw(out) == [ref.tick(40, (100.0, 0.0), [peer(B, 106.0)])]
+
+
 def test_realtime_a_peer_whose_token_went_is_not_waited_for() -> None:
     node = started(peers=(B, C))
     node.step([clock(0, (A, B, C), **RT), state(0, 100.0, 0.0), beacon(B, 0, 110.0, 0.0), beacon(C, 0, 120.0, 0.0)],
