@@ -2,8 +2,13 @@
 
 Each robot holds the input of its agent's latest command (`plant_input`: the head point's velocity of eq. 3 at
 the heading the agent planned from, the zero-order hold the in-process engine uses) for `hold_sim_s`, then
-stops. `observe` is what a tick publishes of it: the truth and every robot's state with its scan (the contour
-points in sensing range and the held robots near it). The state machine around it is simworld/world.py;
+stops. A command is held beyond its own tick (or taken late) only while its robot stands within
+`hold_reach_m` (d_safe / 2) of where its agent planned it: the law is one short step from that point (the
+paper's repulsion, |Ψ| = 65 m/s, moves a robot metres a tick), and driven from elsewhere it is that step moved
+by as much, through whatever the law never saw there. Two robots each that near their plans lose at most d_safe
+of the gap the law keeps. `observe` is what a tick publishes of it: the truth and every robot's state with its
+scan (the contour points in sensing range and the held robots near it). The state machine around it is
+simworld/world.py;
 ROS 2 mode's plant, a robot base holding (v, ω) itself, is simworld/ros2_io.Ros2Plant.
 """
 
@@ -39,8 +44,12 @@ class Plant:
         self.hold_ticks = max(1, round(hold_sim_s / s.meta.dt_s))
         self.held = np.zeros((n, 2))  # each robot's held input to the plant (`plant_input` of its last command)
         self.held_k = np.full(n, -(10**9))  # tick of each robot's last command
+        self.planned_p = self.p.copy()  # (N, 2) each robot's head point at its last command's tick
+        self.hold_reach_m = s.planner.d_safe_m / 2.0
+        self.halted = np.zeros(n, dtype=bool)  # (N,) the robots no command moved over the last step
         self.cmds: dict[int, dict[int, np.ndarray]] = {}  # tick -> agent index -> (v, ω)
         self.headings: dict[int, np.ndarray] = {}  # θ at the recent ticks (a late command is its tick's)
+        self.positions: dict[int, np.ndarray] = {}  # (N, 2) head points at the same ticks
 
     def command(self, agent_id: int, k: int, v_mps: float, omega_radps: float) -> None:
         """Agent agent_id's (v, ω) for tick k (a late one still counts as its latest, `apply`)."""
@@ -70,9 +79,10 @@ class Plant:
         """Per robot: the held robots within body_range_m of its head point, as (agent id, head x, y): those whose
         agents are not in `alive`, and from tick 1 on those standing still because their agent's commands stopped
         `hold_sim_s` ago or never came (an agent alive by its token that never spoke is heard by nobody: without
-        this its robot would be in nobody's plan); none for a robot whose own agent is gone."""
+        this its robot would be in nobody's plan) or because no command held them over the last step (its agent
+        behind: `stopped`); none for a robot whose own agent is gone."""
         out: list[tuple[tuple[int, float, float], ...]] = [()] * len(self.ids)
-        stopped = self.stopped(k) if k >= 1 else np.zeros(len(self.ids), dtype=bool)
+        stopped = self.expired(k) | self.halted if k >= 1 else np.zeros(len(self.ids), dtype=bool)
         held = [i for i, a in enumerate(self.ids) if a not in alive or stopped[i]]
         if not held:
             return out
@@ -84,16 +94,22 @@ class Plant:
                                for j in map(int, np.flatnonzero(d[i] <= self.body_range_m)) if held[j] != i)
         return out
 
-    def stopped(self, k: int) -> np.ndarray:
-        """(N,) bool: the robots no command holds at tick k (the last one older than `hold_sim_s`, or none ever)."""
+    def expired(self, k: int) -> np.ndarray:
+        """(N,) bool: the robots whose last command is older than `hold_sim_s` at tick k (or never came)."""
         return (k - self.held_k) > self.hold_ticks
+
+    def stopped(self, k: int) -> np.ndarray:
+        """(N,) bool: the robots no command holds over the step from tick k: expired, or standing farther than
+        `hold_reach_m` from where their agents planned the command they hold (held beyond its tick, or late: the
+        step is then the planned one moved by that much; a command of tick k moves it by exactly 0)."""
+        return self.expired(k) | (np.hypot(*(self.p - self.planned_p).T) > self.hold_reach_m)
 
     def apply(self, k: int) -> set[int]:
         """Choose every robot's input for the step k -> k+1 and integrate; the agent indices commanded for k."""
         hold = self.hold_ticks
-        self.headings[k] = self.theta.copy()
+        self.headings[k], self.positions[k] = self.theta.copy(), self.p.copy()
         for kk in [x for x in self.headings if x < k - hold - 1]:
-            del self.headings[kk]
+            del self.headings[kk], self.positions[kk]
         got = self.cmds.pop(k, {})
         for kk in sorted(x for x in self.cmds if x < k):  # late commands still count as the latest
             late = {i: vw for i, vw in self.cmds.pop(kk).items() if kk > self.held_k[i]}
@@ -101,7 +117,8 @@ class Plant:
                 self._hold(kk, late)
         if got:
             self._hold(k, got)
-        self.integrate(np.where(self.stopped(k)[:, None], 0.0, self.held))
+        self.halted = self.stopped(k)
+        self.integrate(np.where(self.halted[:, None], 0.0, self.held))
         return set(got)
 
     def _hold(self, k: int, cmds: dict[int, np.ndarray]) -> None:
@@ -110,6 +127,7 @@ class Plant:
         vw = np.array([cmds[i] for i in rows.tolist()])
         self.held[rows] = self.plant_input(vw, self.headings[k][rows], rows)
         self.held_k[rows] = k
+        self.planned_p[rows] = self.positions[k][rows]
 
     def plant_input(self, vw: np.ndarray, theta: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """The input these robots' plant holds over the step: the head point's velocity u = M(θ_k) [v, ω]
