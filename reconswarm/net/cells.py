@@ -50,15 +50,15 @@ class CellGrid:
     def cell_of(self, x: float, y: float) -> Cell:
         return math.floor(x / self.width_m), math.floor(y / self.width_m)
 
+    @property
+    def listen_radius_m(self) -> float:
+        """reach + 3 V dt: the radius of the disk whose cells an agent listens to."""
+        return self.reach_m + 3.0 * self.step_m
+
     def listen_cells(self, x: float, y: float) -> frozenset[Cell]:
-        """Every cell that intersects the disk of radius reach + 3 V dt around (x, y)."""
-        rad = self.reach_m + 3.0 * self.step_m
-        w = self.width_m
-        x0, x1 = math.floor((x - rad) / w), math.floor((x + rad) / w)
-        y0, y1 = math.floor((y - rad) / w), math.floor((y + rad) / w)
-        # The nearest point of a cell's square to (x, y), one axis at a time: squared distances by column, by row.
-        xs = [(cx, (min(max(x, cx * w), (cx + 1) * w) - x) ** 2) for cx in range(x0, x1 + 1)]
-        ys = [(cy, (min(max(y, cy * w), (cy + 1) * w) - y) ** 2) for cy in range(y0, y1 + 1)]
+        """Every cell that intersects the disk of radius `listen_radius_m` around (x, y)."""
+        rad, w = self.listen_radius_m, self.width_m
+        xs, ys = _spans(x, rad, w, 0), _spans(y, rad, w, 0)
         r2 = rad * rad
         return frozenset((cx, cy) for cx, dx2 in xs for cy, dy2 in ys if dx2 + dy2 <= r2)
 
@@ -66,12 +66,9 @@ class CellGrid:
         """How far (x, y) can move and `listen_cells` stay the same: the smallest gap between the radius and a
         cell's distance, over the cells it names and the ring around them (those beyond are a cell width
         farther), at most a cell width. A distance to a square changes no more than the point moves."""
-        rad, w = self.reach_m + 3.0 * self.step_m, self.width_m
-        x0, x1 = math.floor((x - rad) / w) - 1, math.floor((x + rad) / w) + 1
-        y0, y1 = math.floor((y - rad) / w) - 1, math.floor((y + rad) / w) + 1
-        xs = [(min(max(x, cx * w), (cx + 1) * w) - x) ** 2 for cx in range(x0, x1 + 1)]
-        ys = [(min(max(y, cy * w), (cy + 1) * w) - y) ** 2 for cy in range(y0, y1 + 1)]
-        return min(w, min(abs(math.sqrt(dx2 + dy2) - rad) for dx2 in xs for dy2 in ys))
+        rad, w = self.listen_radius_m, self.width_m
+        xs, ys = _spans(x, rad, w, 1), _spans(y, rad, w, 1)
+        return min(w, min(abs(math.sqrt(dx2 + dy2) - rad) for _, dx2 in xs for _, dy2 in ys))
 
     @property
     def matter_m(self) -> float:
@@ -82,6 +79,14 @@ class CellGrid:
         """Can a peer at `peer` at tick k-1 be within reach of us at tick k (we at `own` at k-1)?"""
         # (hypot: a distance beyond the float range is inf, not an OverflowError as a square of 1e308 is)
         return math.hypot(own[0] - peer[0], own[1] - peer[1]) <= self.matter_m
+
+
+def _spans(v: float, rad: float, w: float, ring: int) -> list[tuple[int, float]]:
+    """Along one axis: the cells c (of width w) the interval [v - rad, v + rad] meets, and `ring` more on each side,
+    each with the squared distance from v to the cell's [c w, (c + 1) w] (0 inside it). The nearest point of a
+    square to a point is the nearest on each axis, so a cell's squared distance is its column's plus its row's."""
+    lo, hi = math.floor((v - rad) / w) - ring, math.floor((v + rad) / w) + ring
+    return [(c, (min(max(v, c * w), (c + 1) * w) - v) ** 2) for c in range(lo, hi + 1)]
 
 
 def cell_chunk(c: Cell) -> str:
