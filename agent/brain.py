@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from reconswarm.geometry.plane import Edges, norm2
-from reconswarm.paper.blocked import blocked_hulls, pass_gap_m
+from reconswarm.paper.blocked import Group, inside, lost_groups, merged_hulls, pass_gap_m
 from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
 from reconswarm.paper.knowledge import KnownObstacles, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
@@ -88,7 +88,9 @@ class AgentBrain:
         self._centres = np.zeros((0, 2))
         self._reach = np.zeros(0)
         self._blocked_key: tuple[int, tuple[tuple[int, float, float, float], ...]] = (-1, ())
-        self._blocked: tuple[Edges | None, list[Body]] = (None, [])  # (the hulls with lost robots, the rest)
+        self._groups: tuple[list[Array], Array, list[Group]] = ([], np.zeros((0, 3)), [])  # (hulls, discs, groups)
+        # (the hulls with lost robots, the rest), by the groups left apart (those holding our head point)
+        self._blocked: dict[tuple[int, ...], tuple[Edges | None, list[Body]]] = {}
         self._seen: set[tuple[float, float]] = set()  # contour points already merged (merging again is a no-op)
         w = window_ticks(self.cfg.stall_window_s, s.meta.dt_s)
         self.stall = StallState.create(1, w, [generator(s.meta.seed, agent_id)])
@@ -189,16 +191,21 @@ class AgentBrain:
 
     def _obstacles_with_lost(self, pos: Array, lost: Sequence[Body]) -> tuple[ObstacleView, list[Body]]:
         """The known hulls with each lost robot that blocks a passage merged into one convex obstacle with
-        what it blocks; the lost robots that block nothing, to be avoided as neighbours."""
+        what it blocks, unless that obstacle holds our head point (`merged_hulls`); the lost robots left
+        to be avoided as neighbours."""
         key = (self.rev, tuple(sorted((b.id, b.px, b.py, b.radius) for b in lost)))
         if key != self._blocked_key:  # (lost robots stand still: this changes when they or the hulls do)
             discs = np.array([[b.px, b.py, b.radius] for b in lost], dtype=np.float64)
-            hulls, absorbed = blocked_hulls([h for _, h in self.known.sorted_items()], discs,
-                                            pass_gap_m(float(self.r[0]), self.cfg.d_max_m))
+            known = [h for _, h in self.known.sorted_items()]
+            groups = lost_groups(known, discs, pass_gap_m(float(self.r[0]), self.cfg.d_max_m))
+            self._blocked_key, self._groups, self._blocked = key, (known, discs, groups), {}
+        known, discs, groups = self._groups
+        apart = inside(groups, pos[0]) if groups else ()
+        if (got := self._blocked.get(apart)) is None:
+            hulls, absorbed = merged_hulls(known, discs.shape[0], groups, apart)
             alone = [b for b, a in zip(lost, absorbed.tolist(), strict=True) if not a]
-            edges = Edges.of(hulls) if hulls else None
-            self._blocked_key, self._blocked = key, (edges, alone)
-        edges, alone = self._blocked
+            got = self._blocked[apart] = (Edges.of(hulls) if hulls else None, alone)
+        edges, alone = got
         if edges is None:
             return ObstacleView.empty(1), alone
         m = edges.ax.shape[0]

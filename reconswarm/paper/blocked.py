@@ -18,6 +18,8 @@ Pure: hulls (V, 2) counter-clockwise, discs (L, 3) as (x, y, radius); no state, 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -40,14 +42,19 @@ def pass_gap_m(radius_m: float, d_max_m: float) -> float:
     return 2.0 * (radius_m + d_max_m)
 
 
-def blocked_hulls(hulls: list[Array], discs: Array, gap_m: float) -> tuple[list[Array], NDArray[np.bool_]]:
-    """Group each lost robot's disc with the known hulls and the other discs closer to it than gap_m.
+@dataclass(frozen=True)
+class Group:
+    """Lost robots (disc indices) and known hulls (hull indices) too close to pass between, as one convex hull."""
 
-    hulls: M known hulls (V, 2); discs (L, 3). Returns (the hulls to plan with: every known hull that is in
-    no group, in the given order, then one convex hull per group of two or more members, in the order of
-    their first disc), absorbed (L,): which discs went into a group (the others stay neighbours).
-    Hulls are never grouped with each other: only a lost robot joins things.
-    """
+    discs: tuple[int, ...]
+    hulls: tuple[int, ...]
+    hull: Array  # (V, 2) counter-clockwise
+
+
+def lost_groups(hulls: list[Array], discs: Array, gap_m: float) -> list[Group]:
+    """Group each lost robot's disc with the known hulls and the other discs closer to it than gap_m: the groups
+    of two or more members with a disc in them, in the order of their first disc. hulls: M known hulls (V, 2);
+    discs (L, 3). Hulls are never grouped with each other: only a lost robot joins things."""
     n_l, n_m = discs.shape[0], len(hulls)
     parent = list(range(n_l + n_m))  # union-find: discs 0..L-1, then hulls L..L+M-1
 
@@ -74,24 +81,51 @@ def blocked_hulls(hulls: list[Array], discs: Array, gap_m: float) -> tuple[list[
             gap = distance_to_polygon(c, h)[0] - discs[:, 2]  # (L,)
         for i in np.flatnonzero(gap < gap_m).tolist():
             join(i, n_l + m)
-    groups: dict[int, list[int]] = {}
+    members: dict[int, list[int]] = {}
     for i in range(n_l + n_m):
-        groups.setdefault(root(i), []).append(i)
-    absorbed = np.zeros(n_l, dtype=bool)
+        members.setdefault(root(i), []).append(i)
+    out = []
+    for group in sorted(members.values(), key=min):
+        if len(group) < 2 or min(group) >= n_l:  # alone, or hulls only (cannot happen: never joined)
+            continue
+        d_idx = tuple(i for i in group if i < n_l)
+        h_idx = tuple(i - n_l for i in group if i >= n_l)
+        pts = [disc_polygon(*discs[i].tolist()) for i in d_idx] + [hulls[m] for m in h_idx]
+        out.append(Group(d_idx, h_idx, convex_hull(np.concatenate(pts))))
+    return out
+
+
+def inside(groups: list[Group], at: Array) -> tuple[int, ...]:
+    """The groups whose hull holds the point `at` (2,) (an agent's head point)."""
+    return tuple(g for g, x in enumerate(groups) if distance_to_polygon(at.reshape(1, 2), x.hull)[0][0] < 0.0)
+
+
+def blocked_hulls(hulls: list[Array], discs: Array, gap_m: float) -> tuple[list[Array], NDArray[np.bool_]]:
+    """`merged_hulls` of every group `lost_groups` finds."""
+    return merged_hulls(hulls, discs.shape[0], lost_groups(hulls, discs, gap_m))
+
+
+def merged_hulls(hulls: list[Array], n_discs: int, groups: list[Group], apart: tuple[int, ...] = ()
+                 ) -> tuple[list[Array], NDArray[np.bool_]]:
+    """The hulls to plan with, and which of the n_discs lost robots went into them: every known hull in no
+    merged group, in the given order, then each group's convex hull, in the groups' order; absorbed (L,): the
+    discs in a merged group (the others stay neighbours).
+
+    The groups in `apart` are not merged, their hulls as they are and their robots neighbours: those whose hull
+    holds the planning agent's head point (`inside`). The merge keeps agents out of a pocket they would stick in;
+    an agent the hull was made around (many robots counted lost at once, the swarm's own formation one group)
+    would be pushed out of it at the repulsion's contact value (about 80 m/s in the paper), across whatever lies
+    that way, the lost robots among them.
+    """
+    absorbed = np.zeros(n_discs, dtype=bool)
     merged: list[Array] = []
     grouped_hulls: set[int] = set()
-    for members in sorted(groups.values(), key=min):
-        if len(members) < 2 or min(members) >= n_l:  # alone, or hulls only (cannot happen: never joined)
+    for g, x in enumerate(groups):
+        if g in apart:
             continue
-        pts = []
-        for i in members:
-            if i < n_l:
-                absorbed[i] = True
-                pts.append(disc_polygon(*discs[i].tolist()))
-            else:
-                grouped_hulls.add(i - n_l)
-                pts.append(hulls[i - n_l])
-        merged.append(convex_hull(np.concatenate(pts)))
+        absorbed[list(x.discs)] = True
+        grouped_hulls.update(x.hulls)
+        merged.append(x.hull)
     kept = [h for m, h in enumerate(hulls) if m not in grouped_hulls]
     return kept + merged, absorbed
 

@@ -7,7 +7,7 @@ import numpy as np
 
 from agent.brain import AgentBrain, Peer
 from reconswarm.geometry.plane import distance_to_polygon, norm2, points_inside_hull
-from reconswarm.paper.blocked import blocked_hulls, disc_polygon, pass_gap_m
+from reconswarm.paper.blocked import blocked_hulls, disc_polygon, inside, lost_groups, merged_hulls, pass_gap_m
 from reconswarm.scenario.model import Scenario, load
 from tests.support import PAPER
 
@@ -91,3 +91,39 @@ def test_agents_caught_between_a_dead_robot_and_the_diamond_get_out() -> None:
         for o, q in freed.items():
             if o > a:
                 assert (norm2(t - q) - ra - s.agents[s.agent_index(o)].radius_m).min() > 0.0
+
+
+def test_a_group_made_around_the_agent_is_left_apart_and_the_agent_is_not_thrown_out_of_it() -> None:
+    """Under a flood the world counted every agent gone for a while: each agent's peers all lost at once, six of
+    them in a ring 15 m around it are one group (9.8 m apart, closer than the pass gap) whose hull holds the
+    agent. Merged, it is pushed out at the repulsion's contact value (metres a tick, through the ring); left
+    apart, the ring's robots are neighbours and it moves at cruise speed, never nearer any than d_safe."""
+    s = load(PAPER)
+    me = s.agents[0].id
+    r = s.agents[0].radius_m
+    centre = np.array([100.0, 0.0])
+    ring = [Peer(100 + j, float(centre[0] + 15.0 * np.cos(a)), float(centre[1] + 15.0 * np.sin(a)), r)
+            for j, a in enumerate(np.linspace(0.0, 2 * np.pi, 6, endpoint=False) + 0.3)]
+    discs = np.array([[b.px, b.py, b.radius] for b in ring])
+    groups = lost_groups([], discs, pass_gap_m(r, s.planner.d_max_m))
+    assert len(groups) == 1 and inside(groups, centre) == (0,)
+    assert merged_hulls([], len(ring), groups, (0,))[1].tolist() == [False] * 6  # all stay neighbours
+    assert len(merged_hulls([], len(ring), groups)[0]) == 1  # (merged: one obstacle of all six)
+
+    brain = AgentBrain(s, me)
+    p = centre.copy()
+    u, _ = brain.tick(0, p.copy(), {}, [], [], None, ring)
+    assert float(norm2(u)) <= s.planner.k_att * s.planner.target_radius_m + 1e-9  # at most the cruise speed
+    closest = np.inf
+    for k in range(1, 200):
+        p = p + s.meta.dt_s * u
+        closest = min(closest, min(float(norm2(p - [b.px, b.py])) - b.radius - r for b in ring))
+        u, _ = brain.tick(k, p.copy(), {}, [], [], None, ring)
+    assert closest > s.planner.d_safe_m
+
+
+def test_inside_is_the_head_point_in_the_hull_not_a_body_touching_it() -> None:
+    """The pocket's agents (above) touch the merged hull as they slide along it: they must keep it."""
+    g = lost_groups([SQUARE], np.array([[20.0, 5.0, 2.0]]), 28.0)
+    assert inside(g, np.array([5.0, 5.0])) == (0,)
+    assert inside(g, np.array([5.0, -0.5])) == ()  # 0.5 m outside: a body of radius 2 overlaps, still merged
