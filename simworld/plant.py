@@ -8,8 +8,7 @@ paper's repulsion, |Ψ| = 65 m/s, moves a robot metres a tick), and driven from 
 by as much, through whatever the law never saw there. Two robots each that near their plans lose at most d_safe
 of the gap the law keeps. `observe` is what a tick publishes of it: the truth and every robot's state with its
 scan (the contour points in sensing range and the held robots near it). The state machine around it is
-simworld/world.py;
-ROS 2 mode's plant, a robot base holding (v, ω) itself, is simworld/ros2_io.Ros2Plant.
+simworld/world.py; ROS 2 mode's plant, a robot base holding (v, ω) itself, is simworld/ros2_io.Ros2Plant.
 """
 
 from __future__ import annotations
