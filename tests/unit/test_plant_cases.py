@@ -69,9 +69,10 @@ def test_a_robot_commanded_at_every_tick_moves_at_every_tick() -> None:
         assert np.hypot(*(plant.p - before).T) == pytest.approx(1.0 * DT)  # straight at 1 m/s
 
 
-def apart() -> Plant:
-    """Every robot far from every obstacle and from each other (commands of (0, 0): they stand still)."""
-    plant = Plant(S, 0.2)
+def apart(plant: Plant | None = None) -> Plant:
+    """Every robot far from every obstacle and from each other (commands of (0, 0): they stand still), in a new
+    plant holding commands 0.2 s or the one given."""
+    plant = Plant(S, 0.2) if plant is None else plant
     for i in range(len(IDS)):
         plant.p[i] = np.array([-5000.0, 3000.0 + 1000.0 * i])
     return plant

@@ -9,24 +9,17 @@ import pytest
 
 from simworld.plant import Plant
 from simworld.ros2_io import Ros2Plant
+from tests.unit.test_plant_cases import apart as spread
+from tests.unit.test_plant_cases import moved
 from tests.unit.test_world_node import IDS, S
 
 DT = S.meta.dt_s
 
 
 def apart(plant: Plant) -> Plant:
-    """Every robot far from every obstacle and from each other, heading along +x."""
-    for i in range(len(IDS)):
-        plant.p[i] = np.array([-5000.0, 3000.0 + 1000.0 * i])
-    plant.theta[:] = 0.0
+    """test_plant_cases.apart, every robot heading along +x."""
+    spread(plant).theta[:] = 0.0
     return plant
-
-
-def moved(plant: Plant, k: int) -> np.ndarray:
-    """How far each head point moves over the step k -> k+1. (N,)"""
-    before = plant.p.copy()
-    plant.apply(k)
-    return np.hypot(*(plant.p - before).T)
 
 
 def test_the_reach_is_half_of_d_safe() -> None:
