@@ -2,10 +2,12 @@
 
 Every payload is invalid by construction, one of several kinds: random bytes, truncated msgpack, a wrong
 schema version, NaN / inf numbers, wrong types, another agent's id, an oversized payload. A valid message
-is never sent, so the run's outcome must not change; every receiver must drop and count each one.
+is never sent, so the run's outcome must not change; every receiver must drop and count each one it receives
+(the run's router forwards no payload over the wire's limit: reconswarm/net/session.py PAYLOAD_CAP).
 Beacons and obstacle sets go under the cell each agent is in when the flood starts (heard from the run's
 beacons for up to 2 s; else the cell of its start), so the agents listening there receive them too.
-Prints one JSON line: how many payloads went to each key.
+Prints one JSON line: how many payloads went to each key (`sent`), how many of them were over the limit
+(`over_limit`), and the total.
 """
 
 from __future__ import annotations
@@ -86,6 +88,7 @@ def run(cfg: FloodConfig) -> dict[str, int]:
     k = Keys(cfg.run)
     rng = random.Random(cfg.seed)
     sent: dict[str, int] = {}
+    over: dict[str, int] = {}
     import zenoh
 
     session = open_session(cfg.zenoh, "flood")
@@ -101,9 +104,12 @@ def run(cfg: FloodConfig) -> dict[str, int]:
         for n in range(cfg.count):
             key, _ = keys[n % len(keys)]
             maker = makers[key][rng.randrange(len(makers[key]))]
-            pubs[key].put(maker())
+            payload = maker()
+            pubs[key].put(payload)
             sent[key] = sent.get(key, 0) + 1
+            if len(payload) > MAX_PAYLOAD_BYTES:
+                over[key] = over.get(key, 0) + 1
     finally:
         session.close()
-    print(json.dumps({"sent": sent, "total": cfg.count}), flush=True)
+    print(json.dumps({"sent": sent, "over_limit": over, "total": cfg.count}), flush=True)
     return sent

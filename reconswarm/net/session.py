@@ -20,11 +20,19 @@ from typing import Any
 from reconswarm.errors import BadInput, ProcessFailure
 from reconswarm.net.lifecycle import Stopper, usage
 from reconswarm.net.timing import TIMING
+from reconswarm.scenario.wire_limits import MAX_PAYLOAD_BYTES
 
 log = logging.getLogger("reconswarm")
 MODES = ("peer", "client", "router")
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 LEASE_MS = TIMING.lease_ms  # a frozen process is declared gone after this (zenoh's 10 s is too slow for robots)
+
+# A router forwards no message with a payload over the wire's limit: every decoder refuses such a payload anyway
+# (reconswarm/net/wire.py), and a router that fans it out makes each receiver take it first (a flood of 1 MiB
+# payloads held every agent host's loop up for seconds and ~1 GB of memory). Zenoh's own low-pass filter, on
+# what the router receives; a router's own config file may set its own filter instead.
+PAYLOAD_CAP = {"id": "reconswarm-payload-cap", "flows": ["ingress"], "messages": ["put", "delete", "query", "reply"],
+               "key_exprs": ["**"], "size_limit": MAX_PAYLOAD_BYTES}
 
 
 @dataclass(frozen=True)
@@ -68,7 +76,10 @@ class ZenohOptions:
             conf.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
         if self.listen:
             conf.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
+        if json.loads(conf.get_json("mode")) == "router" and json.loads(conf.get_json("low_pass_filter")) == []:
+            conf.insert_json5("low_pass_filter", json.dumps([PAYLOAD_CAP]))
         return conf
+
 
 
 @contextmanager
