@@ -47,8 +47,8 @@ class Plant:
         self.hold_reach_m = s.planner.d_safe_m / 2.0
         self.halted = np.zeros(n, dtype=bool)  # (N,) the robots no command moved over the last step
         self.cmds: dict[int, dict[int, np.ndarray]] = {}  # tick -> agent index -> (v, ω)
-        self.headings: dict[int, np.ndarray] = {}  # θ at the recent ticks (a late command is its tick's)
-        self.positions: dict[int, np.ndarray] = {}  # (N, 2) head points at the same ticks
+        # The robots' poses at the recent ticks, tick -> (θ (N,), head points (N, 2)): a late command is its tick's.
+        self.poses: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def command(self, agent_id: int, k: int, v_mps: float, omega_radps: float) -> None:
         """Agent agent_id's (v, ω) for tick k (a late one still counts as its latest, `apply`)."""
@@ -106,13 +106,13 @@ class Plant:
     def apply(self, k: int) -> set[int]:
         """Choose every robot's input for the step k -> k+1 and integrate; the agent indices commanded for k."""
         hold = self.hold_ticks
-        self.headings[k], self.positions[k] = self.theta.copy(), self.p.copy()
-        for kk in [x for x in self.headings if x < k - hold - 1]:
-            del self.headings[kk], self.positions[kk]
+        self.poses[k] = self.theta.copy(), self.p.copy()
+        for kk in [x for x in self.poses if x < k - hold - 1]:
+            del self.poses[kk]
         got = self.cmds.pop(k, {})
         for kk in sorted(x for x in self.cmds if x < k):  # late commands still count as the latest
             late = {i: vw for i, vw in self.cmds.pop(kk).items() if kk > self.held_k[i]}
-            if late and kk in self.headings:  # (older than the hold: stale anyway)
+            if late and kk in self.poses:  # (older than the hold: stale anyway)
                 self._hold(kk, late)
         if got:
             self._hold(k, got)
@@ -124,9 +124,10 @@ class Plant:
         """Hold the commands (v, ω) of tick k (agent index -> row) as the robots' plant inputs."""
         rows = np.array(list(cmds), dtype=np.int64)
         vw = np.array([cmds[i] for i in rows.tolist()])
-        self.held[rows] = self.plant_input(vw, self.headings[k][rows], rows)
+        theta, p = self.poses[k]
+        self.held[rows] = self.plant_input(vw, theta[rows], rows)
         self.held_k[rows] = k
-        self.planned_p[rows] = self.positions[k][rows]
+        self.planned_p[rows] = p[rows]
 
     def plant_input(self, vw: np.ndarray, theta: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """The input these robots' plant holds over the step: the head point's velocity u = M(θ_k) [v, ω]

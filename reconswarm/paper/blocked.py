@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.geometry.plane import convex_hull, distance_to_polygon, norm2
+from reconswarm.geometry.plane import convex_hull, distance_to_polygon, norm2, points_inside_hull
 
 Array = NDArray[np.float64]
 
@@ -96,8 +96,9 @@ def lost_groups(hulls: list[Array], discs: Array, gap_m: float) -> list[Group]:
 
 
 def inside(groups: list[Group], at: Array) -> tuple[int, ...]:
-    """The groups whose hull holds the point `at` (2,) (an agent's head point)."""
-    return tuple(g for g, x in enumerate(groups) if distance_to_polygon(at.reshape(1, 2), x.hull)[0][0] < 0.0)
+    """The groups whose hull holds the point `at` (2,) (an agent's head point; on its boundary counts)."""
+    at = at.reshape(1, 2)
+    return tuple(g for g, x in enumerate(groups) if points_inside_hull(at, x.hull)[0])
 
 
 def blocked_hulls(hulls: list[Array], discs: Array, gap_m: float) -> tuple[list[Array], NDArray[np.bool_]]:
