@@ -21,7 +21,8 @@ log = logging.getLogger("reconswarm.router")
 def router_cmd(
     listen: Listen = None, connect: Connect = None, zenoh_config: ZConfig = None,
 ) -> None:
-    """A zenoh router (Python-hosted) for local and multi-host runs; default tcp/127.0.0.1:7447."""
+    """A zenoh router (Python-hosted) for local and multi-host runs; default tcp/127.0.0.1:7447. It forwards no
+    payload over the wire's 1 MiB limit (unless its --zenoh-config sets a low_pass_filter of its own)."""
     from reconswarm.net.session import DEFAULT_ROUTER
 
     def go() -> int:
