@@ -81,7 +81,6 @@ class ZenohOptions:
         return conf
 
 
-
 @contextmanager
 def serving(opts: ZenohOptions, what: str,
             timeout_s: float = TIMING.session_open_timeout_s) -> Iterator[tuple[Any, Stopper]]:
