@@ -4,6 +4,7 @@ on 127.0.0.1, a router opened with the options every `reconswarm router` uses, t
 from __future__ import annotations
 
 import json
+import threading
 import time
 from pathlib import Path
 
@@ -25,8 +26,13 @@ def _through(router: ZenohOptions, endpoint: str) -> list[int]:
     got: list[int] = []
     try:
         sub = s.declare_subscriber("cap/**", lambda sample: got.append(len(sample.payload.to_bytes())))
+        heard = threading.Event()
+        probe = s.declare_subscriber("probe", lambda _sample: heard.set())  # (declared after: it arrives after)
         pub = p.declare_publisher("cap/x", congestion_control=zenoh.CongestionControl.BLOCK)
-        time.sleep(0.5)  # (the subscription reaches the router)
+        deadline = time.monotonic() + 10.0  # (a barrier: the subscriptions reached the router once a probe comes)
+        while not heard.wait(0.05) and time.monotonic() < deadline:
+            p.put("probe", b"")
+        probe.undeclare()
         for n in SIZES:
             pub.put(bytes(n))
         deadline = time.monotonic() + 10.0
