@@ -47,6 +47,11 @@ CORE: dict[str, tuple[str, ...]] = {
     "monitor/node.py": ("test_monitor_node.py", "test_membership_rules.py", "test_world_uncommanded.py",
                         "test_monitor_node_cases.py"),
     "monitor/presence.py": ("test_monitor_node.py", "test_membership_rules.py", "test_presence_cases.py"),
+    "reconswarm/paper/blocked.py": ("test_blocked.py", "test_blocked_cases.py", "test_agent_node.py",
+                                    "test_agent_node_cases.py"),
+    "reconswarm/net/membership.py": ("test_membership_rules.py", "test_membership_cases.py", "test_world_node.py",
+                                     "test_world_node_cases.py", "test_monitor_node.py", "test_presence_cases.py",
+                                     "test_router_link.py"),
 }
 
 # mutmut's exit codes (mutmut.stats.status_by_exit_code): 1 and 3 killed, 0 survived, the rest neither.
