@@ -52,6 +52,11 @@ CORE: dict[str, tuple[str, ...]] = {
     "reconswarm/net/membership.py": ("test_membership_rules.py", "test_membership_cases.py", "test_world_node.py",
                                      "test_world_node_cases.py", "test_monitor_node.py", "test_presence_cases.py",
                                      "test_router_link.py"),
+    "reconswarm/paper/deadlock.py": ("test_deadlock_leader.py", "test_deadlock_cases.py", "test_law_batched.py"),
+    "reconswarm/net/gate.py": ("test_admission.py", "test_gate_cases.py", "test_agent_host_routing.py",
+                               "test_agent_node.py", "test_ros2_admission.py", "test_world_node.py"),
+    "agent/heard.py": ("test_heard.py", "test_heard_cases.py", "test_agent_node.py", "test_agent_node_cases.py",
+                       "test_agent_node_waits.py", "test_agent_node_outputs.py"),
 }
 
 # mutmut's exit codes (mutmut.stats.status_by_exit_code): 1 and 3 killed, 0 survived, the rest neither.
