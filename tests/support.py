@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from reconswarm.geometry.plane import Edges
+from reconswarm.net import wire
 from reconswarm.net.node import Role, Token
 from reconswarm.paper.knowledge import obstacle_view
 from reconswarm.paper.planner import ObstacleView
@@ -197,3 +198,8 @@ def left(agent: int) -> Token:
 def world_token(up: bool) -> Token:
     """The world's liveliness token appeared (up) or went away."""
     return Token(Role.WORLD, up)
+
+
+def beacon(aid: int, k: int, px: float, py: float, radius_m: float = 2.0, dt_s: float = 0.05) -> wire.Beacon:
+    """Agent `aid`'s beacon of tick k at head point (px, py) (the paper's dt unless told)."""
+    return wire.Beacon(aid, k, k * dt_s, px, py, radius_m)

@@ -13,7 +13,7 @@ from reconswarm.net.gate import Gate
 from reconswarm.net.keys import Keys
 from reconswarm.net.report import Report
 from reconswarm.scenario.model import load
-from tests.support import PAPER
+from tests.support import PAPER, beacon
 
 S = load(PAPER)
 KEYS = Keys("paper-0a1b2c")
@@ -26,8 +26,7 @@ def _clock(k: int) -> wire.Clock:
 
 
 def _beacon(aid: int, k: int = 0) -> wire.Beacon:
-    radius = float(S.radii[S.agent_index(aid)]) if aid in S.ids else 1.0
-    return wire.Beacon(aid, k, k * DT, 40.0, 0.0, radius)
+    return beacon(aid, k, 40.0, 0.0, float(S.radii[S.agent_index(aid)]) if aid in S.ids else 1.0, DT)
 
 
 def _state(k: int) -> wire.State:

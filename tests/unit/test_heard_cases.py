@@ -6,28 +6,25 @@ from __future__ import annotations
 
 from agent.heard import Heard
 from reconswarm.net import wire
-
-
-def _beacon(aid: int, k: int, x: float = 0.0) -> wire.Beacon:
-    return wire.Beacon(aid, k, 0.05 * k, x, 0.0, 2.0)
+from tests.support import beacon
 
 
 def test_a_peers_newest_beacon_is_kept_and_an_older_tick_does_not_replace_it() -> None:
     h = Heard(1)
-    h.beacon(_beacon(2, 5, 10.0), 1.0)
-    h.beacon(_beacon(3, 4, 30.0), 1.1)
-    h.beacon(_beacon(2, 3, 99.0), 1.2)  # late: an older tick
+    h.beacon(beacon(2, 5, 10.0, 0.0), 1.0)
+    h.beacon(beacon(3, 4, 30.0, 0.0), 1.1)
+    h.beacon(beacon(2, 3, 99.0, 0.0), 1.2)  # late: an older tick
     assert h.last_seen[2].k == 5 and h.last_seen[2].px == 10.0 and h.last_seen[3].px == 30.0
-    h.beacon(_beacon(2, 5, 11.0), 1.3)  # the same tick again (a session that reconnected): the newest word
+    h.beacon(beacon(2, 5, 11.0, 0.0), 1.3)  # the same tick again (a session that reconnected): the newest word
     assert h.last_seen[2].px == 11.0
-    assert h.beacons[3] == {2: _beacon(2, 3, 99.0)} and h.beacons[5] == {2: _beacon(2, 5, 11.0)}
+    assert h.beacons[3] == {2: beacon(2, 3, 99.0, 0.0)} and h.beacons[5] == {2: beacon(2, 5, 11.0, 0.0)}
 
 
 def test_silence_is_kept_in_the_order_of_each_peers_latest_word() -> None:
     h = Heard(1)
-    h.beacon(_beacon(2, 1), 1.0)
-    h.beacon(_beacon(3, 1), 2.0)
-    h.beacon(_beacon(2, 2), 3.0)  # peer 2 spoke last: it moves to the end
+    h.beacon(beacon(2, 1, 0.0, 0.0), 1.0)
+    h.beacon(beacon(3, 1, 0.0, 0.0), 2.0)
+    h.beacon(beacon(2, 2, 0.0, 0.0), 3.0)  # peer 2 spoke last: it moves to the end
     assert list(h.heard.items()) == [(3, 2.0), (2, 3.0)]
 
 
@@ -52,8 +49,8 @@ def test_stale_places_of_live_peers_are_forgotten_from_the_given_tick_on() -> No
     h = Heard(1)
     for aid, k in [(2, 9), (3, 10), (4, 3)]:
         h.token(aid, True, 0.0)
-        h.beacon(_beacon(aid, k, 10.0 * aid), 1.0)
-    h.beacon(_beacon(5, 1), 1.0)  # no token: a lost robot stays where it was seen
+        h.beacon(beacon(aid, k, 10.0 * aid, 0.0), 1.0)
+    h.beacon(beacon(5, 1, 0.0, 0.0), 1.0)  # no token: a lost robot stays where it was seen
     h.forget_stale(lambda b: b.id != 4, living={2, 3, 4, 5}, stale_k=10)
     assert set(h.last_seen) == {3, 5}  # 2: heard before tick 10; 4: out of our cells; 3: at tick 10 exactly
 

@@ -11,18 +11,13 @@ import math
 import numpy as np
 
 from agent.neighbours import REALTIME_SILENT_S, Neighbourhood
-from reconswarm.net import wire
 from reconswarm.net.cells import CellGrid
 from reconswarm.plant import unicycle
 from reconswarm.scenario.model import load
-from tests.support import PAPER
+from tests.support import PAPER, beacon
 
 S = load(PAPER)
 DT = S.meta.dt_s
-
-
-def _beacon(aid: int, k: int, px: float, py: float) -> wire.Beacon:
-    return wire.Beacon(aid, k, k * DT, px, py, 2.0)
 
 
 def _acting(p: tuple[float, float] = (0.0, 64.0), k: int = 4) -> Neighbourhood:
@@ -40,18 +35,18 @@ def test_a_peer_back_without_a_beacon_is_placed_where_it_was_last_seen_not_at_it
         nb.peer_joined(peer, acting=True)
     nb.start[2] = (0.0, 64.0 + 5.0)  # its start is near us, but it was last seen 100 m away: not waited for
     nb.start[3] = (500.0, 500.0)  # never seen: placed at its start, far away
-    last_seen = {2: _beacon(2, 1, 100.0, 64.0),
-                 4: _beacon(4, 2, 0.0, 64.0 + 12.0),  # exactly at the bound (12 m): waited for
-                 5: _beacon(5, 2, 0.0, 64.0 + 12.5),  # just beyond, along the y axis
-                 6: _beacon(6, 2, 0.0, 65.0)}  # seen here once; its beacon of k-1 says it is elsewhere now
-    prev = {6: _beacon(6, 4, 50.0, 64.0)}  # agent 6 has its beacon of k-1: placed by it (50 m away)
+    last_seen = {2: beacon(2, 1, 100.0, 64.0),
+                 4: beacon(4, 2, 0.0, 64.0 + 12.0),  # exactly at the bound (12 m): waited for
+                 5: beacon(5, 2, 0.0, 64.0 + 12.5),  # just beyond, along the y axis
+                 6: beacon(6, 2, 0.0, 65.0)}  # seen here once; its beacon of k-1 says it is elsewhere now
+    prev = {6: beacon(6, 4, 50.0, 64.0)}  # agent 6 has its beacon of k-1: placed by it (50 m away)
     assert nb.wait_set(5, range(1, 11), prev, last_seen) == frozenset({4})
 
 
 def test_realtime_places_a_peer_where_it_was_last_seen_and_never_seen_at_its_start() -> None:
     nb = _acting()
     nb.start[2], nb.start[3] = (0.0, 70.0), (0.0, 70.0)  # both start near us
-    last_seen = {2: _beacon(2, 3, 0.0, 164.0)}  # agent 2 was seen far away since
+    last_seen = {2: beacon(2, 3, 0.0, 164.0)}  # agent 2 was seen far away since
     assert nb.near_now((0.0, 64.0), {2, 3}, last_seen) == {3}
 
 
@@ -65,10 +60,10 @@ def test_an_agents_first_tick_joining_a_mission_under_way_waits_for_every_peer()
 def test_intruders_are_within_reach_on_both_axes_the_bound_included() -> None:
     nb = _acting()
     assert nb.wait_set(4, [], {}, {}) == frozenset()
-    fresh = {2: _beacon(2, 4, 0.0, 74.0),  # 10 m above: within reach (its edge)
-             3: _beacon(3, 4, 0.0, 74.5),  # beyond it
-             4: _beacon(4, 4, 6.0, 72.0),  # 10 m away on the diagonal
-             5: _beacon(5, 4, 0.0, -74.0)}  # far below (mirrored)
+    fresh = {2: beacon(2, 4, 0.0, 74.0),  # 10 m above: within reach (its edge)
+             3: beacon(3, 4, 0.0, 74.5),  # beyond it
+             4: beacon(4, 4, 6.0, 72.0),  # 10 m away on the diagonal
+             5: beacon(5, 4, 0.0, -74.0)}  # far below (mirrored)
     assert [b.id for b in nb.intruders(4, fresh)] == [2, 4]
     assert nb.intruder(4, fresh[2]) and not nb.intruder(4, fresh[3])
 
@@ -85,8 +80,8 @@ def test_the_runtime_waits_for_live_peers_that_spoke_in_a_cell_it_hears() -> Non
     nb = _acting()
     inside = nb.grid.cell_of(0.0, 64.0)
     assert inside in (nb.listen or frozenset())
-    prev = {2: _beacon(2, 4, 1.0, 65.0), 3: _beacon(3, 4, 900.0, 900.0), 4: _beacon(4, 4, 2.0, 66.0),
-            5: _beacon(5, 4, 3.0, 63.0)}
+    prev = {2: beacon(2, 4, 1.0, 65.0), 3: beacon(3, 4, 900.0, 900.0), 4: beacon(4, 4, 2.0, 66.0),
+            5: beacon(5, 4, 3.0, 63.0)}
     # 2: will come; 3: in a cell we do not hear; 4: not alive; 5: waited for already
     assert nb.also_heard({2, 3, 5}, prev, {}, frozenset({5})) == 1
     assert nb.also_heard({2, 3, 5}, prev, {2: prev[2]}, frozenset({5})) == 0  # (its beacon is in)
@@ -115,7 +110,7 @@ def test_ticks_older_than_four_are_forgotten() -> None:
 def test_an_intruder_is_explained_with_the_speed_bound() -> None:
     nb = Neighbourhood(S, 1)
     v = nb.grid.step_m / DT
-    assert f"faster than the speed bound {v:g} m/s" in nb.unexpected(_beacon(2, 7, 0.0, 0.0))
+    assert f"faster than the speed bound {v:g} m/s" in nb.unexpected(beacon(2, 7, 0.0, 0.0))
     assert v > 100.0  # (m/s: not a step in metres)
 
 
