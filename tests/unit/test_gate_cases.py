@@ -14,15 +14,12 @@ from reconswarm.net.keys import Keys
 from reconswarm.net.report import Report
 from reconswarm.scenario.model import load
 from tests.support import PAPER, beacon
+from tests.unit.test_admission import clock
 
 S = load(PAPER)
 KEYS = Keys("paper-0a1b2c")
 WORLD, A2, X = "world-zid", "agent2-zid", "intruder-zid"
 DT = S.meta.dt_s
-
-
-def _clock(k: int) -> wire.Clock:
-    return wire.Clock(k, k * DT, tuple(a.id for a in S.agents))
 
 
 def _beacon(aid: int, k: int = 0) -> wire.Beacon:
@@ -45,10 +42,10 @@ def logged(caplog: pytest.LogCaptureFixture) -> pytest.LogCaptureFixture:
 
 def test_each_kind_of_message_meets_its_own_rule(logged: pytest.LogCaptureFixture) -> None:
     g = Gate(S, "agent-5")
-    assert g.admit(_clock(0), WORLD, KEYS.clock, 0.0)  # pins the world's session
-    assert g.admit(_clock(3), WORLD, KEYS.clock, 0.1) and (g.world_k, g.t) == (3, 3 * DT)
-    assert g.admit(_clock(1), WORLD, KEYS.clock, 0.2) and (g.world_k, g.t) == (3, 3 * DT)  # (the newest stays)
-    assert not g.admit(_clock(4), X, KEYS.clock, 0.3)
+    assert g.admit(clock(0), WORLD, KEYS.clock, 0.0)  # pins the world's session
+    assert g.admit(clock(3), WORLD, KEYS.clock, 0.1) and (g.world_k, g.t) == (3, 3 * DT)
+    assert g.admit(clock(1), WORLD, KEYS.clock, 0.2) and (g.world_k, g.t) == (3, 3 * DT)  # (the newest stays)
+    assert not g.admit(clock(4), X, KEYS.clock, 0.3)
     assert not g.admit(_state(3), X, KEYS.state(2), 0.3) and g.admit(_state(3), WORLD, KEYS.state(2), 0.3)
     assert not g.admit(_beacon(999), X, KEYS.beacon((0, 0), 999), 0.4)
     assert g.admit(_beacon(2), A2, KEYS.beacon((0, 0), 2), 0.4)  # pins agent 2's session
@@ -86,7 +83,7 @@ def test_an_obstacle_set_too_large_for_the_run_is_refused_undecoded(logged: pyte
 
 def test_a_cmd_vel_beyond_the_bound_is_refused_with_its_key(logged: pytest.LogCaptureFixture) -> None:
     g = Gate(S, "simworld")
-    assert g.admit(_clock(2), WORLD, KEYS.clock, 0.0)
+    assert g.admit(clock(2), WORLD, KEYS.clock, 0.0)
     topic = "0/robot_2/cmd_vel/geometry_msgs::msg::dds_::Twist_/RIHS01_0"
     assert g.admit_twist(wire.Cmd(2, 2, 1.0, 0.0), A2, topic, 0.0)
     assert not g.admit_twist(wire.Cmd(2, 2, 1e6, 0.0), A2, topic, 5.0)
@@ -97,7 +94,7 @@ def test_a_cmd_vel_beyond_the_bound_is_refused_with_its_key(logged: pytest.LogCa
 
 def test_a_report_or_a_state_from_the_wrong_session_is_logged_with_its_key(logged: pytest.LogCaptureFixture) -> None:
     g = Gate(S, "monitor")
-    assert g.admit(_clock(0), WORLD, KEYS.clock, 0.0) and g.admit(_beacon(2), A2, KEYS.beacon((0, 0), 2), 0.0)
+    assert g.admit(clock(0), WORLD, KEYS.clock, 0.0) and g.admit(_beacon(2), A2, KEYS.beacon((0, 0), 2), 0.0)
     assert not g.admit(Report("agent-2", None), X, KEYS.report("agent-2"), 0.1)
     assert not g.admit(_state(0), X, KEYS.state(2), 0.2)
     assert [m.split(" on ")[1].split(": ")[0] for m in logged.messages] == [KEYS.report("agent-2"), KEYS.state(2)]
@@ -105,10 +102,10 @@ def test_a_report_or_a_state_from_the_wrong_session_is_logged_with_its_key(logge
 
 def test_refusals_are_logged_at_most_once_a_second_with_the_held_back(logged: pytest.LogCaptureFixture) -> None:
     g = Gate(S, "agent-5")
-    assert g.admit(_clock(0), WORLD, KEYS.clock, 0.0)
+    assert g.admit(clock(0), WORLD, KEYS.clock, 0.0)
     why = f"not_from_world from {X} on {KEYS.clock}: the world speaks from session {WORLD}"
     for now in (10.0, 10.5, 10.9, 11.0, 11.5):
-        assert not g.admit(_clock(1), X, KEYS.clock, now)
+        assert not g.admit(clock(1), X, KEYS.clock, now)
     assert logged.messages == [f"agent-5: intrusion refused: {why} [total 1]",  # the first at once
                      f"agent-5: intrusion refused: {why} (+2 more since the last line) [total 4]"]  # 1.0 s on
     # A new kind or source is logged at once, with what was held back since the last line.
@@ -120,21 +117,21 @@ def test_refusals_are_logged_at_most_once_a_second_with_the_held_back(logged: py
 def test_the_report_carries_the_tally_when_it_changed_at_most_once_a_second() -> None:
     g = Gate(S, "simworld")
     assert g.report(0.0) is None  # nothing refused yet
-    g.admit(_clock(0), WORLD, KEYS.clock, 0.0)
-    assert not g.admit(_clock(1), X, KEYS.clock, 0.0)
+    g.admit(clock(0), WORLD, KEYS.clock, 0.0)
+    assert not g.admit(clock(1), X, KEYS.clock, 0.0)
     assert g.report(0.0) == Report("simworld", (("not_from_world", X, 1, 0.0),), 0, -1)
-    assert not g.admit(_clock(1), X, KEYS.clock, 0.5)
+    assert not g.admit(clock(1), X, KEYS.clock, 0.5)
     assert g.report(0.5) is None and g.report(0.99) is None
     assert g.report(1.0) == Report("simworld", (("not_from_world", X, 2, 0.0),), 0, -1)  # 1.0 s on: due
     assert g.report(1.5) is None  # unchanged
-    assert not g.admit(_clock(1), X, KEYS.clock, 1.6)
+    assert not g.admit(clock(1), X, KEYS.clock, 1.6)
     assert g.report(1.7, final=True) == Report("simworld", (("not_from_world", X, 3, 0.0),), 0, -1)
 
 
 def test_odometry_comes_from_the_world_and_within_reach_of_the_last(logged: pytest.LogCaptureFixture) -> None:
     g = Gate(S, "agent-2")
     topic = "0/robot_2/odom/nav_msgs::msg::dds_::Odometry_/RIHS01_0"
-    assert g.admit(_clock(0), WORLD, KEYS.clock, 0.0)
+    assert g.admit(clock(0), WORLD, KEYS.clock, 0.0)
     assert g.admit_odometry(_state(0), WORLD, topic, 0.0)
     assert not g.admit_odometry(_state(1), X, topic, 0.1)  # not the world's session
     late = wire.State(2, 2000, 2000 * DT, 40.0, 0.0, 0.0, 41.0, 0.0, None)  # (t = 100 s: anywhere near is reachable)
