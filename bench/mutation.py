@@ -59,7 +59,8 @@ CORE: dict[str, tuple[str, ...]] = {
                        "test_agent_node_waits.py", "test_agent_node_outputs.py"),
     "agent/neighbours.py": ("test_neighbours.py", "test_neighbours_cases.py", "test_agent_node.py",
                             "test_agent_node_cases.py", "test_agent_node_outputs.py", "test_agent_host_routing.py"),
-    "reconswarm/paper/knowledge.py": ("test_sensing_knowledge.py", "test_planner.py", "test_agent_brain_vs_engine.py"),
+    "reconswarm/paper/knowledge.py": ("test_sensing_knowledge.py", "test_planner.py", "test_agent_brain_vs_engine.py",
+                                      "test_knowledge_cases.py"),
     "reconswarm/net/cells.py": ("test_cells.py", "test_cells_cases.py", "test_neighbours.py", "test_plant_cases.py"),
 }
 

@@ -121,8 +121,8 @@ class SwarmKnowledge:
 
         prev (N, B) the bits at k-1; pairs (E, 2) the linked pairs (i < j) at tick k.
         """
-        self._reset()
         if pairs.shape[0] == 0 or self.bits.shape[1] == 0 or not prev.any():
+            self._reset()
             return
         dst = np.concatenate([pairs[:, 0], pairs[:, 1]])
         src = np.concatenate([pairs[:, 1], pairs[:, 0]])
@@ -132,6 +132,7 @@ class SwarmKnowledge:
         reduced = np.bitwise_or.reduceat(prev[src], firsts, axis=0)
         rows = dst[firsts]
         self.bits[rows] |= reduced
+        self._reset()  # after the bits changed: `known` is recomputed from them
 
     def _reset(self) -> None:
         """After add or share: every incremental shortcut starts over."""
