@@ -17,25 +17,30 @@ from hypothesis import strategies as st
 from agent.brain import AgentBrain, Peer
 from reconswarm.geometry.plane import norm2
 from reconswarm.paper.link import linked
-from reconswarm.scenario.model import load
+from reconswarm.scenario.generate import generate
+from reconswarm.scenario.model import PlannerKind, Scenario, load
 from reconswarm_bringup.engine import Engine
 from tests.support import PAPER
 
 TICKS = 1000  # until the swarm is well into the diamond (knowledge sensed, shared and repelling)
+STALL_TICKS = 700  # generate(16, 4, 3): its first stall perturbation at tick 518, then more
+LEADER_TICKS = 600
 
 
-def test_agent_brain_tick_equals_the_engine_row_bit_for_bit() -> None:
-    s = load(PAPER)
+def side_by_side(s: Scenario, ticks: int) -> tuple[Engine, int, int]:
+    """The engine and one AgentBrain per agent over `ticks` ticks, every command compared with `==`. Returns the
+    engine, how many agent-ticks grew knowledge from peers' sets alone, and how many planned with known hulls."""
     eng = Engine(s)
     c, f, n = s.planner, eng.field, eng.n
     ids = [int(a) for a in s.ids]
     brains = [AgentBrain(s, a) for a in ids]
+    leader = s.planner.kind == PlannerKind.VIRTUAL_LEADER
     rev = [0] * n  # revision of each agent's set, as its beacon would announce it
     sets: list[dict[str, np.ndarray]] = [{} for _ in range(n)]  # each agent's set at k-1
     merged = [[0] * n for _ in range(n)]  # merged[i][j]: j's revision that agent i merged last
     bits = eng.know.bits.copy()
     shared_grew = obstacle_rows = 0
-    for k in range(TICKS):
+    for k in range(ticks):
         p = eng.p.copy()
         for j in range(n):  # the sets at k-1 (the engine's knowledge before it plans tick k)
             if not np.array_equal(eng.know.bits[j], bits[j]):
@@ -57,15 +62,38 @@ def test_agent_brain_tick_equals_the_engine_row_bit_for_bit() -> None:
                 if rev[j] > merged[i][j]:
                     shared.append(sets[j])
                     merged[i][j] = rev[j]
+            swarm = [sets[j] for j in range(n) if j != i] if leader else None  # the leader's union: everyone's
             before = brains[i].rev
-            ui, _grew = brains[i].tick(k, p[i].copy(), scan, peers, shared)
+            ui, _grew = brains[i].tick(k, p[i].copy(), scan, peers, shared, swarm)
             assert ui.tolist() == u[i].tolist(), (k, ids[i], ui, u[i])  # `==` on floats: bit for bit
             shared_grew += bool(shared) and brains[i].rev > before and not scan
             obstacle_rows += brains[i].rev > 0
         eng.advance(u)
+    return eng, shared_grew, obstacle_rows
+
+
+def test_agent_brain_tick_equals_the_engine_row_bit_for_bit() -> None:
+    s = load(PAPER)
+    eng, shared_grew, obstacle_rows = side_by_side(s, TICKS)
     # The check covered knowledge received only from peers and commands with known obstacles around.
     assert shared_grew > 0 and obstacle_rows > 1000
-    assert np.min(eng.field.true_distances(eng.p)[:, 0] - eng.r) < c.d_max_m
+    assert np.min(eng.field.true_distances(eng.p)[:, 0] - eng.r) < s.planner.d_max_m
+
+
+def test_agent_brain_equals_the_engine_through_stall_perturbations() -> None:
+    """Remark 1's escape (each agent's own stall window, the push along its current repulsion): a scenario that
+    stalls against its obstacles, until a perturbation has acted for a while."""
+    s = generate(16, 4, 3)
+    eng, _, obstacle_rows = side_by_side(s, STALL_TICKS)
+    assert int(eng.stall.stalls.sum()) >= 1 and obstacle_rows > 0
+
+
+def test_agent_brain_equals_the_engine_under_the_virtual_leader() -> None:
+    """The benchmark: each agent's copy of the leader from the union of everyone's sets, its velocity fed forward,
+    the containment wall."""
+    s = load(PAPER).with_planner(PlannerKind.VIRTUAL_LEADER.value)
+    _, _, obstacle_rows = side_by_side(s, LEADER_TICKS)
+    assert obstacle_rows > 100
 
 
 _coord = st.floats(-50.0, 50.0, allow_nan=False)

@@ -70,29 +70,30 @@ def test_lyapunov_rigid_formation_inside_the_disk_decays_geometrically():
 
 
 def test_engine_is_deterministic_with_stalls_and_seeds_only_act_through_them():
-    s = generate(10, 3, 3)  # perturbation on; this scenario stalls against its obstacles
-    ticks = 2600
+    s = generate(16, 4, 3)  # perturbation on; this scenario stalls against its obstacles (first at tick 518)
+    ticks = 1200
 
     def trajectory(scen):
         eng = Engine(scen)
-        out = []
+        out, first_stall = [], None
         for k in range(ticks):
             u = eng.plan(k)
             out.append((eng.p.copy(), eng.theta.copy(), u.copy()))
             eng.advance(u)
-        return out, int(eng.stall.stalls.sum()), eng
+            if first_stall is None and eng.stall.stalls.any():
+                first_stall = k
+        return out, first_stall
 
-    a, stalls_a, _ = trajectory(s)
-    b, _, _ = trajectory(s)
+    a, stall_a = trajectory(s)
+    b, _ = trajectory(s)
     for (pa, ta, ua), (pb, tb, ub) in zip(a, b, strict=True):
         assert np.array_equal(pa, pb) and np.array_equal(ta, tb) and np.array_equal(ua, ub)
-    c, stalls_c, _ = trajectory(s.with_seed(s.meta.seed + 1))
-    # Until the first stall perturbation the seed plays no part: identical bits.
+    c, stall_c = trajectory(s.with_seed(s.meta.seed + 1))
+    assert stall_a is not None  # (else this would test nothing of the seed)
+    # Until the first stall perturbation the seed plays no part: identical bits (after it, the sides drawn may
+    # differ, or happen to be the same).
     first = next((k for k in range(ticks) if not np.array_equal(a[k][2], c[k][2])), None)
-    if stalls_a == 0 and stalls_c == 0:
-        assert first is None
-    else:
-        assert first is not None and first >= 100  # a stall needs a full window (5 s) of history
+    assert first is None or first >= min(stall_a, ticks if stall_c is None else stall_c) >= 100
 
 
 def test_knowledge_is_only_sensed_or_shared():
