@@ -185,7 +185,7 @@ class Neighbourhood:
     def intruder(self, k: int, b: wire.Beacon) -> bool:
         """A beacon of tick k from a peer we did not wait for at k, within reach of us at k: the speed bound
         was violated (whether it was in when we acted is a race)."""
-        near, own = self.near.get(k), self.own.get(k)  # (`intruders` for one beacon, inline: most beacons take it)
+        near, own = self.near.get(k), self.own.get(k)  # (called for most beacons that arrive: nothing built)
         if self.everyone or near is None or own is None or b.id in near:
             return False
         return (b.px - own[0]) ** 2 + (b.py - own[1]) ** 2 <= self.grid.reach_m ** 2
@@ -193,12 +193,10 @@ class Neighbourhood:
     def intruders(self, k: int, fresh: Mapping[int, wire.Beacon]) -> list[wire.Beacon]:
         """The intruders among tick k's beacons `fresh` (by peer), in id order, reading only the peers we did not
         wait for."""
-        near, own = self.near.get(k), self.own.get(k)
-        if self.everyone or near is None or own is None:
+        near = self.near.get(k)
+        if near is None:
             return []
-        ox, oy, reach2 = own[0], own[1], self.grid.reach_m ** 2
-        others = [fresh[a] for a in sorted(fresh.keys() - near)]  # (in id order)
-        return [b for b in others if (b.px - ox) ** 2 + (b.py - oy) ** 2 <= reach2]
+        return [fresh[a] for a in sorted(fresh.keys() - near) if self.intruder(k, fresh[a])]
 
     def also_heard(self, alive: set[int], prev: Mapping[int, wire.Beacon], fresh: Mapping[int, wire.Beacon],
                    waited: AbstractSet[int]) -> int:
