@@ -13,8 +13,11 @@ from reconswarm_bringup import runid
 
 
 def test_run_ids_are_unique_valid_key_chunks(tmp_path: Path) -> None:
-    ids = {runid.new_run_id("paper") for _ in range(200)}
-    assert len(ids) == 200
+    drawn = [runid.new_run_id("paper") for _ in range(200)]
+    ids = set(drawn)
+    # 24 random bits: among 200 ids one pair collides with probability 0.12 % (seen once in CI), six pairs
+    # practically never; a generator that repeats itself (a fixed seed, a counter reset) fails this.
+    assert len(ids) >= 195
     for r in ids:
         assert re.fullmatch(r"paper-[0-9a-f]{6}", r)
         keys = Keys(r)
