@@ -14,6 +14,7 @@ from reconswarm.paper.knowledge import KnownObstacles, SwarmKnowledge
 from tests.unit.test_sensing_knowledge import FIELD, swarm_for
 
 NO_LINKS = np.zeros((0, 2), dtype=np.int64)
+NOTHING = np.zeros(0, dtype=np.int64)  # no agents, no samples
 
 
 def square_field(n_agents: int) -> SwarmKnowledge:
@@ -97,13 +98,13 @@ def test_update_after_add_still_shares_what_add_brought():
     s0 = int(FIELD.start[2])
     sensed = np.arange(s0, s0 + 5, dtype=np.int64)
     sk.add(np.zeros(sensed.size, dtype=np.int64), sensed)
-    sk.update(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.array([[0, 1]]))
+    sk.update(NOTHING, NOTHING, np.array([[0, 1]]))
     assert sk.knows(2).tolist() == [True, True, False]
     assert np.array_equal(sk.hull(1, 2), convex_hull(FIELD.samples[sensed]))
     # ... and again after `share`, over a link that existed at the update before.
     prev = sk.bits.copy()
     sk.share(prev, np.array([[1, 2]]))
-    sk.update(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.array([[0, 1], [1, 2]]))
+    sk.update(NOTHING, NOTHING, np.array([[0, 1], [1, 2]]))
     assert sk.knows(2).tolist() == [True, True, True]
 
 
@@ -113,7 +114,7 @@ def test_a_field_of_one_byte_is_sensed_and_shared():
         assert sk.bits.shape == (2, 1)
         if path == "update":
             sk.update(np.array([0, 0, 0]), np.array([0, 2, 4]), NO_LINKS)
-            sk.update(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.array([[0, 1]]))
+            sk.update(NOTHING, NOTHING, np.array([[0, 1]]))
         else:
             sk.add(np.array([0, 0, 0]), np.array([0, 2, 4]))
             sk.share(sk.bits.copy(), np.array([[0, 1]]))
@@ -127,10 +128,9 @@ def test_links_of_many_agents_over_few_bytes_never_pass_for_one_another():
     made from the byte count instead of the agent count would call them the same), so 1 learns 2's bits."""
     sk = square_field(5)
     sk.update(np.array([2, 0]), np.array([1, 5]), NO_LINKS)  # agent 2 senses sample 1, agent 0 sample 5
-    nothing = np.zeros(0, dtype=np.int64)
-    sk.update(nothing, nothing, np.array([[0, 3]]))  # 3 learns 0's sample
-    sk.update(nothing, nothing, np.array([[0, 3]]))  # the same link again: nothing changes
-    sk.update(nothing, nothing, np.array([[1, 2]]))  # a new link: 1 learns all 2 knows
+    sk.update(NOTHING, NOTHING, np.array([[0, 3]]))  # 3 learns 0's sample
+    sk.update(NOTHING, NOTHING, np.array([[0, 3]]))  # the same link again: NOTHING changes
+    sk.update(NOTHING, NOTHING, np.array([[1, 2]]))  # a new link: 1 learns all 2 knows
     assert sk.knows(0).tolist() == [True, True, True, True, False]
     assert np.array_equal(sk.hull(1, 0), sk.samples[[1]])
     assert np.array_equal(sk.hull(3, 0), sk.samples[[5]])
@@ -154,17 +154,16 @@ def test_union_before_any_update_is_nothing():
     s0 = int(FIELD.start[1])
     sk.update(np.array([0, 1]), np.array([s0, s0 + 3]), NO_LINKS)
     assert sk.union_hull_before(1) is None  # the union before this update
-    sk.update(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), NO_LINKS)
+    sk.update(NOTHING, NOTHING, NO_LINKS)
     union = sk.union_hull_before(1)
     assert union is not None and np.array_equal(union, convex_hull(FIELD.samples[[s0, s0 + 3]]))
 
 
 def test_a_field_without_obstacles_knows_nothing_and_steps_fine():
-    sk = SwarmKnowledge(np.zeros((0, 2)), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), 3)
+    sk = SwarmKnowledge(np.zeros((0, 2)), NOTHING, NOTHING, 3)
     assert sk.bits.shape == (3, 0)
-    nothing = np.zeros(0, dtype=np.int64)
-    sk.update(nothing, nothing, np.array([[0, 1]]))
-    sk.add(nothing, nothing)
+    sk.update(NOTHING, NOTHING, np.array([[0, 1]]))
+    sk.add(NOTHING, NOTHING)
     sk.share(sk.bits.copy(), np.array([[0, 1], [1, 2]]))
     assert sk.bits.shape == (3, 0) and sk.known.shape == (3, 0)
 
