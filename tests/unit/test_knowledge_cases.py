@@ -129,7 +129,7 @@ def test_links_of_many_agents_over_few_bytes_never_pass_for_one_another():
     sk = square_field(5)
     sk.update(np.array([2, 0]), np.array([1, 5]), NO_LINKS)  # agent 2 senses sample 1, agent 0 sample 5
     sk.update(NOTHING, NOTHING, np.array([[0, 3]]))  # 3 learns 0's sample
-    sk.update(NOTHING, NOTHING, np.array([[0, 3]]))  # the same link again: NOTHING changes
+    sk.update(NOTHING, NOTHING, np.array([[0, 3]]))  # the same link again: nothing changes
     sk.update(NOTHING, NOTHING, np.array([[1, 2]]))  # a new link: 1 learns all 2 knows
     assert sk.knows(0).tolist() == [True, True, True, True, False]
     assert np.array_equal(sk.hull(1, 0), sk.samples[[1]])
