@@ -1,5 +1,6 @@
 """The launcher's processes run under SCHED_BATCH in lockstep and under the default policy in realtime
-(reconswarm_bringup/fleet.py: Fleet.batch), threads included."""
+(reconswarm_bringup/fleet.py: Fleet.batch), and the monitor at a lower priority (Fleet.observer_nice), threads
+included."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from reconswarm_bringup.fleet import Fleet
+from reconswarm_bringup.fleet import OBSERVER_NICE, Fleet
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "SCHED_BATCH"), reason="SCHED_BATCH is Linux's")
 
@@ -19,10 +20,15 @@ CHILD = ("import os, threading, time; t = threading.Thread(target=time.sleep, ar
          "print(os.sched_getscheduler(0), os.sched_getscheduler(t.native_id), flush=True); t.join()")
 
 
-def policies(tmp_path: Path, batch: bool) -> list[int]:
+# The same child printing both threads' nice values.
+NICE_CHILD = CHILD.replace("os.sched_getscheduler(0), os.sched_getscheduler(t.native_id)",
+                           "os.getpriority(os.PRIO_PROCESS, 0), os.getpriority(os.PRIO_PROCESS, t.native_id)")
+
+
+def policies(tmp_path: Path, batch: bool, role: str = "probe", child: str = CHILD) -> list[int]:
     fleet = Fleet(tmp_path, dict(os.environ), batch=batch)
     # Fleet starts `python -m reconswarm_bringup.cli ARGS`; the prefix turns that into `python -c CHILD`.
-    proc = fleet.start("probe", "-", [], prefix=[sys.executable, "-c", CHILD, "--"])
+    proc = fleet.start(role, "-", [], prefix=[sys.executable, "-c", child, "--"])
     assert proc.popen.wait(timeout=60) == 0
     time.sleep(0.05)
     return [int(x) for x in proc.log_path.read_text().split()]
@@ -31,3 +37,13 @@ def policies(tmp_path: Path, batch: bool) -> list[int]:
 def test_lockstep_processes_run_under_sched_batch_and_realtime_ones_do_not(tmp_path: Path) -> None:
     assert policies(tmp_path / "lockstep", True) == [os.SCHED_BATCH, os.SCHED_BATCH]
     assert policies(tmp_path / "realtime", False) == [os.SCHED_OTHER, os.SCHED_OTHER]
+
+
+def test_the_monitor_runs_at_a_lower_priority_and_the_control_loop_does_not(tmp_path: Path) -> None:
+    ours = os.getpriority(os.PRIO_PROCESS, 0)
+    assert OBSERVER_NICE > 0
+    for clock, batch in (("lockstep", True), ("realtime", False)):
+        want = min(19, ours + OBSERVER_NICE)
+        assert policies(tmp_path / clock / "monitor", batch, "monitor", NICE_CHILD) == [want, want]
+        for role in ("simworld", "agent", "router"):
+            assert policies(tmp_path / clock / role, batch, role, NICE_CHILD) == [ours, ours]
