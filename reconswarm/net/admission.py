@@ -117,23 +117,54 @@ class Pins:
         return False
 
 
-class Admission:
-    """The rules above for one scenario; `check_*` return None (admitted) or the Intrusion."""
+class HullChecks:
+    """Whether a shared hull lies on its obstacle's boundary: a question about the hull alone (whoever sent it,
+    whoever receives it), so the agents of one process ask one `HullChecks` and a hull that many peers share,
+    or that every co-hosted agent receives, is measured once. A refused hull is never kept; the memory of
+    hulls found good is bounded (`vertices_kept`)."""
 
-    def __init__(self, s: Scenario, pins: Pins | None = None, hull_vertices_kept: int = HULL_VERTICES_KEPT) -> None:
+    def __init__(self, s: Scenario, vertices_kept: int = HULL_VERTICES_KEPT) -> None:
+        self.polygons = {o.id: s.polygon(k) for k, o in enumerate(s.obstacles)}
+        self.edges = {o: Edges.of([poly]) for o, poly in self.polygons.items()}
+        self.max_vertices = {o: int(sample_boundary(poly, SAMPLE_SPACING_M).shape[0])
+                             for o, poly in self.polygons.items()}
+        self.ok: set[tuple[str, tuple[tuple[float, float], ...]]] = set()
+        self._kept_vertices, self._keep_vertices = 0, vertices_kept
+
+    def problem(self, oid: str, hull: tuple[tuple[float, float], ...]) -> str | None:
+        """None if every vertex of `hull` (of a known obstacle id) lies on that obstacle's boundary and there are no
+        more than can be sensed; else what is wrong."""
+        if len(hull) > self.max_vertices[oid]:
+            return f"{len(hull)} vertices, at most {self.max_vertices[oid]} can be sensed"
+        if not hull or (oid, hull) in self.ok:
+            return None
+        pts = np.asarray(hull, dtype=np.float64).reshape(-1, 2)
+        d = signed_distance(pts[:, 0:1], pts[:, 1:2], self.edges[oid], normals=False)  # (P, 1)
+        worst = float(np.abs(d).max())
+        if not worst <= HULL_TOL_M:
+            return f"a vertex {worst:.6g} m off the obstacle's boundary"
+        if self._kept_vertices + len(hull) > self._keep_vertices:
+            self.ok.clear()
+            self._kept_vertices = 0
+        self.ok.add((oid, hull))
+        self._kept_vertices += len(hull)
+        return None
+
+
+class Admission:
+    """The rules above for one scenario; `check_*` return None (admitted) or the Intrusion.
+
+    hulls: the process's `HullChecks`, shared by its agents' admissions (None: one of its own)."""
+
+    def __init__(self, s: Scenario, pins: Pins | None = None, hull_vertices_kept: int = HULL_VERTICES_KEPT,
+                 hulls: HullChecks | None = None) -> None:
         self.s = s
         self.pins = pins or Pins()
         self.radius = {a.id: a.radius_m for a in s.agents}
         self.head_offset = {a.id: float(a.head_offset_m) for a in s.agents}
         self.last_tick = round(s.meta.duration_s / s.meta.dt_s)  # the world's last (simworld/world.py: n_ticks)
-        self.polygons = {o.id: s.polygon(k) for k, o in enumerate(s.obstacles)}
-        self.edges = {o: Edges.of([poly]) for o, poly in self.polygons.items()}
-        # Hulls already found on their obstacle's boundary: peers share the same merged hulls over and over,
-        # and the check depends on the hull alone (a refused hull is never kept; the memory is bounded).
-        self.hulls_ok: set[tuple[str, tuple[tuple[float, float], ...]]] = set()
-        self._kept_vertices, self._keep_vertices = 0, hull_vertices_kept
-        self.max_vertices = {o: int(sample_boundary(poly, SAMPLE_SPACING_M).shape[0])
-                             for o, poly in self.polygons.items()}
+        self.hulls = hulls or HullChecks(s, hull_vertices_kept)
+        self.polygons, self.max_vertices = self.hulls.polygons, self.hulls.max_vertices
         self.u_max = command_bound_mps(s)
         # The largest obstacle set the run can send: every obstacle with every sensed vertex, as msgpack
         # (a map of id -> list of [x, y] float64 pairs, 19 bytes a vertex, plus headers and the fields).
@@ -253,21 +284,12 @@ class Admission:
         return None
 
     def hull_problem(self, oid: str, hull: tuple[tuple[float, float], ...]) -> str | None:
-        if len(hull) > self.max_vertices[oid]:
-            return f"{len(hull)} vertices, at most {self.max_vertices[oid]} can be sensed"
-        if not hull or (oid, hull) in self.hulls_ok:
-            return None
-        pts = np.asarray(hull, dtype=np.float64).reshape(-1, 2)
-        d = signed_distance(pts[:, 0:1], pts[:, 1:2], self.edges[oid], normals=False)  # (P, 1)
-        worst = float(np.abs(d).max())
-        if not worst <= HULL_TOL_M:
-            return f"a vertex {worst:.6g} m off the obstacle's boundary"
-        if self._kept_vertices + len(hull) > self._keep_vertices:
-            self.hulls_ok.clear()
-            self._kept_vertices = 0
-        self.hulls_ok.add((oid, hull))
-        self._kept_vertices += len(hull)
-        return None
+        return self.hulls.problem(oid, hull)
+
+    @property
+    def hulls_ok(self) -> set[tuple[str, tuple[tuple[float, float], ...]]]:
+        """The hulls found on their obstacle's boundary and remembered (HullChecks)."""
+        return self.hulls.ok
 
     def check_report(self, agent_id: int | None, source: str, key: str, now: float) -> Intrusion | None:
         """A report (reconswarm/net/report.py): an agent's like its other messages (a known agent, from its

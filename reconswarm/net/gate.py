@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 
 from reconswarm.net import wire
-from reconswarm.net.admission import Admission, Intrusion, IntrusionTally
+from reconswarm.net.admission import Admission, HullChecks, Intrusion, IntrusionTally
 from reconswarm.net.report import Report
 from reconswarm.scenario.model import Scenario
 
@@ -21,9 +21,10 @@ Message = wire.Beacon | wire.Cmd | wire.ObstacleSet | wire.Clock | wire.State | 
 
 
 class Gate:
-    def __init__(self, s: Scenario, process: str, report_every_s: float = 1.0) -> None:
+    def __init__(self, s: Scenario, process: str, report_every_s: float = 1.0, hulls: HullChecks | None = None) -> None:
+        """hulls: the process's hull checks, shared by its agents' gates (a question about the hull alone)."""
         self.process = process
-        self.adm = Admission(s)
+        self.adm = Admission(s, hulls=hulls)
         self.tally = IntrusionTally()
         self.t = 0.0  # simulated time of the newest admitted clock (first_t of the intrusions)
         self.world_k = -1  # newest tick of the admitted clocks

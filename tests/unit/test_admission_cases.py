@@ -330,6 +330,35 @@ def test_the_memory_of_checked_hulls_holds_exactly_its_vertex_budget() -> None:
     assert adm.hulls_ok == {("box", tri(2)), ("box", tri(3))}
 
 
+def test_a_processs_gates_share_their_hull_checks_each_refusal_counted_by_its_own_gate(monkeypatch) -> None:
+    """An agent host's agents ask one HullChecks: a good hull that every co-hosted agent receives is measured once;
+    a bad one is refused by each agent's gate and counted in that gate's tally alone."""
+    from reconswarm.net import admission
+    from reconswarm.net.gate import Gate
+
+    measured: list[int] = []
+    real = admission.signed_distance
+
+    def counting(*args, **kwargs):
+        measured.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(admission, "signed_distance", counting)
+    hulls = admission.HullChecks(S)
+    gates = [Gate(S, f"agent-{a}", hulls=hulls) for a in (1, 2)]
+    okey = KEYS.obstacles((0, 0), 2)
+    good = wire.ObstacleSet(2, 1, 1, {"box": ((101.0, -50.0), (105.0, -50.0), (120.0, -45.0))})
+    assert [g.admit(good, A2, okey, 0.0) for g in gates] == [True, True]
+    assert len(measured) == 1 and gates[0].adm.hulls_ok == gates[1].adm.hulls_ok == {("box", good.obstacles["box"])}
+    bad = wire.ObstacleSet(2, 2, 1, {"box": ((110.0, -45.0), (100.0, -50.0))})  # the box's centre: 5 m inside
+    assert gates[0].admit(bad, X, okey, 0.0) is False
+    assert (gates[0].count, gates[1].count) == (1, 0)
+    assert gates[1].admit(bad, X, okey, 0.0) is False
+    assert (gates[0].count, gates[1].count) == (1, 1) and len(measured) == 3  # (a refused hull is never kept)
+    lone = [Gate(S, f"agent-{a}") for a in (1, 2)]  # (gates of their own: each measures)
+    assert [g.admit(good, A2, okey, 0.0) for g in lone] == [True, True] and len(measured) == 5
+
+
 # ------------------------------------------------------------------------------------------ odometry, reports
 
 
