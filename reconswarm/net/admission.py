@@ -154,7 +154,8 @@ class HullChecks:
 class Admission:
     """The rules above for one scenario; `check_*` return None (admitted) or the Intrusion.
 
-    hulls: the process's `HullChecks`, shared by its agents' admissions (None: one of its own)."""
+    hulls: the process's `HullChecks`, shared by its agents' admissions (None: one of its own, remembering at most
+    `hull_vertices_kept` vertices)."""
 
     def __init__(self, s: Scenario, pins: Pins | None = None, hull_vertices_kept: int = HULL_VERTICES_KEPT,
                  hulls: HullChecks | None = None) -> None:

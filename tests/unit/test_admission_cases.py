@@ -12,8 +12,9 @@ from dataclasses import replace
 
 import pytest
 
-from reconswarm.net import wire
+from reconswarm.net import admission, wire
 from reconswarm.net.admission import UNATTRIBUTED, Admission, Intrusion, IntrusionKind, Pins, command_bound_mps
+from reconswarm.net.gate import Gate
 from reconswarm.net.keys import Keys
 from reconswarm.scenario.model import AgentSpec, ObstacleSpec, PlannerKind, load
 from tests.support import PAPER
@@ -333,9 +334,6 @@ def test_the_memory_of_checked_hulls_holds_exactly_its_vertex_budget() -> None:
 def test_a_processs_gates_share_their_hull_checks_each_refusal_counted_by_its_own_gate(monkeypatch) -> None:
     """An agent host's agents ask one HullChecks: a good hull that every co-hosted agent receives is measured once;
     a bad one is refused by each agent's gate and counted in that gate's tally alone."""
-    from reconswarm.net import admission
-    from reconswarm.net.gate import Gate
-
     measured: list[int] = []
     real = admission.signed_distance
 
