@@ -13,8 +13,12 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
-OBSERVERS = frozenset({"monitor"})  # roles on no tick's path (Fleet.observer_nice)
-OBSERVER_NICE = 10
+# The monitor observes: it is on no tick's path (the world waits for agents, never for it) and keeps up in the
+# cores' idle moments, so it runs at a lower priority and leaves the CPU to the control loop whenever both want
+# it (the paper in lockstep: about 7 % more ticks a second). On a saturated machine it still gets a share (nice
+# 10 weighs about a tenth of a default process) and catches up.
+OBSERVERS = frozenset({"monitor"})  # roles on no tick's path
+OBSERVER_NICE = 10  # added to their nice value
 
 
 @dataclass
@@ -49,11 +53,6 @@ class Fleet:
     # with the default policy: 25-40 % less kernel CPU in the agents, sim/wall median 5.4 against 4.8.
     # Realtime keeps the default policy: there a woken process should run at once.
     batch: bool = False
-    # The monitor observes: it is on no tick's path (the world waits for agents, never for it) and keeps up in the
-    # cores' idle moments, so it runs at a lower priority (nice, `OBSERVER_NICE`) and leaves the CPU to the
-    # control loop whenever both want it (the paper in lockstep: about 7 % more ticks a second). On a saturated
-    # machine it still gets a share (nice 10 weighs about a tenth of a default process) and catches up.
-    observer_nice: int = OBSERVER_NICE
 
     def start(self, role: str, ident: str, args: list[str], prefix: list[str] | None = None,
               members: tuple[str, ...] = ()) -> Proc:
@@ -70,8 +69,8 @@ class Fleet:
         fh.close()
         if self.batch:  # Popen returns once the child exec'd, before its interpreter starts a thread (they inherit it)
             batch_policy(popen.pid)
-        if role in OBSERVERS and self.observer_nice:
-            lower_priority(popen.pid, self.observer_nice)
+        if role in OBSERVERS:
+            lower_priority(popen.pid, OBSERVER_NICE)
         proc = Proc(role, ident, args, popen, log_path, list(prefix or []), members=tuple(members))
         self.procs.append(proc)
         with (self.out / "processes.tsv").open("a") as tsv:

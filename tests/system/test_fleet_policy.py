@@ -1,5 +1,5 @@
 """The launcher's processes run under SCHED_BATCH in lockstep and under the default policy in realtime
-(reconswarm_bringup/fleet.py: Fleet.batch), and the monitor at a lower priority (Fleet.observer_nice), threads
+(reconswarm_bringup/fleet.py: Fleet.batch), and the monitor at a lower priority (OBSERVER_NICE), threads
 included."""
 
 from __future__ import annotations
