@@ -138,7 +138,6 @@ class AgentHost:
         self.warm: frozenset[Cell] = frozenset().union(*(
             link.node.nb.grid.listen_cells(*link.node.nb.start[aid]) for aid, link in links.items()
             if not link.node.nb.everyone))
-        self.max_set_bytes = next(iter(links.values())).gate.adm.max_set_bytes
         z, k = session, keys
         self.subs: list[Any] = []
         for aid, link in links.items():

@@ -65,6 +65,8 @@ CORE: dict[str, tuple[str, ...]] = {
     "reconswarm/paper/knowledge.py": ("test_sensing_knowledge.py", "test_planner.py", "test_agent_brain_vs_engine.py",
                                       "test_knowledge_cases.py"),
     "reconswarm/net/cells.py": ("test_cells.py", "test_cells_cases.py", "test_neighbours.py", "test_plant_cases.py"),
+    "agent/host.py": ("test_agent_host_routing.py", "test_agent_host_cases.py", "test_agent_host_sessions.py",
+                      "test_tagged_inbox.py", "test_runtime.py", "test_law_batched.py"),
 }
 
 # mutmut's exit codes (mutmut.stats.status_by_exit_code): 1 and 3 killed, 0 survived, the rest neither.

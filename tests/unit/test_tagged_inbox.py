@@ -2,6 +2,9 @@
 loop wakes once `want` samples are in, or once the states (urgent samples) of `urgent` hosted agents are in, so
 that one round takes the world's burst of states, or `LINGER_S` after the first state if the rest does not come.
 
+Also: one sample wanted, or one agent's state, wakes a take; with nothing, a take waits its timeout out, counts its
+wakeup and the samples it took, and stamps each with when it arrived.
+
 (Each take runs in a thread joined with a long timeout: a take that waits when it should not hangs there.)"""
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ import time
 from typing import Any
 
 from agent.host import TaggedInbox
+from reconswarm.net.inbox import Inbox
 
 
 class Payload:
@@ -85,3 +89,40 @@ def test_a_timeout_of_zero_takes_what_is_there_at_once() -> None:
     fill(inbox, 1, "b/1")
     assert take(inbox, 5, 3, timeout=0.0) == ["s/agent/1/state", "b/1"]
     assert take(inbox, 5, 3, timeout=0.0) == []
+
+
+def test_a_take_waits_for_its_timeout_and_counts_its_wakeup_and_samples() -> None:
+    inbox = TaggedInbox()
+    wakeups, samples = Inbox.wakeups, Inbox.samples_in
+    assert timed_take(inbox, 1, 1.0, 1) == [] and Inbox.wakeups == wakeups + 1 and Inbox.samples_in == samples
+    t0 = time.monotonic()
+    inbox.callback(("cell", None))(Sample("b/1"))
+    inbox.callback(("cell", None))(Sample("b/2"))
+    got = inbox.take(5, 0.0)
+    assert [it[0] for _t, it in got] == ["b/1", "b/2"] and all(t0 <= it[4] <= time.monotonic() for _t, it in got)
+    assert Inbox.wakeups == wakeups + 1 and Inbox.samples_in == samples + 2  # (a take at once: no wakeup)
+
+
+def test_one_sample_wanted_or_one_agents_state_wakes_the_take() -> None:
+    inbox = TaggedInbox()
+    inbox.LINGER_S = 60.0
+    threading.Timer(0.2, lambda: inbox.callback(("cell", None))(Sample("b/1"))).start()
+    assert [it[0] for _t, it in timed_take(inbox, 1, 30.0, 5, at_most_s=15.0)] == ["b/1"]
+    threading.Timer(0.2, lambda: inbox.callback(("own", 1), urgent=True)(Sample("s/1"))).start()
+    assert [it[0] for _t, it in timed_take(inbox, None, 30.0, 1, at_most_s=15.0)] == ["s/1"]
+
+
+def timed_take(inbox: TaggedInbox, want: int | None, timeout: float, urgent: int,
+               at_most_s: float = 60.0) -> list[Any]:
+    """One take in a thread: it returns after its timeout at the earliest when nothing wakes it (then the
+    result is []), within at_most_s when something does."""
+    got: list[Any] = []
+    t0 = time.monotonic()
+    taker = threading.Thread(target=lambda: got.extend(inbox.take(want, timeout, urgent)))
+    taker.start()
+    taker.join(at_most_s + timeout)
+    took = time.monotonic() - t0
+    assert not taker.is_alive() and took < at_most_s, f"the take took {took:.1f} s"
+    if not got:
+        assert took >= 0.9 * timeout, f"nothing came, yet the take returned after {took:.2f} s of {timeout} s"
+    return got
