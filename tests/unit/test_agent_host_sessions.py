@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import zenoh
@@ -30,48 +32,57 @@ def host_session() -> Any:
     return zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{free_port()}",), "peer").config())
 
 
-def test_the_hosts_subscriptions_take_remote_samples_tagged_with_history_and_none_of_its_own() -> None:
+@contextmanager
+def two_sessions() -> Iterator[tuple[Any, Any]]:
+    """The host's session (listening on a free port) and an outside one connected to it, closed after."""
     port = free_port()
     z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{port}",), "peer").config())
     out = zenoh.open(ZenohOptions((f"tcp/127.0.0.1:{port}",), (), "peer").config())
-    h = None
     try:
-        # Before the host exists: agent 3's token and its obstacle set in the cache of an advanced publisher.
-        token = out.liveliness().declare_token(KEYS.alive_agent(3))
-        home3 = AgentNode(S, 3, 0.0).nb.home
-        pub = ext.declare_advanced_publisher(out, KEYS.obstacles(home3, 3), cache=ext.CacheConfig(max_samples=1))
-        pub.put(wire.obstacles_to_wire(wire.ObstacleSet(3, 0, 1, {})))
-        time.sleep(0.5)
-        h = make_host(z)
-        time.sleep(1.0)  # (the host's declarations reach the outside session)
-        got: list[tuple[Any, Item]] = h.inbox.take(0, 0.0)  # (history: the token and the set)
-        out.put(KEYS.state(1), wire.state_to_wire(state(1)))
-        out.put(KEYS.clock, wire.clock_to_wire(wire.Clock(0, 0.0, (1, 2, 3))))
-        out.put(KEYS.beacon(home3, 3), wire.beacon_to_wire(beacon_of(3)))
-        z.put(KEYS.beacon(home3, 4), wire.beacon_to_wire(beacon_of(4)))  # our own session's: never taken
-        z.put(KEYS.obstacles(home3, 4), wire.obstacles_to_wire(wire.ObstacleSet(4, 0, 1, {})))
-        deadline = time.monotonic() + 10.0
-        want = {KEYS.state(1), KEYS.clock, KEYS.beacon(home3, 3), KEYS.alive_agent(3), KEYS.obstacles(home3, 3)}
-        while time.monotonic() < deadline and not want <= {it[0] for _t, it in got}:
-            got += h.inbox.take(1, 0.5)
-        tags: dict[str, set[Any]] = {}
-        for tag, it in got:
-            tags.setdefault(it[0], set()).add(tag)
-        assert tags[KEYS.alive_agent(3)] == {ALL} and tags[KEYS.clock] == {ALL}
-        assert tags[KEYS.state(1)] == {("own", 1)}
-        assert tags[KEYS.obstacles(home3, 3)] and tags[KEYS.beacon(home3, 3)]
-        assert all(t[0] == "cell" and t[1] in (None, home3) for t in tags[KEYS.beacon(home3, 3)] | tags[
-            KEYS.obstacles(home3, 3)])
-        assert KEYS.beacon(home3, 4) not in tags and KEYS.obstacles(home3, 4) not in tags
-        batches = route(h, got)
-        assert "Token" in kinds(batches[1]) and "ObstacleSet" in kinds(batches[1]) and "State" in kinds(batches[1])
-        assert "State" not in kinds(batches[2]) and "Clock" in kinds(batches[2])
-        token.undeclare()
+        yield z, out
     finally:
-        if h is not None:
-            h.close()
         out.close()
         z.close()
+
+
+def test_the_hosts_subscriptions_take_remote_samples_tagged_with_history_and_none_of_its_own() -> None:
+    with two_sessions() as (z, out):
+        h = None
+        try:
+            # Before the host exists: agent 3's token and its obstacle set in the cache of an advanced publisher.
+            token = out.liveliness().declare_token(KEYS.alive_agent(3))
+            home3 = AgentNode(S, 3, 0.0).nb.home
+            pub = ext.declare_advanced_publisher(out, KEYS.obstacles(home3, 3), cache=ext.CacheConfig(max_samples=1))
+            pub.put(wire.obstacles_to_wire(wire.ObstacleSet(3, 0, 1, {})))
+            time.sleep(0.5)
+            h = make_host(z)
+            time.sleep(1.0)  # (the host's declarations reach the outside session)
+            got: list[tuple[Any, Item]] = h.inbox.take(0, 0.0)  # (history: the token and the set)
+            out.put(KEYS.state(1), wire.state_to_wire(state(1)))
+            out.put(KEYS.clock, wire.clock_to_wire(wire.Clock(0, 0.0, (1, 2, 3))))
+            out.put(KEYS.beacon(home3, 3), wire.beacon_to_wire(beacon_of(3)))
+            z.put(KEYS.beacon(home3, 4), wire.beacon_to_wire(beacon_of(4)))  # our own session's: never taken
+            z.put(KEYS.obstacles(home3, 4), wire.obstacles_to_wire(wire.ObstacleSet(4, 0, 1, {})))
+            deadline = time.monotonic() + 10.0
+            want = {KEYS.state(1), KEYS.clock, KEYS.beacon(home3, 3), KEYS.alive_agent(3), KEYS.obstacles(home3, 3)}
+            while time.monotonic() < deadline and not want <= {it[0] for _t, it in got}:
+                got += h.inbox.take(1, 0.5)
+            tags: dict[str, set[Any]] = {}
+            for tag, it in got:
+                tags.setdefault(it[0], set()).add(tag)
+            assert tags[KEYS.alive_agent(3)] == {ALL} and tags[KEYS.clock] == {ALL}
+            assert tags[KEYS.state(1)] == {("own", 1)}
+            assert tags[KEYS.obstacles(home3, 3)] and tags[KEYS.beacon(home3, 3)]
+            assert all(t[0] == "cell" and t[1] in (None, home3) for t in tags[KEYS.beacon(home3, 3)] | tags[
+                KEYS.obstacles(home3, 3)])
+            assert KEYS.beacon(home3, 4) not in tags and KEYS.obstacles(home3, 4) not in tags
+            batches = route(h, got)
+            assert "Token" in kinds(batches[1]) and "ObstacleSet" in kinds(batches[1]) and "State" in kinds(batches[1])
+            assert "State" not in kinds(batches[2]) and "Clock" in kinds(batches[2])
+            token.undeclare()
+        finally:
+            if h is not None:
+                h.close()
 
 
 def beacon_of(aid: int) -> wire.Beacon:
@@ -80,36 +91,32 @@ def beacon_of(aid: int) -> wire.Beacon:
 
 
 def test_the_states_of_the_hosted_agents_wake_the_host_at_once_a_peers_beacon_does_not() -> None:
-    port = free_port()
-    z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{port}",), "peer").config())
-    out = zenoh.open(ZenohOptions((f"tcp/127.0.0.1:{port}",), (), "peer").config())
-    h = make_host(z)
-    try:
-        time.sleep(1.0)
-        h.inbox.take(0, 0.0)
-        home3 = AgentNode(S, 3, 0.0).nb.home
-        out.put(KEYS.beacon(home3, 3), wire.beacon_to_wire(beacon_of(3)))  # (not urgent: the take waits it out)
-        t0 = time.monotonic()
-        assert {it[0] for _tag, it in h.inbox.take(None, 1.0, urgent=1)} == {KEYS.beacon(home3, 3)}
-        assert time.monotonic() - t0 >= 0.9, "a peer's beacon woke the take as if it were our state"
-        got: list[Any] = []
-        t0 = time.monotonic()
-        taker = threading.Thread(target=lambda: got.extend(h.inbox.take(None, 30.0, urgent=2)))
-        taker.start()
-        for a in (1, 2):
-            out.put(KEYS.state(a), wire.state_to_wire(state(a)))
-        taker.join(40.0)
-        assert not taker.is_alive()
-        assert time.monotonic() - t0 < 15.0, "the states did not wake the take: it waited for its timeout"
-        assert sorted(it[0] for _tag, it in got) == [KEYS.state(1), KEYS.state(2)]
-    finally:
-        h.close()
-        out.close()
-        z.close()
+    with two_sessions() as (z, out):
+        h = make_host(z)
+        try:
+            time.sleep(1.0)
+            h.inbox.take(0, 0.0)
+            home3 = AgentNode(S, 3, 0.0).nb.home
+            out.put(KEYS.beacon(home3, 3), wire.beacon_to_wire(beacon_of(3)))  # (not urgent: the take waits it out)
+            t0 = time.monotonic()
+            assert {it[0] for _tag, it in h.inbox.take(None, 1.0, urgent=1)} == {KEYS.beacon(home3, 3)}
+            assert time.monotonic() - t0 >= 0.9, "a peer's beacon woke the take as if it were our state"
+            got: list[Any] = []
+            t0 = time.monotonic()
+            taker = threading.Thread(target=lambda: got.extend(h.inbox.take(None, 30.0, urgent=2)))
+            taker.start()
+            for a in (1, 2):
+                out.put(KEYS.state(a), wire.state_to_wire(state(a)))
+            taker.join(40.0)
+            assert not taker.is_alive()
+            assert time.monotonic() - t0 < 15.0, "the states did not wake the take: it waited for its timeout"
+            assert sorted(it[0] for _tag, it in got) == [KEYS.state(1), KEYS.state(2)]
+        finally:
+            h.close()
 
 
 def test_an_agent_that_fails_stops_listening_and_its_token_goes_one_that_ends_stays() -> None:
-    z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{free_port()}",), "peer").config())
+    z = host_session()
     host = make_host(z, (1, 2, 3))
     try:
         for a, cell in ((1, A), (2, B), (3, B)):
@@ -159,43 +166,36 @@ def test_an_agent_that_fails_sends_its_final_report_at_once() -> None:
 
 
 def test_in_ros2_mode_an_agent_takes_its_scan_not_its_state_and_odometry_without_attachment_counts() -> None:
-    port = free_port()
-    z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{port}",), "peer").config())
-    out = zenoh.open(ZenohOptions((f"tcp/127.0.0.1:{port}",), (), "peer").config())
-    inbox = TaggedInbox()
-    link = AgentLink(AgentNode(S, 1, 0.0), KEYS, z, Rejections("agent 1"), Gate(S, "agent-1"), 0, None,
-                     inbox.callback(("own", 1), urgent=True))
-    h = AgentHost(z, KEYS, {1: link}, inbox)
-    ros2 = link.ros2
-    assert ros2 is not None
-    try:
-        time.sleep(1.0)
-        inbox.take(0, 0.0)
-        scan = wire.Scan(1, 0, 0.0, ())
-        out.put(KEYS.scan(1), wire.scan_to_wire(scan))
-        out.put(KEYS.state(1), wire.state_to_wire(state(1)))
-        out.put(ros2.odom_key, b"no attachment")
-        got: list[Any] = []
-        deadline = time.monotonic() + 10.0
-        while time.monotonic() < deadline and (not got or ros2.node.bad_attachments == 0):
-            got += inbox.take(1, 0.3)
-        time.sleep(0.3)
-        got += inbox.take(0, 0.0)
-        assert [(tag, it[0]) for tag, it in got] == [(("own", 1), KEYS.scan(1))]
-        batch = route(h, got)[1]
-        assert kinds(batch) == ["Scan", "Invalid"]
-    finally:
-        h.close()
-        out.close()
-        z.close()
+    with two_sessions() as (z, out):
+        inbox = TaggedInbox()
+        link = AgentLink(AgentNode(S, 1, 0.0), KEYS, z, Rejections("agent 1"), Gate(S, "agent-1"), 0, None,
+                         inbox.callback(("own", 1), urgent=True))
+        h = AgentHost(z, KEYS, {1: link}, inbox)
+        ros2 = link.ros2
+        assert ros2 is not None
+        try:
+            time.sleep(1.0)
+            inbox.take(0, 0.0)
+            scan = wire.Scan(1, 0, 0.0, ())
+            out.put(KEYS.scan(1), wire.scan_to_wire(scan))
+            out.put(KEYS.state(1), wire.state_to_wire(state(1)))
+            out.put(ros2.odom_key, b"no attachment")
+            got: list[Any] = []
+            deadline = time.monotonic() + 10.0
+            while time.monotonic() < deadline and (not got or ros2.node.bad_attachments == 0):
+                got += inbox.take(1, 0.3)
+            time.sleep(0.3)
+            got += inbox.take(0, 0.0)
+            assert [(tag, it[0]) for tag, it in got] == [(("own", 1), KEYS.scan(1))]
+            batch = route(h, got)[1]
+            assert kinds(batch) == ["Scan", "Invalid"]
+        finally:
+            h.close()
 
 
 def test_a_closed_host_takes_nothing_more() -> None:
-    port = free_port()
-    z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{port}",), "peer").config())
-    out = zenoh.open(ZenohOptions((f"tcp/127.0.0.1:{port}",), (), "peer").config())
-    h = make_host(z)
-    try:
+    with two_sessions() as (z, out):
+        h = make_host(z)
         time.sleep(1.0)
         h.close()  # (its session stays open: a new host on a new session replaces it, this inbox is left)
         time.sleep(0.5)
@@ -205,6 +205,3 @@ def test_a_closed_host_takes_nothing_more() -> None:
         out.put(KEYS.clock, wire.clock_to_wire(wire.Clock(0, 0.0, (1, 2))))
         time.sleep(1.0)
         assert h.inbox.take(0, 0.0) == []
-    finally:
-        out.close()
-        z.close()
