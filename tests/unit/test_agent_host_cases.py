@@ -21,19 +21,16 @@ from agent.node import AgentNode
 from reconswarm.net import wire
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Rejections
-from reconswarm.net.keys import Keys
 from reconswarm.net.node import Exit, Role, Token
 from reconswarm.net.session import ZenohOptions
-from reconswarm.scenario.model import load
-from tests.support import PAPER, free_port
+from tests.support import free_port
+from tests.unit.test_agent_host_routing import KEYS, PEER, S, beacon, obstacle_set
 from tests.unit.test_agent_node import A as NODE_AGENT
 from tests.unit.test_agent_node import S as NODE_S
 from tests.unit.test_agent_node import T as NODE_T
 from tests.unit.test_agent_node_batched import script
 
-S = load(PAPER)
-KEYS = Keys("host-cases")
-PEER, OTHER = "peer-session", "other-session"
+OTHER = "other-session"
 A, B = (0, 0), (5, 5)  # cells
 Item = tuple[str, bytes, str, str, float]
 
@@ -54,12 +51,6 @@ def host() -> Iterator[AgentHost]:
     finally:
         h.close()
         z.close()
-
-
-def beacon(aid: int, cell: tuple[int, int], source: str = PEER, k: int = 0, at: float = 0.0) -> Item:
-    i = S.agent_index(aid)
-    b = wire.Beacon(aid, k, 0.05 * k, float(S.starts[i][0]), float(S.starts[i][1]), float(S.radii[i]))
-    return KEYS.beacon(cell, aid), wire.beacon_to_wire(b), "PUT", source, at
 
 
 def state(aid: int, k: int = 0) -> wire.State:
@@ -136,9 +127,8 @@ def test_the_once_a_round_filter_merges_only_one_sample_through_two_subscription
 def test_only_sets_of_the_scenarios_agents_in_a_cell_are_kept_for_replay(host: AgentHost) -> None:
     host.listen(1, Cells(A, frozenset({A})))
     host.listen(2, Cells(B, frozenset({B})))
-    stranger = (KEYS.obstacles(A, 99), wire.obstacles_to_wire(wire.ObstacleSet(99, 0, 1, {})), "PUT", PEER, 0.0)
-    bad_key = (f"{KEYS.prefix}/cell/x_y/agent/3/obstacles",
-               wire.obstacles_to_wire(wire.ObstacleSet(3, 0, 1, {})), "PUT", PEER, 0.0)
+    stranger = obstacle_set(99, A)
+    bad_key = (f"{KEYS.prefix}/cell/x_y/agent/3/obstacles", obstacle_set(3, A)[1], "PUT", PEER, 0.0)
     route(host, [(("cell", A), stranger), (("cell", A), bad_key)])
     assert host.sets == {}
     assert host.links[1].gate.count == 1  # (agent 99 is no agent of the scenario: refused)
@@ -203,9 +193,7 @@ def test_a_key_without_a_valid_cell_counts_as_invalid_for_those_its_subscription
 def test_each_agent_that_starts_listening_to_a_cell_gets_that_cells_sets_and_no_others(host: AgentHost) -> None:
     host.listen(1, Cells(A, frozenset({A})))
     host.listen(2, Cells(B, frozenset({B})))
-    in_a = (KEYS.obstacles(A, 3), wire.obstacles_to_wire(wire.ObstacleSet(3, 0, 1, {})), "PUT", PEER, 0.0)
-    in_b = (KEYS.obstacles(B, 4), wire.obstacles_to_wire(wire.ObstacleSet(4, 0, 1, {})), "PUT", PEER, 0.0)
-    route(host, [(("cell", A), in_a), (("cell", B), in_b)])
+    route(host, [(("cell", A), obstacle_set(3, A)), (("cell", B), obstacle_set(4, B))])
     host.listen(1, Cells(A, frozenset({A, B})))  # both move in the same round: each its own replay
     host.listen(2, Cells(B, frozenset({A, B})))
     got = route(host, [])
@@ -222,11 +210,11 @@ def test_the_plans_of_a_round_are_answered_together_by_tick_then_forgotten(host:
     (p1,), (p2,) = plans_of(2), plans_of(2)
     assert host.act(1, p1, 0.0) is False and host.act(2, p2, 0.0) is False  # (no new session: the law comes)
     want = commands([p1])[0]
-    assert route_answers(host) == {1: [Law(p1.k, *want)], 2: [Law(p2.k, *want)]}
-    assert route_answers(host) == {}
+    assert answers(host) == {1: [Law(p1.k, *want)], 2: [Law(p2.k, *want)]}
+    assert answers(host) == {}
 
 
-def route_answers(host: AgentHost) -> dict[int, list[Any]]:
+def answers(host: AgentHost) -> dict[int, list[Any]]:
     return dict(host.answers(0.0))
 
 
@@ -239,9 +227,7 @@ def test_our_state_from_a_session_other_than_the_worlds_is_refused(host: AgentHo
 def test_what_a_hosted_agent_will_find_in_its_next_batch_is_counted_per_agent(host: AgentHost) -> None:
     host.listen(1, Cells(A, frozenset({A})))
     host.listen(2, Cells(B, frozenset({B})))
-    sets = [(KEYS.obstacles(A, a), wire.obstacles_to_wire(wire.ObstacleSet(a, 0, 1, {})), "PUT", PEER, 0.0)
-            for a in (3, 4)]
-    route(host, [(("cell", A), s) for s in sets])
+    route(host, [(("cell", A), obstacle_set(a, A)) for a in (3, 4)])
     host.listen(2, Cells(B, frozenset({A, B})))  # two sets replayed to agent 2
     assert host.pending() == {2: 2}
     route(host, [])

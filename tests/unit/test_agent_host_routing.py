@@ -23,6 +23,7 @@ from reconswarm.net.keys import Keys
 from reconswarm.net.node import Exit, Invalid
 from reconswarm.net.session import ZenohOptions
 from reconswarm.scenario.model import load
+from tests import support
 from tests.support import PAPER, free_port
 
 S = load(PAPER)
@@ -46,10 +47,17 @@ def host() -> Iterator[AgentHost]:
         z.close()
 
 
-def beacon(aid: int, cell: tuple[int, int], source: str = PEER) -> tuple[str, bytes, str, str, float]:
+def at_start(aid: int, k: int = 0) -> wire.Beacon:
+    """Agent aid's beacon of tick k from its start, with its radius."""
     i = S.agent_index(aid)
-    b = wire.Beacon(aid, 0, 0.0, float(S.starts[i][0]), float(S.starts[i][1]), float(S.radii[i]))
-    return KEYS.beacon(cell, aid), wire.beacon_to_wire(b), "PUT", source, time.monotonic()
+    return support.beacon(aid, k, float(S.starts[i][0]), float(S.starts[i][1]), float(S.radii[i]))
+
+
+def beacon(aid: int, cell: tuple[int, int], source: str = PEER, k: int = 0,
+           at: float | None = None) -> tuple[str, bytes, str, str, float]:
+    """at_start's beacon as a sample in `cell` from `source`, arrived at `at` (None: now)."""
+    return (KEYS.beacon(cell, aid), wire.beacon_to_wire(at_start(aid, k)), "PUT", source,
+            time.monotonic() if at is None else at)
 
 
 def obstacle_set(aid: int, cell: tuple[int, int], rev: int = 1) -> tuple[str, bytes, str, str, float]:

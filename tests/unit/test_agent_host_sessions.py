@@ -25,7 +25,8 @@ from reconswarm.net.node import Exit
 from reconswarm.net.report import report_from_wire
 from reconswarm.net.session import ZenohOptions
 from tests.support import free_port
-from tests.unit.test_agent_host_cases import KEYS, OTHER, PEER, A, B, Item, S, beacon, kinds, make_host, route, state
+from tests.unit.test_agent_host_cases import OTHER, A, B, Item, kinds, make_host, route, state
+from tests.unit.test_agent_host_routing import KEYS, PEER, S, at_start, beacon, obstacle_set
 
 
 def host_session() -> Any:
@@ -53,16 +54,16 @@ def test_the_hosts_subscriptions_take_remote_samples_tagged_with_history_and_non
             token = out.liveliness().declare_token(KEYS.alive_agent(3))
             home3 = AgentNode(S, 3, 0.0).nb.home
             pub = ext.declare_advanced_publisher(out, KEYS.obstacles(home3, 3), cache=ext.CacheConfig(max_samples=1))
-            pub.put(wire.obstacles_to_wire(wire.ObstacleSet(3, 0, 1, {})))
+            pub.put(obstacle_set(3, home3)[1])
             time.sleep(0.5)
             h = make_host(z)
             time.sleep(1.0)  # (the host's declarations reach the outside session)
             got: list[tuple[Any, Item]] = h.inbox.take(0, 0.0)  # (history: the token and the set)
             out.put(KEYS.state(1), wire.state_to_wire(state(1)))
             out.put(KEYS.clock, wire.clock_to_wire(wire.Clock(0, 0.0, (1, 2, 3))))
-            out.put(KEYS.beacon(home3, 3), wire.beacon_to_wire(beacon_of(3)))
-            z.put(KEYS.beacon(home3, 4), wire.beacon_to_wire(beacon_of(4)))  # our own session's: never taken
-            z.put(KEYS.obstacles(home3, 4), wire.obstacles_to_wire(wire.ObstacleSet(4, 0, 1, {})))
+            out.put(KEYS.beacon(home3, 3), wire.beacon_to_wire(at_start(3)))
+            z.put(KEYS.beacon(home3, 4), wire.beacon_to_wire(at_start(4)))  # our own session's: never taken
+            z.put(*obstacle_set(4, home3)[:2])
             deadline = time.monotonic() + 10.0
             want = {KEYS.state(1), KEYS.clock, KEYS.beacon(home3, 3), KEYS.alive_agent(3), KEYS.obstacles(home3, 3)}
             while time.monotonic() < deadline and not want <= {it[0] for _t, it in got}:
@@ -85,11 +86,6 @@ def test_the_hosts_subscriptions_take_remote_samples_tagged_with_history_and_non
                 h.close()
 
 
-def beacon_of(aid: int) -> wire.Beacon:
-    i = S.agent_index(aid)
-    return wire.Beacon(aid, 0, 0.0, float(S.starts[i][0]), float(S.starts[i][1]), float(S.radii[i]))
-
-
 def test_the_states_of_the_hosted_agents_wake_the_host_at_once_a_peers_beacon_does_not() -> None:
     with two_sessions() as (z, out):
         h = make_host(z)
@@ -97,7 +93,7 @@ def test_the_states_of_the_hosted_agents_wake_the_host_at_once_a_peers_beacon_do
             time.sleep(1.0)
             h.inbox.take(0, 0.0)
             home3 = AgentNode(S, 3, 0.0).nb.home
-            out.put(KEYS.beacon(home3, 3), wire.beacon_to_wire(beacon_of(3)))  # (not urgent: the take waits it out)
+            out.put(KEYS.beacon(home3, 3), wire.beacon_to_wire(at_start(3)))  # (not urgent: the take waits it out)
             t0 = time.monotonic()
             assert {it[0] for _tag, it in h.inbox.take(None, 1.0, urgent=1)} == {KEYS.beacon(home3, 3)}
             assert time.monotonic() - t0 >= 0.9, "a peer's beacon woke the take as if it were our state"
