@@ -28,13 +28,14 @@ class Heard:
         self._counted: tuple[int, ...] | None = None  # the newest clock's live agents (`clock`)
 
     def beacon(self, m: wire.Beacon, now: float) -> None:
-        if (tick := self.beacons.get(m.k)) is None:
-            tick = self.beacons[m.k] = {}
-        tick[m.id] = m
-        self.heard.pop(m.id, None)  # (kept in the order of its times: the newest last)
-        self.heard[m.id] = now
-        if (seen := self.last_seen.get(m.id)) is None or m.k >= seen.k:
-            self.last_seen[m.id] = m
+        a, k, heard = m.id, m.k, self.heard  # (most of what arrives: its fields read once)
+        if (tick := self.beacons.get(k)) is None:
+            tick = self.beacons[k] = {}
+        tick[a] = m
+        heard.pop(a, None)  # (kept in the order of its times: the newest last)
+        heard[a] = now
+        if (seen := self.last_seen.get(a)) is None or k >= seen.k:
+            self.last_seen[a] = m
 
     def token(self, agent: int, up: bool, now: float) -> None:
         """A peer's token came (up) or went."""

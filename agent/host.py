@@ -36,7 +36,7 @@ import zenoh
 from zenoh import ext
 
 from agent.brain import Plan, commands
-from agent.link import AgentLink, Decoded, decode_sample
+from agent.link import PEER_MESSAGES, AgentLink, Decoded, decode_sample
 from agent.messages import Input, Law, Reconnect
 from agent.neighbours import Cells
 from reconswarm.net import wire
@@ -121,7 +121,9 @@ class AgentHost:
         self.active = dict(links)  # the agents still running (one that exited leaves this)
         self.locality = zenoh.Locality.REMOTE  # (co-hosted agents' samples are handed over in the process)
         self.source = str(session.info.zid())  # the source of what co-hosted agents hand each other
-        self.local: list[tuple[Tag, Item]] = []  # what co-hosted agents published since the last round
+        # What co-hosted agents published since the last round: a beacon with the message it was put from (the bytes
+        # decode to it: nothing to decode again, 200 a tick in a host of 200), a set as its bytes (decoded once).
+        self.local: list[tuple[Tag, Item, wire.Beacon | None]] = []
         self.listening: dict[int, frozenset[Cell] | None] = {}  # agent -> the cells it listens to (None: all)
         self.by_cell: dict[Cell | None, set[int]] = {}  # cell -> the agents listening to it (None: to all)
         self._heard_by: dict[Cell | None, list[int]] = {}  # cell -> `_listeners` (until listening or `active` change)
@@ -170,7 +172,7 @@ class AgentHost:
             self.by_cell.setdefault(cell, set()).add(aid)
         self.replay += [(aid, tag, item) for tag, item in self.sets.values()
                          if self._hears(c.listen, self._cell(item[0])) and not self._hears(old, self._cell(item[0]))]
-        want: set[Cell | None] = set().union(*({None} if ls is None else ls for ls in self.listening.values()))
+        want: set[Cell | None] = {cell for cell, heard_by in self.by_cell.items() if heard_by}  # (every listened cell)
         if None in want:
             want |= self.warm
         for cell in want - self.cell_subs.keys():
@@ -222,8 +224,13 @@ class AgentHost:
         for aid, tag, item in pending:
             self._deliver(tag, item, batches, aid)
         local, self.local = self.local, []
-        for tag, item in local:
-            self._deliver(tag, item, batches, None)
+        for tag, item, sent in local:
+            if sent is None:
+                self._deliver(tag, item, batches, None)
+                continue
+            for aid in self._listeners(self._cell(item[0])):  # (`_deliver`'s way for a co-hosted agent's beacon)
+                if aid != tag[1]:
+                    batches[aid].append(sent)
         seen: set[tuple[str, bytes, str]] = set()
         for tag, item in items:
             if tag[0] == "cell":
@@ -276,7 +283,7 @@ class AgentHost:
                     batches[aid].append(m)
             return
         # In the name of an agent running in this process, from another session: forged (ours never come that way).
-        forged = m.id if isinstance(m, wire.Beacon | wire.ObstacleSet) and m.id in self.active else None
+        forged = m.id if isinstance(m, PEER_MESSAGES) and m.id in self.active else None
         for aid in who:
             link = self.active[aid]
             if forged is not None and aid != forged:  # (its own link counts one on its own key as invalid)
@@ -309,7 +316,7 @@ class AgentHost:
         held: dict[int, int] = {}
         for aid, _tag, _item in self.replay:
             held[aid] = held.get(aid, 0) + 1
-        for tag, item in self.local:
+        for tag, item, _sent in self.local:
             for aid in self._listeners(self._cell(item[0])):
                 if aid != tag[1]:
                     held[aid] = held.get(aid, 0) + 1
@@ -352,7 +359,7 @@ class AgentHost:
         put = self.links[aid].publish(out)
         if put is not None and len(self.links) > 1:
             item = (put[0], put[1], "PUT", self.source, now_s)
-            self.local.append((("local", aid), item))
+            self.local.append((("local", aid), item, out if isinstance(out, wire.Beacon) else None))
             if isinstance(out, wire.ObstacleSet):
                 self.sets[aid] = (("local", aid), item)  # (for an agent that starts listening to its cell later)
         return False

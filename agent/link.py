@@ -31,6 +31,10 @@ from reconswarm.net.report import report_to_wire
 from reconswarm.net.session import Member
 
 log = logging.getLogger("reconswarm.agent")
+# (the kinds `AgentLink.take` sorts a sample by, as tuples: `isinstance` with `A | B` builds the union each call)
+PASSED = (Token, RouterLink, Stop)  # taken as they are
+OWN = (wire.State, wire.Scan)  # for one agent: the others drop it
+PEER_MESSAGES = (wire.Beacon, wire.ObstacleSet)  # a peer's: never in our own name from another session
 Decoded = Heard | None  # what a sample decodes to (None: a key no agent reads)
 
 
@@ -130,14 +134,14 @@ class AgentLink(Member):
 
     def take(self, m: Decoded, key: str, source: str) -> Heard | None:
         """A decoded sample, as this agent takes it: ours to act on, counted as invalid, or refused."""
-        if m is None or isinstance(m, Token | RouterLink | Stop):
+        if m is None or isinstance(m, PASSED):
             return m
         if isinstance(m, Invalid):
             self.rej.reject(key, m.reason)
             return m
-        if isinstance(m, wire.State | wire.Scan) and m.id != self.id:
+        if isinstance(m, OWN) and m.id != self.id:
             return None
-        if isinstance(m, wire.Beacon | wire.ObstacleSet) and m.id == self.id:
+        if isinstance(m, PEER_MESSAGES) and m.id == self.id:
             if source == self.own_source:
                 return None  # our own, back through our session's shared subscription
             what = "a beacon" if isinstance(m, wire.Beacon) else "an obstacle set"

@@ -193,10 +193,11 @@ class Neighbourhood:
     def intruders(self, k: int, fresh: Mapping[int, wire.Beacon]) -> list[wire.Beacon]:
         """The intruders among tick k's beacons `fresh` (by peer), in id order, reading only the peers we did not
         wait for."""
-        near = self.near.get(k)
-        if near is None:
+        near, own = self.near.get(k), self.own.get(k)
+        if self.everyone or near is None or own is None:
             return []
-        return [fresh[a] for a in sorted(fresh.keys() - near) if self.intruder(k, fresh[a])]
+        ox, oy, reach2 = own[0], own[1], self.grid.reach_m ** 2  # (`intruder`, inline: every agent, every tick)
+        return [b for a in sorted(fresh.keys() - near) if ((b := fresh[a]).px - ox) ** 2 + (b.py - oy) ** 2 <= reach2]
 
     def also_heard(self, alive: set[int], prev: Mapping[int, wire.Beacon], fresh: Mapping[int, wire.Beacon],
                    waited: AbstractSet[int]) -> int:

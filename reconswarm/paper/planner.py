@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,6 +24,7 @@ from reconswarm.scenario.model import PlannerConfig
 
 Array = NDArray[np.float64]
 Mask = NDArray[np.bool_]
+_A = TypeVar("_A", Array, Mask)
 
 
 def attraction(p: Array, center: Array, offset: Array, k_att: float, r_c: float) -> Array:
@@ -150,7 +153,8 @@ class Neighbours:
 
     @staticmethod
     def empty(n: int) -> Neighbours:
-        return Neighbours(np.zeros((n, 0, 2)), np.zeros((n, 0)), np.zeros((n, 0), dtype=bool))
+        """No neighbour for any of n rows (one table per n, shared: its arrays hold nothing and are read-only)."""
+        return _empty_neighbours(n)
 
     @staticmethod
     def stack(tables: Sequence[Neighbours]) -> Neighbours:
@@ -168,12 +172,30 @@ class ObstacleView:
 
     @staticmethod
     def empty(n: int) -> ObstacleView:
-        return ObstacleView(np.zeros((n, 0)), np.zeros((n, 0, 2)), np.zeros((n, 0), dtype=bool))
+        """No obstacle for any of n rows (one view per n, shared: its arrays hold nothing and are read-only)."""
+        return _empty_view(n)
 
     @staticmethod
     def stack(views: Sequence[ObstacleView]) -> ObstacleView:
         """Several views' rows as one (sum N_v, max M_v), each padded with invalid columns (adding nothing)."""
         return ObstacleView(*_stack_padded([(v.d, v.n, v.valid) for v in views]))
+
+
+def _read_only(a: _A) -> _A:
+    a.flags.writeable = False
+    return a
+
+
+@lru_cache(maxsize=64)
+def _empty_neighbours(n: int) -> Neighbours:
+    return Neighbours(_read_only(np.zeros((n, 0, 2))), _read_only(np.zeros((n, 0))),
+                      _read_only(np.zeros((n, 0), dtype=bool)))
+
+
+@lru_cache(maxsize=64)
+def _empty_view(n: int) -> ObstacleView:
+    return ObstacleView(_read_only(np.zeros((n, 0))), _read_only(np.zeros((n, 0, 2))),
+                        _read_only(np.zeros((n, 0), dtype=bool)))
 
 
 def _stack_padded(parts: Sequence[tuple[Array, Array, Mask]]) -> tuple[Array, Array, Mask]:

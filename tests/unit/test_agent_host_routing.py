@@ -100,7 +100,7 @@ def test_what_a_co_hosted_agent_publishes_goes_to_the_others_never_back(host: Ag
     host.listen(1, Cells(A, frozenset({A})))
     host.listen(2, Cells(A, frozenset({A, B})))
     item = beacon(1, A, source=host.source)
-    host.local.append((("local", 1), item))
+    host.local.append((("local", 1), item, None))
     assert host.pending() == {2: 1}  # (the runtime counts it in what agent 2 still needs: nothing need arrive)
     got = host.route([])
     assert got[1] == [] and ids(got[2]) == [("Beacon", 1)] and host.pending() == {}
@@ -123,6 +123,19 @@ def test_a_beacon_forged_in_a_co_hosted_agents_name_is_refused_even_before_it_sp
     host.exited(1, Exit(1, "failed"), 0.0)
     got = host.route([(("cell", A), beacon(1, A, source=PEER))])
     assert ids(got[2]) == [("Beacon", 1)] and host.links[2].gate.count == 2
+
+
+def test_a_co_hosted_agents_beacon_reaches_the_others_as_the_message_it_put(host: AgentHost) -> None:
+    """Handed over without decoding its bytes again: they decode to that very beacon."""
+    host.listen(1, Cells(A, frozenset({A})))
+    host.listen(2, Cells(A, frozenset({A})))
+    sent = at_start(1)
+    host.act(1, sent, 0.0)
+    [(tag, (key, payload, *_rest), message)] = host.local
+    assert tag == ("local", 1) and key == KEYS.beacon(A, 1) and message is sent
+    assert wire.beacon_from_wire(payload, 1) == sent
+    got = host.route([])
+    assert got[1] == [] and len(got[2]) == 1 and got[2][0] is sent and host.local == []
 
 
 def test_a_co_hosted_agents_set_is_replayed_as_its_own_not_refused(host: AgentHost) -> None:

@@ -13,7 +13,9 @@ import pytest
 
 from reconswarm.geometry.pairs import pairs_within
 from reconswarm.paper.planner import (
+    Neighbours,
     NeighbourTables,
+    ObstacleView,
     agent_repulsion,
     attraction,
     containment,
@@ -112,3 +114,18 @@ def test_one_table_builder_over_changing_neighbours_equals_a_fresh_one_each_time
         assert got.valid.tolist() == want.valid.tolist(), step
         if step in (3, 4):
             assert got.valid.sum() == 2 and got.r[0, 0] == 1.5 and got.r[1, 0] == 1.0
+
+
+def test_an_empty_table_is_one_per_row_count_holds_nothing_and_cannot_be_written() -> None:
+    """Neighbours.empty and ObstacleView.empty (every plan without a peer or obstacle near asks for one): shared,
+    so read-only; the stacked table of empty and non-empty rows is a fresh, writable one."""
+    nb, ob = Neighbours.empty(1), ObstacleView.empty(3)
+    assert nb is Neighbours.empty(1) and ob is ObstacleView.empty(3) and nb is not Neighbours.empty(2)
+    assert (nb.p.shape, nb.r.shape, nb.valid.shape) == ((1, 0, 2), (1, 0), (1, 0))
+    assert (ob.d.shape, ob.n.shape, ob.valid.shape) == ((3, 0), (3, 0, 2), (3, 0))
+    for a in (nb.p, nb.r, nb.valid, ob.d, ob.n, ob.valid):
+        with pytest.raises(ValueError, match="read-only"):
+            a[...] = 0
+    one = Neighbours(np.ones((1, 1, 2)), np.ones((1, 1)), np.ones((1, 1), dtype=bool))
+    both = Neighbours.stack([nb, one])
+    assert both.valid.tolist() == [[False], [True]] and both.p.flags.writeable
