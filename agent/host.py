@@ -15,10 +15,11 @@ is for, through one inbox and one loop that steps every hosted node (agent/node.
   round has been stepped, the plans of one tick are computed in one call of `law` (the planner batched over
   them, each row the same bit for bit as the agent's alone) and each node takes its command back (`Law`).
 
-Co-hosted agents hear each other in the process: a beacon or set one of them publishes is handed, as the
-same bytes with the session as source, to the others that listen to its cell, at once (the subscriptions
-take remote samples only, so nobody's own puts wake a subscriber's thread). A node is stepped when it has
-input, a deadline, or every `agent_poll_s` (its timers).
+Co-hosted agents hear each other in the process: a beacon or set one of them publishes is handed to the others
+that listen to its cell, at once (a beacon as the message it was put from, which its bytes decode to; a set as
+the same bytes with the session as source); the subscriptions take remote samples only, so nobody's own puts
+wake a subscriber's thread. A node is stepped when it has input, a deadline, or every `agent_poll_s` (its
+timers).
 """
 
 from __future__ import annotations
