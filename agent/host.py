@@ -197,6 +197,11 @@ class AgentHost:
             heard_by = self._heard_by[cell] = sorted(a for a in got | self.by_cell.get(None, set()) if a in self.active)
         return heard_by
 
+    def _others(self, sender: int, key: str) -> list[int]:
+        """Whom a co-hosted agent's beacon or set under `key` is for: the running agents that listen to its cell,
+        but not its sender."""
+        return [a for a in self._listeners(self._cell(key)) if a != sender]
+
     @staticmethod
     def _hears(listen: frozenset[Cell] | None, cell: Cell | None) -> bool:
         return listen is None or cell in listen
@@ -229,9 +234,8 @@ class AgentHost:
             if sent is None:
                 self._deliver(tag, item, batches, None)
                 continue
-            for aid in self._listeners(self._cell(item[0])):  # (`_deliver`'s way for a co-hosted agent's beacon)
-                if aid != tag[1]:
-                    batches[aid].append(sent)
+            for aid in self._others(tag[1], item[0]):  # (`_deliver`'s way for a co-hosted agent's beacon)
+                batches[aid].append(sent)
         seen: set[tuple[str, bytes, str]] = set()
         for tag, item in items:
             if tag[0] == "cell":
@@ -256,7 +260,7 @@ class AgentHost:
         if tag == ALL:
             who = list(self.active)
         elif tag[0] == "local":  # a co-hosted agent's: for the others that hear its cell
-            who = [a for a in self._listeners(self._cell(key)) if a != tag[1]]
+            who = self._others(tag[1], key)
         else:  # (a key with no valid cell: those the subscription it came through was for, to count it)
             cell = self._cell(key)
             who = self._listeners(tag[1] if cell is None else cell)
@@ -318,9 +322,8 @@ class AgentHost:
         for aid, _tag, _item in self.replay:
             held[aid] = held.get(aid, 0) + 1
         for tag, item, _sent in self.local:
-            for aid in self._listeners(self._cell(item[0])):
-                if aid != tag[1]:
-                    held[aid] = held.get(aid, 0) + 1
+            for aid in self._others(tag[1], item[0]):
+                held[aid] = held.get(aid, 0) + 1
         return held
 
     def answers(self, now_s: float) -> dict[int, list[Input]]:
