@@ -231,11 +231,7 @@ class AgentHost:
             self._deliver(tag, item, batches, aid)
         local, self.local = self.local, []
         for tag, item, sent in local:
-            if sent is None:
-                self._deliver(tag, item, batches, None)
-                continue
-            for aid in self._others(tag[1], item[0]):  # (`_deliver`'s way for a co-hosted agent's beacon)
-                batches[aid].append(sent)
+            self._deliver(tag, item, batches, None, sent)
         seen: set[tuple[str, bytes, str]] = set()
         for tag, item in items:
             if tag[0] == "cell":
@@ -249,7 +245,10 @@ class AgentHost:
                 batches[aid] += link.ros2.take_invalid()
         return batches
 
-    def _deliver(self, tag: Tag, item: Item, batches: dict[int, list[Input]], only: int | None) -> None:
+    def _deliver(self, tag: Tag, item: Item, batches: dict[int, list[Input]], only: int | None,
+                 sent: wire.Beacon | None = None) -> None:
+        """Hand one sample to the agents it is for (`only`: to that one alone); `sent`: the co-hosted agent's beacon
+        the sample was put from (its bytes decode to it: not decoded again)."""
         key, payload, kind, source, _at = item
         if tag[0] == "own":
             link = self.active.get(tag[1])
@@ -275,7 +274,7 @@ class AgentHost:
             who = [a for a in who if self.active[a].admit_bytes(len(payload), source, key)]
             if not who:
                 return
-        m: Decoded = decode_sample(self.keys, key, payload, kind)
+        m: Decoded = sent if sent is not None else decode_sample(self.keys, key, payload, kind)
         if isinstance(m, wire.Clock):  # (the live agents of the clock before, if the same: one tuple, known at once)
             if m.alive == self._alive:
                 m = dataclasses.replace(m, alive=self._alive)
