@@ -61,7 +61,8 @@ def launch_cmd(
     ros_domain_id: Annotated[int | None, typer.Option("--ros-domain-id", metavar="D",
         help="ROS 2 domain (default: ROS_DOMAIN_ID, else 0).")] = None,
     agents_per_process: Annotated[str, typer.Option("--agents-per-process", metavar="K|auto",
-        help="Agents per process (one zenoh session each; default 1); auto: ceil(N / CPUs).")] = "1",
+        help="Agents per process (one zenoh session each; default 1); auto: one process for up to 48 agents, "
+             "then one per CPU.")] = "1",
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
     no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress bar, nor the lines logged instead.")
                            ] = False,

@@ -3,8 +3,11 @@
 K = 1 (the default) is one process per agent. K > 1 packs up to K agents into one agent host
 (`reconswarm agent --ids 1-5`: one zenoh session, each agent still with its own keys and token), in the
 scenario's order; agents that reach the router differently (`--hosts 2`) are never packed together.
-`auto`: K = ceil(N / C), C the CPUs this launcher may run on, so there is one agent host per CPU. K > N
-is clamped to N.
+`auto`: one agent host while the swarm is small, then one per CPU: H = min(C, ceil(N / 48)) hosts of
+K = ceil(N / H) agents, C the CPUs this launcher may run on. Below about 48 agents a second host costs more
+than it brings: each host takes the other's beacons through the router, each admitted by every receiving agent,
+and on 2 CPUs one host of 10-36 agents ran 1.2-1.6x faster in lockstep than two (the paper, the grid of 16 and
+36: docs/benchmarks.md); at 64 and 100 two hosts were as fast or faster. K > N is clamped to N.
 """
 
 from __future__ import annotations
@@ -41,9 +44,16 @@ def cpus() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+AUTO_HOST_AGENTS = 48  # `auto`: agents per host before a second host pays (measured on 2 CPUs)
+
+
 def per_process(k: int | str, n_agents: int, n_cpus: int | None = None) -> int:
-    """K for N agents: `auto` is ceil(N / CPUs); any K is clamped to 1..N."""
-    want = math.ceil(n_agents / (n_cpus or cpus())) if k == AUTO else int(k)
+    """K for N agents: `auto` is ceil(N / H) with H = min(CPUs, ceil(N / 48)) hosts; any K is clamped to 1..N."""
+    if k == AUTO:
+        n_hosts = max(1, min(n_cpus or cpus(), math.ceil(n_agents / AUTO_HOST_AGENTS)))
+        want = math.ceil(n_agents / n_hosts)
+    else:
+        want = int(k)
     return max(1, min(want, n_agents))
 
 
@@ -85,7 +95,8 @@ def start_agents(fleet: Any, s: Scenario, k: int | str, zopt: Callable[[str, str
     per = per_process(k, len(ids))
     packed = hosts(ids, per, lambda a: zopt("agent", str(a))[0])  # (by where it runs: --hosts 2's namespaces)
     if per > 1:
-        log.info("%d agents in %d processes (%s %s: up to %d each)", len(ids), len(packed), OPTION, k, per)
+        log.info("%d agents in %d process%s (%s %s: up to %d each)", len(ids), len(packed),
+                 "" if len(packed) == 1 else "es", OPTION, k, per)
     for group in packed:
         prefix, zargs = zopt("agent", str(group[0]))
         fleet.start("agent", ids_spec(group), ["agent", *agent_args(group), *args, *zargs], prefix,

@@ -56,10 +56,16 @@ def test_agents_per_process_takes_a_positive_integer_or_auto(value: str) -> None
     assert packing.parse("5") == 5 and packing.parse("auto") == packing.AUTO and packing.parse(" AUTO ") == "auto"
 
 
-def test_per_process_auto_is_one_host_per_cpu_and_any_k_is_clamped_to_n() -> None:
-    assert packing.per_process("auto", 10, n_cpus=2) == 5
-    assert packing.per_process("auto", 101, n_cpus=2) == 51  # ceil
-    assert packing.per_process("auto", 3, n_cpus=8) == 1
+def test_per_process_auto_is_one_host_up_to_48_agents_then_one_per_cpu_and_any_k_is_clamped_to_n() -> None:
+    assert packing.per_process("auto", 10, n_cpus=2) == 10  # the paper: one host
+    assert packing.per_process("auto", 3, n_cpus=8) == 3
+    assert packing.per_process("auto", 48, n_cpus=2) == 48
+    assert packing.per_process("auto", 49, n_cpus=2) == 25  # two hosts (ceil)
+    assert packing.per_process("auto", 101, n_cpus=2) == 51  # no more hosts than CPUs
+    assert packing.per_process("auto", 400, n_cpus=2) == 200
+    assert packing.per_process("auto", 100, n_cpus=8) == 34  # ceil(100 / 48) = 3 hosts, within the 8 CPUs
+    assert packing.per_process("auto", 400, n_cpus=8) == 50  # 8 hosts: one per CPU
+    assert packing.per_process("auto", 100, n_cpus=1) == 100
     assert packing.per_process(20, 10) == 10  # K > N: clamped
     assert packing.per_process(1, 10) == 1
 
