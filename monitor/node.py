@@ -10,8 +10,9 @@ and `Exit` once the mission's end is recorded or it was told to stop.
 Who is alive is decided once, by the node's `Presence` (monitor/presence.py): a token AND the agent's own
 reports (its heartbeat); our own session losing its router is nobody's loss (`RouterLink`); losses, returns
 and network splits are its events. The world: its clock silent for `world_stall_s` (or its token gone) is a
-stall; while it lasts, agents that come and go are not judged (they reconnect when nothing moves) until
-`burst_s` after the world is back; the stall is one `world_stalled` event (with its wall duration), ticks that
+stall (a clock within `burst_s` of its token going was put before it went: not the world back); while it
+lasts, agents that come and go are not judged (they reconnect when nothing moves) until `burst_s` after the
+world is back; the stall is one `world_stalled` event (with its wall duration), ticks that
 never arrived a `gaps` row, and a world that never comes back `world_lost` when the monitor finishes.
 """
 
@@ -171,7 +172,10 @@ class MonitorNode:
         if self.end is not None and not c.end:
             self._refuse_end(f"the world's clock goes on (tick {c.k})")
         self.last_clock_s = now_s
-        if self.stall_since is not None:
+        # A clock within burst_s of the world's token going was put before it went (samples and liveliness changes
+        # reach us on different threads, in either order): a world killed right after a tick is not back.
+        put_before = self.world_gone_at is not None and now_s - self.world_gone_at < self.timing.burst_s
+        if self.stall_since is not None and not put_before:
             self._emit(Event(round(self.stall_t, 9), EventKind.WORLD_STALLED,
                             duration_s=round(now_s - self.stall_since, 3), wall_unix=self._wall(now_s)))
             log.warning("the world is back after %.1f s", now_s - self.stall_since)

@@ -49,6 +49,28 @@ def test_the_worlds_token_going_is_a_stall_at_once_and_a_world_lost_on_its_last_
                                                                    1020.123457)
 
 
+def test_a_clock_the_world_put_before_its_token_went_does_not_end_the_stall(tmp_path: Path) -> None:
+    """A world killed right after a tick: its token's going can reach the node before that tick's clock (they come
+    through different subscribers). The clock 0.036 s later is not the world back (no `world_stalled` of 36 ms);
+    one burst_s after the token went, a clock is (the world's own, back)."""
+    run = started(tmp_path)
+    for k in range(3):
+        run.tick(k, 0.05 * k)
+    run.step(0.13, world(False))
+    assert run.step(0.136, clock(3), truth(3)) == []
+    assert run.node.stall_since == pytest.approx(0.1)  # from the last clock before its token went
+    (lost,) = run.stop(3.0)
+    assert (lost.kind, lost.t, lost.duration_s) == (EventKind.WORLD_LOST, 2 * DT, 2.9)
+    with run.record() as rec:
+        assert [e["kind"] for e in rec.events()] == ["world_lost"]
+    back = started(tmp_path / "back")
+    back.tick(0, 0.0)
+    back.step(0.1, world(False))
+    assert back.step(0.2, clock(1), truth(1)) == []
+    (stall,) = back.step(1.1, clock(2), truth(2))  # burst_s after the token went: the world is back
+    assert (stall.kind, stall.duration_s) == (EventKind.WORLD_STALLED, 1.1)
+
+
 def test_the_worlds_token_coming_or_flapping_before_the_start_is_no_stall(tmp_path: Path) -> None:
     run = started(tmp_path)
     run.step(0.1, world(True))
