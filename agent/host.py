@@ -131,6 +131,9 @@ class AgentHost:
         self.cell_subs: dict[Cell | None, tuple[Any, Any]] = {}  # the host's subscriptions (None: every cell)
         self.plans: list[tuple[int, Plan]] = []  # the hosted agents' plans of this round, for `answers`
         self.sets: dict[int, tuple[Tag, Item]] = {}  # agent -> its newest obstacle set heard (its cell in its key)
+        # Each hosted agent's newest obstacle set put (key, payload), in its publisher's cache: what our own
+        # subscribers' history queries get back (zenoh does not filter a query's replies by the allowed origin).
+        self.cached: dict[int, tuple[str, bytes]] = {}
         self.replay: list[tuple[int, Tag, Item]] = []  # (agent, tag, obstacle set) for that agent alone (replayed)
         self._cells: dict[str, Cell | None] = {}  # key -> the cell in it (None: not a cell key)
         self._alive: tuple[int, ...] = ()  # the newest clock's live agents (one tuple while they stay the same)
@@ -270,6 +273,8 @@ class AgentHost:
         # A co-hosted agent's own beacon or set, handed over in the process: ours, believed without admission
         # (the tag is the host's own: no sample from zenoh carries it, whatever source it is stamped with).
         cohosted = tag[0] == "local"
+        if source == self.source and not cohosted and self._echo(key, payload):
+            return  # our own set from our publisher's cache: the others had it at its put (or have it replayed)
         if key.endswith("/obstacles") and not cohosted:
             who = [a for a in who if self.active[a].admit_bytes(len(payload), source, key)]
             if not who:
@@ -296,6 +301,12 @@ class AgentHost:
             got = link.take(m, key, source)
             if got is not None:
                 batches[aid].append(got)
+
+    def _echo(self, key: str, payload: bytes) -> bool:
+        """The newest set a hosted agent put, as its publisher's cache holds it: a cell subscription declared after the
+        put (an agent that starts listening to the publisher's cell) queries that cache, ours included. Anything else
+        with our session's id as its source (anyone can stamp it) goes through admission as before."""
+        return any(k == key and p == payload for k, p in self.cached.values())
 
     # ------------------------------------------------------------------------------ the runtime's port
 
@@ -360,6 +371,8 @@ class AgentHost:
         if isinstance(out, Cells):
             self.listen(aid, out)
         put = self.links[aid].publish(out)
+        if put is not None and isinstance(out, wire.ObstacleSet):
+            self.cached[aid] = put
         if put is not None and len(self.links) > 1:
             item = (put[0], put[1], "PUT", self.source, now_s)
             self.local.append((("local", aid), item, out if isinstance(out, wire.Beacon) else None))

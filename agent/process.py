@@ -67,8 +67,6 @@ def run(cfg: AgentConfig) -> int:
     missing = [a for a in ids if a not in {a.id for a in s.agents}]
     if missing:
         raise BadInput(f"--id: agent {missing[0]} is not in {cfg.scenario}")
-    if cfg.ros2_domain_id is not None and len(ids) > 1:
-        raise BadInput("--ros2: one agent per process (--id I), not several")
     # Kept across new sessions: each agent's node, gate and rejection count.
     nodes = {a: AgentNode(s, a, time.monotonic(), cfg.timing, batched=len(ids) > 1) for a in ids}
     hulls = HullChecks(s)  # (whether a hull lies on its obstacle is the hull's alone: measured once per process)

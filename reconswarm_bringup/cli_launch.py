@@ -90,9 +90,6 @@ def launch_cmd(
         if foxglove is not None and not 1 <= foxglove <= 65535:
             raise BadInput(f"--foxglove: port must be in 1..65535, got {foxglove}")
         per_process = packing.parse(agents_per_process)
-        if per_process != 1 and ros2:
-            raise BadInput(f"--agents-per-process {agents_per_process}: --ros2 runs one agent per process (one ROS 2 "
-                           "node per session)")
         if ros_domain_id is not None and not ros2:
             raise BadInput("--ros-domain-id: only with --ros2")
         domain = resolve_domain_id(ros_domain_id, os.environ) if ros2 else None

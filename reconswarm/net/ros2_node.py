@@ -2,16 +2,20 @@
 
 The node's liveliness token (`NN`), for each publisher a token (`MP`) and a zenoh publisher on the topic's
 key whose every sample carries the 33-byte attachment (sequence number, source timestamp, gid), for each
-subscription a token (`MS`) and a zenoh subscriber. Entity ids count from 1 within the node (the node is
-entity 0, as the first node of an rmw_zenoh context). Samples reach the caller's callback with their
+subscription a token (`MS`) and a zenoh subscriber. Ids count from 0 within the session, nodes and their
+entities alike, as rmw_zenoh counts them within a context (one zenoh session): the first node of a session is
+entity 0 and its entities 1, 2, ...; a second node on the same session (an agent host's) takes the next id
+and its entities the ones after. Samples reach the caller's callback with their
 attachment checked: one without a valid attachment is not delivered but counted in `bad_attachments`
 (read it on the caller's loop; nothing is logged or blocked inside zenoh's callback).
 """
 
 from __future__ import annotations
 
+import itertools
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from contextlib import suppress
 from typing import Any
 
@@ -21,6 +25,14 @@ from reconswarm.net import ros2
 from reconswarm.net import ros2_graph as graph
 
 QOS = graph.QoS(depth=10)  # ROS 2's default profile for topics: reliable, volatile, keep last 10
+_IDS: dict[str, Iterator[int]] = {}  # session id -> its next entity id (rmw_zenoh: one counter per context)
+_IDS_LOCK = threading.Lock()
+
+
+def next_entity_id(session_id: str) -> int:
+    """The session's next entity id (nodes and their publishers and subscriptions share one count)."""
+    with _IDS_LOCK:
+        return next(_IDS.setdefault(session_id, itertools.count()))
 
 
 class Ros2Publisher:
@@ -39,17 +51,15 @@ class Ros2Node:
     def __init__(self, session: Any, domain_id: int, name: str) -> None:
         self.z, self.domain_id, self.name = session, ros2.check_domain_id(domain_id), name
         self.session_id = str(session.zid())
-        self.node_id = 0
-        self._entity = 0
+        self.node_id = next_entity_id(self.session_id)
         self.bad_attachments = 0
         self.tokens = [session.liveliness().declare_token(
             graph.node_token(domain_id, self.session_id, self.node_id, name))]
         self.entities: list[Any] = []
 
     def _token(self, kind: graph.EntityKind, topic: str, type_name: str) -> str:
-        self._entity += 1
-        key = graph.endpoint_token(kind, self.domain_id, self.session_id, self.node_id, self._entity, self.name, topic,
-                                   type_name, QOS)
+        key = graph.endpoint_token(kind, self.domain_id, self.session_id, self.node_id,
+                                   next_entity_id(self.session_id), self.name, topic, type_name, QOS)
         self.tokens.append(self.z.liveliness().declare_token(key))
         return key
 

@@ -18,6 +18,7 @@ from agent.host import ALL, AgentHost, TaggedInbox
 from agent.link import AgentLink
 from agent.neighbours import Cells
 from agent.node import AgentNode
+from reconswarm.net import ros2_graph as graph
 from reconswarm.net import wire
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Rejections
@@ -26,7 +27,7 @@ from reconswarm.net.report import report_from_wire
 from reconswarm.net.session import ZenohOptions
 from tests.support import free_port
 from tests.unit.test_agent_host_cases import OTHER, A, B, Item, kinds, make_host, route, state
-from tests.unit.test_agent_host_routing import KEYS, PEER, S, at_start, beacon, obstacle_set
+from tests.unit.test_agent_host_routing import KEYS, PEER, C, S, at_start, beacon, obstacle_set
 
 
 def host_session() -> Any:
@@ -201,3 +202,58 @@ def test_a_closed_host_takes_nothing_more() -> None:
         out.put(KEYS.clock, wire.clock_to_wire(wire.Clock(0, 0.0, (1, 2))))
         time.sleep(1.0)
         assert h.inbox.take(0, 0.0) == []
+
+
+def test_a_hosted_agents_own_set_back_from_its_cache_is_no_forgery() -> None:
+    """An agent that starts listening to a cell the host did not hear yet (after a restart, say: the agents join where
+    their robots stand) makes the host declare that cell's subscription, whose history query also reaches the cache
+    of a co-hosted agent publishing there: its set comes back stamped with our own session's id. Before, each other
+    agent there refused it as an impersonation (4 intrusions in a run with no attacker). Not that set, or from
+    another session: refused as before."""
+    z = host_session()
+    h = make_host(z, (1, 2, 3))
+    try:
+        h.act(1, Cells(C, None), 0.0)  # agent 1 publishes from cell C, listening to every cell (no command yet)
+        mine = wire.ObstacleSet(1, 0, 1, {"diamond": ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0))})
+        h.act(1, mine, 0.0)  # (in its publisher's cache)
+        assert [kinds(b) for b in route(h, []).values()] == [[], ["ObstacleSet"], ["ObstacleSet"]]  # (handed over)
+        h.act(1, Cells(C, frozenset({C})), 0.0)  # its first command: its own cells, C declared now (history query)
+        got: list[tuple[Any, Item]] = []
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline and not any(it[0] == KEYS.obstacles(C, 1) for _t, it in got):
+            got += h.inbox.take(1, 0.3)
+        echo = [(tag, it) for tag, it in got if it[0] == KEYS.obstacles(C, 1)]
+        assert echo and all(it[3] == h.source for _tag, it in echo)  # (zenoh's reply: our own session's id)
+        assert route(h, echo) == {1: [], 2: [], 3: []}  # (agents 2 and 3 listen to every cell: C's too)
+        assert all(h.links[a].gate.count == 0 and h.links[a].rej.count == 0 for a in (1, 2, 3))
+        # Another set in agent 1's name stamped with our id, or its very bytes from another session: refused.
+        forged = wire.obstacles_to_wire(wire.ObstacleSet(1, 0, 2, {}))
+        route(h, [(("cell", C), (KEYS.obstacles(C, 1), forged, "PUT", h.source, 0.0)),
+                  (("cell", C), (KEYS.obstacles(C, 1), echo[0][1][1], "PUT", PEER, 0.0))])
+        assert h.links[2].gate.count == 2
+    finally:
+        h.close()
+        z.close()
+
+
+def test_in_ros2_mode_agents_hosted_on_one_session_are_ros2_nodes_with_ids_of_their_own() -> None:
+    """rmw_zenoh counts ids within a context (one session), nodes and their entities alike: a ROS 2 tool's graph
+    tells two nodes of one session apart by their node ids, and each entity by its id."""
+    z = host_session()
+    inbox = TaggedInbox()
+    zid = str(z.info.zid())
+    links = {a: AgentLink(AgentNode(S, a, 0.0), KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"), 0, zid,
+                          inbox.callback(("own", a), urgent=True)) for a in (1, 2)}
+    h = AgentHost(z, KEYS, links, inbox)
+    try:
+        tokens = [graph.parse_token(str(r.ok.key_expr)) for r in z.liveliness().get("@ros2_lv/0/**", timeout=2.0)
+                  if r.ok is not None]
+        nodes = {e.node_name: e.node_id for e in tokens if e.kind is graph.EntityKind.NODE}
+        assert set(nodes) == {"agent_1", "agent_2"} and nodes["agent_1"] != nodes["agent_2"]
+        assert all(e.session_id == zid and e.node_id == nodes[e.node_name] for e in tokens)
+        ids = [e.entity_id for e in tokens]
+        assert len(ids) == 6 and len(set(ids)) == 6  # 2 nodes, each a publisher (cmd_vel) and a subscription (odom)
+        assert {e.entity_id for e in tokens if e.kind is graph.EntityKind.NODE} == set(nodes.values())
+    finally:
+        h.close()
+        z.close()
