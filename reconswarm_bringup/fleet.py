@@ -33,6 +33,11 @@ class Proc:
     members: tuple[str, ...] = ()  # an agent host: the agents it runs (its id names them all, e.g. 1-5)
 
     @property
+    def name(self) -> str:
+        """As the launcher's lines name it: `router`, `monitor`, `agent 1-5`, `router B` (its id, when it has one)."""
+        return self.role if self.id == "-" else f"{self.role} {self.id}"
+
+    @property
     def idents(self) -> tuple[str, ...]:
         """Whom this process stands for: its id, or each agent of a host."""
         return self.members or (self.id,)

@@ -190,13 +190,13 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
                         else:
                             delay = 0.0 if router_restarts == 0 else min(4.0, 0.5 * 2 ** (router_restarts - 1))
                             router_restarts += 1
-                            log.warning("router %s died (exit %s) at t = %.2f s: restarting it on the same endpoint "
-                                        "in %.1f s (%d of %d)", p.id, rc, watch.t, delay, router_restarts,
+                            log.warning("%s died (exit %s) at t = %.2f s: restarting it on the same endpoint "
+                                        "in %.1f s (%d of %d)", p.name, rc, watch.t, delay, router_restarts,
                                         ROUTER_RESTARTS)
                             timers.append((now + delay, lambda p=p: fleet.restart(p)))
                     elif rc != 0 and watch.end is None:
-                        crashed.append(f"{p.role} {p.id} exited {rc}")
-                        log.warning("%s %s exited with %s", p.role, p.id, rc)
+                        crashed.append(f"{p.name} exited {rc}")
+                        log.warning("%s exited with %s", p.name, rc)
             bar.update(watch.t, watch.alive, len(s.agents))
             live.poll()
             if world.popen.poll() is not None:

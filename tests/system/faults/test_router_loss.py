@@ -41,7 +41,7 @@ def test_router_killed_mid_run_is_restarted_and_no_agent_is_lost(tmp_path: Path,
             proc.send_signal(signal.SIGINT)
             proc.communicate(timeout=30)
     assert len(routers(out)) == 2 and routers(out)[0] == first  # started again, once
-    assert "router - died" in stderr and "restarting it on the same endpoint" in stderr, stderr[-3000:]
+    assert "router died (exit -9)" in stderr and "restarting it on the same endpoint" in stderr, stderr[-3000:]
     s = json.loads(stdout)
     assert s["agents_lost"] == [], stderr[-3000:]
     assert [e for e in events(out / "run.db") if e["kind"] == "agent_lost"] == []
