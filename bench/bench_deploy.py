@@ -16,7 +16,9 @@
 5. large swarms (--large-agents 400): the grid in lockstep until its duration: finished, sim/wall, collisions,
    agents lost, the peak RSS of the run's processes summed and over N;
 6. the paper at --clock realtime --speed X (--paper-realtime X): converged, missed-deadline ratio, collisions,
-   plain, with kill:agent:3@60 and with flood@30.
+   plain, with kill:agent:3@60 and with flood@30;
+7. the paper in ROS 2 mode at --speed X (--paper-ros2 X): the same, plain and with kill:agent:3@60, with the
+   state-to-command latency and the CPU of all the run's processes.
 `--agents-per-process K ...` (default 1) measures each row with K agents per process (agent hosts; `auto`
 too), side by side; an agent host's CPU, messages and wake-ups count a K-th to each of its agents.
 `--checkout DIR` (repeatable) measures another checkout (a git worktree of an older commit with its own
@@ -26,6 +28,7 @@ too), side by side; an agent host's CPU, messages and wake-ups count a K-th to e
     .venv/bin/python bench/bench_deploy.py --paper --equal-paper --agents-per-process 1 5 10 --grid-agents
     .venv/bin/python bench/bench_deploy.py --grid-agents --realtime-agents --large-agents 400 --agents-per-process auto
     .venv/bin/python bench/bench_deploy.py --grid-agents --realtime-agents --paper-realtime 10 --agents-per-process 5
+    .venv/bin/python bench/bench_deploy.py --grid-agents --realtime-agents --paper-ros2 4 --agents-per-process 1 5 auto
     .venv/bin/python bench/bench_deploy.py --quick
 """
 
@@ -92,6 +95,13 @@ def peak_rss_mb(out: Path) -> tuple[float, int]:
     rss = [ast.literal_eval(m[-1]).get("max_rss_mb", 0.0) for log in (out / "logs").glob("*.log")
            if (m := re.findall(r"usage: (\{.*\})", log.read_text(errors="replace")))]
     return float(sum(rss)), len(rss)
+
+
+def cpu_s(out: Path) -> float:
+    """CPU seconds (user + sys) of all the run's processes, from their exit lines."""
+    return float(sum(use["cpu_user_s"] + use["cpu_sys_s"] for log in (out / "logs").glob("*.log")
+                     if (m := re.findall(r"usage: (\{.*\})", log.read_text(errors="replace")))
+                     for use in [ast.literal_eval(m[-1])]))
 
 
 def hosts_agents(checkout: Path) -> bool:
@@ -214,6 +224,8 @@ def main() -> int:
     ap.add_argument("--large-sim-s", type=float, default=10.0)
     ap.add_argument("--paper-realtime", type=float, default=None, metavar="SPEED",
                     help="the paper at --clock realtime --speed SPEED: plain, with kill:agent:3@60, with flood@30")
+    ap.add_argument("--paper-ros2", type=float, default=None, metavar="SPEED",
+                    help="the paper in ROS 2 mode at --speed SPEED: plain, with kill:agent:3@60")
     ap.add_argument("--agents-per-process", nargs="*", default=["1"], metavar="K",
                     help="each row with K agents per process (agent hosts), side by side: 1 5 auto ...")
     ap.add_argument("--quick", action="store_true")
@@ -283,6 +295,24 @@ def main() -> int:
                     print(f"{name[-12:]:>12s} {fault or '-':>18s} {s['converged']!s:>9s} "
                           f"{s['convergence_time_s'] or float('nan'):7.2f} {s.get('missed_deadline_ratio', 0):7.2%} "
                           f"{s['collisions']:10d} {len(s['agents_lost']):5d}", flush=True)
+        if args.paper_ros2 is not None:
+            print(f"\n## the paper in ROS 2 mode (--ros2) at --speed {args.paper_ros2:g}")
+            print(f"{'version':>12s} {'fault':>16s} {'converged':>9s} {'t (s)':>7s} {'missed':>7s} {'p50 ms':>7s} "
+                  f"{'p99 ms':>7s} {'collisions':>10s} {'lost':>5s} {'CPU s':>7s} {'procs':>5s}")
+            for fault in ("", "kill:agent:3@60"):
+                for i, (name, co, extra) in enumerate(versions):
+                    out = tmp / f"paper-ros2-{i}-{fault.replace(':', '_')}"
+                    more = ("--fault", fault) if fault else ()
+                    try:
+                        s = launch(out, PAPER, free_port(), "--ros2", "--speed", f"{args.paper_ros2:g}", *more,
+                                   *extra, launcher=launcher_cmd(co))
+                    except RuntimeError as exc:  # (a checkout that refuses --ros2 with agent hosts)
+                        print(f"{name[-12:]:>12s} {fault or '-':>16s} {str(exc).splitlines()[-1][:80]}", flush=True)
+                        continue
+                    print(f"{name[-12:]:>12s} {fault or '-':>16s} {s['converged']!s:>9s} "
+                          f"{s['convergence_time_s'] or float('nan'):7.2f} {s.get('missed_deadline_ratio', 0):7.2%} "
+                          f"{s.get('latency_p50_ms', 0):7.2f} {s.get('latency_p99_ms', 0):7.2f} {s['collisions']:10d} "
+                          f"{len(s['agents_lost']):5d} {cpu_s(out):7.1f} {peak_rss_mb(out)[1]:5d}", flush=True)
         if args.realtime_agents:
             print(f"\n## realtime at --speed 1 (20 Hz) on the grid, {args.realtime_sim_s:g} s per run")
             print(f"{'version':>12s} {'N':>4s} {'missed':>7s} {'ratio':>7s} {'lat p50 ms':>10s} {'lat p99 ms':>10s}")
