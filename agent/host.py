@@ -284,8 +284,6 @@ class AgentHost:
             if m.alive == self._alive:
                 m = dataclasses.replace(m, alive=self._alive)
             self._alive = m.alive
-        if isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known and self._cell(key) is not None:
-            self.sets[m.id] = (tag, item)  # (for an agent that starts listening to its cell later)
         if cohosted:
             if m is not None:
                 for aid in who:
@@ -293,6 +291,7 @@ class AgentHost:
             return
         # In the name of an agent running in this process, from another session: forged (ours never come that way).
         forged = m.id if isinstance(m, PEER_MESSAGES) and m.id in self.active else None
+        admitted = False
         for aid in who:
             link = self.active[aid]
             if forged is not None and aid != forged:  # (its own link counts one on its own key as invalid)
@@ -301,6 +300,12 @@ class AgentHost:
             got = link.take(m, key, source)
             if got is not None:
                 batches[aid].append(got)
+                admitted = admitted or got is m
+        # Kept for an agent that starts listening to its cell later: a set some hosted agent admitted (a co-hosted
+        # agent's own is kept by `act`), never one that was refused (it would stand in for the genuine one).
+        if (admitted and forged is None and isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known
+                and self._cell(key) is not None):
+            self.sets[m.id] = (tag, item)
 
     def _echo(self, key: str, payload: bytes) -> bool:
         """The newest set a hosted agent put, as its publisher's cache holds it: a cell subscription declared after the

@@ -148,3 +148,23 @@ def test_a_co_hosted_agents_set_is_replayed_as_its_own_not_refused(host: AgentHo
     assert host.pending() == {2: 1}  # (replayed to agent 2 alone)
     got = host.route([])
     assert ids(got[2]) == [("ObstacleSet", 1)] and host.links[2].gate.count == 0
+
+
+def test_a_set_forged_in_a_co_hosted_agents_name_never_stands_in_for_its_genuine_one_at_replay(
+        host: AgentHost) -> None:
+    """The host keeps the newest set of each agent for an agent that starts listening to its cell later: a refused
+    set is never kept, so a forger cannot replace a co-hosted agent's genuine set there (nor a remote one's)."""
+    host.listen(1, Cells(A, frozenset({A})))
+    host.listen(2, Cells(B, frozenset({B})))
+    host.act(1, wire.ObstacleSet(1, 0, 1, {}), 0.0)  # agent 1's genuine set, in cell A
+    forged = (KEYS.obstacles(A, 1), wire.obstacles_to_wire(wire.ObstacleSet(1, 0, 9, {})), "PUT", PEER, 0.0)
+    got = host.route([(("cell", A), forged)])
+    assert [type(m).__name__ for m in got[1]] == ["Invalid"] and got[2] == []  # (agent 1's own key: invalid)
+    host.listen(2, Cells(B, frozenset({A, B})))  # agent 2 moves towards A: it gets agent 1's genuine set
+    got = host.route([])
+    assert [(m.id, m.rev) for m in got[2]] == [(1, 1)] and host.links[2].gate.count == 0
+    host.route([(("cell", A), obstacle_set(3, A))])  # agent 3's: kept; then one naming an unknown obstacle: not
+    made_up = wire.ObstacleSet(3, 0, 9, {"no-such-obstacle": ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))})
+    host.route([(("cell", A), (KEYS.obstacles(A, 3), wire.obstacles_to_wire(made_up), "PUT", PEER, 0.0))])
+    assert host.links[1].gate.count == 1
+    assert wire.obstacles_from_wire(host.sets[3][1][1], 3).rev == 1
