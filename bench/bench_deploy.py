@@ -90,18 +90,21 @@ def role_usage(out: Path) -> dict[str, list[dict[str, float]]]:
     return roles
 
 
+def exit_usages(out: Path) -> list[dict[str, float]]:
+    """Each of the run's processes' resource usage from its exit line (a process killed by SIGKILL writes none)."""
+    return [ast.literal_eval(m[-1]) for log in (out / "logs").glob("*.log")
+            if (m := re.findall(r"usage: (\{.*\})", log.read_text(errors="replace")))]
+
+
 def peak_rss_mb(out: Path) -> tuple[float, int]:
     """The sum over the run's processes of each one's peak RSS (its exit line), and how many processes logged one."""
-    rss = [ast.literal_eval(m[-1]).get("max_rss_mb", 0.0) for log in (out / "logs").glob("*.log")
-           if (m := re.findall(r"usage: (\{.*\})", log.read_text(errors="replace")))]
+    rss = [use.get("max_rss_mb", 0.0) for use in exit_usages(out)]
     return float(sum(rss)), len(rss)
 
 
 def cpu_s(out: Path) -> float:
     """CPU seconds (user + sys) of all the run's processes, from their exit lines."""
-    return float(sum(use["cpu_user_s"] + use["cpu_sys_s"] for log in (out / "logs").glob("*.log")
-                     if (m := re.findall(r"usage: (\{.*\})", log.read_text(errors="replace")))
-                     for use in [ast.literal_eval(m[-1])]))
+    return float(sum(use["cpu_user_s"] + use["cpu_sys_s"] for use in exit_usages(out)))
 
 
 def hosts_agents(checkout: Path) -> bool:
