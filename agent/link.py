@@ -83,7 +83,7 @@ class AgentLink(Member):
         l_m = float(node.s.head_offsets[node.s.agent_index(self.id)])
         # ROS 2 mode: odometry in (to `odometry`, the host's callback for our own samples), cmd_vel out.
         self.ros2 = None if ros2_domain_id is None else AgentRos2(
-            session, ros2_domain_id, self.id, l_m, node.s.meta.dt_s, odometry or (lambda _sample: None))
+            session, ros2_domain_id, self.id, l_m, node.s.meta.dt_s, odometry or (lambda _sample: None), node.timing)
         block = zenoh.CongestionControl.BLOCK
         self.pub_cmd = None if self.ros2 else session.declare_publisher(keys.cmd(self.id), congestion_control=block)
         self.pub_report = session.declare_publisher(keys.report(gate.process))
@@ -160,7 +160,7 @@ class AgentLink(Member):
         """Put what the node returned; a beacon or obstacle set: its key and payload (for co-hosted agents)."""
         if isinstance(out, wire.Cmd):
             if self.ros2 is not None:
-                self.ros2.command(out)
+                self.ros2.command(out, self.node.period_s)
             elif self.pub_cmd is not None:
                 self.pub_cmd.put(wire.cmd_to_wire(out))
         elif isinstance(out, wire.Beacon):

@@ -6,28 +6,42 @@ angular.z = ω), as node `agent_<i>` with rmw_zenoh's keys, attachments and live
 (reconswarm/net/ros2_node.py). The node (agent/node.py) does not change: an odometry becomes the state it
 knows (head point p = s + l [cos θ, sin θ], tick k = round(t / dt)), and its command, already the unicycle's
 (v, ω) = M(θ)⁻¹ u at the heading of the state it was planned from (eq. 3 inverted), becomes the Twist.
+
+A Twist carries no tick, so the plant cannot tell which odometry a cmd_vel was planned from; it takes it as
+planned from the oldest it published within `ros2_plan_age_periods` before the cmd_vel was sent (both
+attachments' source timestamps), and the agent keeps to that: a command planned from an odometry published
+longer ago is not sent (`stale`; the robot then holds its last cmd_vel under the plant's rules, then stops).
 """
 
 from __future__ import annotations
 
+import logging
 import math
+import time
 from typing import Any
 
 from reconswarm.net import ros2, wire
 from reconswarm.net.node import Invalid
 from reconswarm.net.ros2_node import Ros2Node
+from reconswarm.net.timing import TIMING, Timing
+
+log = logging.getLogger("reconswarm.agent")
+KEEP_TICKS = 64  # the odometries' source timestamps kept (a command is planned from one of the newest)
 
 
 class AgentRos2:
     def __init__(self, session: Any, domain_id: int, agent_id: int, head_offset_m: float, dt_s: float,
-                 callback: Any) -> None:
+                 callback: Any, timing: Timing = TIMING) -> None:
         """callback(sample): where odometry samples go (the host's inbox)."""
-        self.id, self.l, self.dt = agent_id, head_offset_m, dt_s
+        self.id, self.l, self.dt, self.timing = agent_id, head_offset_m, dt_s, timing
         self.node = Ros2Node(session, domain_id, f"agent_{agent_id}")
         self.odom_key = ros2.odom_key(domain_id, agent_id)
         self.cmd_vel = self.node.publisher(ros2.cmd_vel_topic(agent_id), ros2.TWIST)
         self.node.subscription(ros2.odom_topic(agent_id), ros2.ODOMETRY, callback)
         self.odom_in = self.cmd_out = self.counted = 0
+        self.published_ns: dict[int, int] = {}  # tick -> when the plant published its odometry (its attachment)
+        self.stale = 0  # commands not sent: planned from an odometry older than `ros2_plan_age_periods`
+        self._told_s = -math.inf
 
     def owns(self, key: str) -> bool:
         return key == self.odom_key
@@ -39,14 +53,32 @@ class AgentRos2:
         except ros2.Ros2Error as exc:
             return Invalid(key, str(exc))
         k = round(o.t_s / self.dt)
+        sent_ns = self.node.sent.take(payload)
+        if sent_ns is not None:
+            self.published_ns[k] = sent_ns
+            if len(self.published_ns) > KEEP_TICKS:
+                del self.published_ns[min(self.published_ns)]
         px, py = o.x_m + self.l * math.cos(o.theta_rad), o.y_m + self.l * math.sin(o.theta_rad)
         self.odom_in += 1
         return wire.State(self.id, k, o.t_s, o.x_m, o.y_m, o.theta_rad, px, py)  # (its scan: on its own key)
 
-    def command(self, c: wire.Cmd) -> None:
-        """The node's command, already the unicycle's (v, ω), as a Twist."""
-        self.cmd_vel.put(ros2.twist_to_ros(c.v_mps, c.omega_radps))
+    def command(self, c: wire.Cmd, period_s: float) -> bool:
+        """The node's command, already the unicycle's (v, ω), as a Twist, unless the odometry of its tick was
+        published more than `ros2_plan_age_periods` of `period_s` (the run's period, wall s) ago: False, not sent."""
+        now_ns = time.time_ns()
+        basis_ns = self.published_ns.get(c.k)
+        budget_ns = self.timing.ros2_plan_age_periods * period_s * 1e9
+        if basis_ns is None or not now_ns - basis_ns <= budget_ns:
+            self.stale += 1
+            if time.monotonic() - self._told_s >= 5.0:
+                self._told_s = time.monotonic()
+                age = "unknown" if basis_ns is None else f"{(now_ns - basis_ns) / 1e6:.1f} ms"
+                log.warning("agent %d: a command not sent: planned from odometry published %s ago, more than %.1f ms "
+                            "(the machine is behind the clock) [total %d]", self.id, age, budget_ns / 1e6, self.stale)
+            return False
+        self.cmd_vel.put(ros2.twist_to_ros(c.v_mps, c.omega_radps), now_ns)
         self.cmd_out += 1
+        return True
 
     def take_invalid(self) -> list[Invalid]:
         """Samples dropped for their attachment since the last call (for the node to count)."""

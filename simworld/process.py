@@ -64,7 +64,8 @@ class WorldPort(Member):
         z, ids, timing = session, node.ids, node.timing
         self.ros2 = None
         if ros2_domain_id is not None and isinstance(node, Ros2World):
-            self.ros2 = WorldRos2(z, ros2_domain_id, node.base, self.inbox.callback)
+            self.ros2 = WorldRos2(z, ros2_domain_id, node.base, self.inbox.callback, node.s.meta.dt_s / node.speed,
+                                  timing)
         self.pub_clock = z.declare_publisher(k.clock, congestion_control=block)
         # The record's input: kept and numbered, so the monitor recovers a truth that was lost (advanced pub/sub).
         self.pub_truth = ext.declare_advanced_publisher(

@@ -7,14 +7,19 @@ of the command key, as node `simworld` with rmw_zenoh's keys, attachments and li
 (reconswarm/net/ros2_node.py). Scans, clock and truth stay on the project's keys.
 
 `Ros2World` is the world's state machine (simworld/world.py) with the plant a robot base is (`Ros2Plant`): it
-holds the latest (v, ω) of each robot (a Twist carries no tick: it counts for the tick in progress when it
-arrives) and moves the body on the exact arc (`unicycle.step_vw`, saturated to the scenario's limits).
+holds the latest (v, ω) of each robot and moves the body on the exact arc (`unicycle.step_vw`, saturated to
+the scenario's limits). A Twist carries no tick: the port takes a cmd_vel as the command of the oldest tick
+whose odometry it published within `ros2_plan_age_periods` before the cmd_vel was sent (its attachment's
+source timestamp; an agent sends none planned from an older one, agent/ros2_io.py), and the plant holds it
+as the project's own mode holds a command of that tick: from where the robot stood then, a late one too,
+while the robot stays within d_safe / 2 of that point and for `hold_sim_s` from that tick.
 ROS 2 topics carry no tick, so ROS 2 mode is realtime only. `WorldRos2` is the transport: the node
 `simworld`'s odometry publishers and cmd_vel subscriptions (simworld/process.py's port uses it).
 """
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
@@ -47,26 +52,38 @@ class Ros2Plant(Plant):
         self.vw = np.stack([v, om], axis=1)
 
 
+def planned_tick(published_ns: dict[int, int], sent_ns: int, plan_age_ns: float) -> int:
+    """The oldest tick whose odometry a cmd_vel sent at `sent_ns` can have been planned from: one published (tick ->
+    when its odometries were out) at most `plan_age_ns` before it (agents send none planned from older:
+    agent/ros2_io.py). The oldest keeps the plant's hold rules on the safe side: its reach is measured from where
+    the robot stood then, its hold counted from then (`Plant.apply`). Both times are wall clocks' (the plant's
+    for its odometry, the agent's for its cmd_vel, as the agent compared them): a constant offset between two
+    machines' clocks cancels. Ros2Error: sent later than that after every odometry kept (clocks drifted apart)."""
+    since = sent_ns - plan_age_ns
+    got = [k for k, at_ns in published_ns.items() if at_ns >= since]
+    if not got:
+        newest = max(published_ns.values(), default=None)
+        late = "" if newest is None else f" ({(since - newest) / 1e6:.1f} ms more after the newest)"
+        raise ros2.Ros2Error(f"cmd_vel sent over {plan_age_ns / 1e6:.1f} ms after any odometry the plant published"
+                             f"{late}: the agent's and the plant's clocks apart?")
+    return min(got)
+
+
 class Ros2World(WorldNode):
-    """The world whose plant is a robot base: an admitted cmd_vel (a Command) holds from the tick in progress on."""
+    """The world whose plant is a robot base (its commands: cmd_vels, each of the tick the port dates it to)."""
 
     def __init__(self, s: Scenario, speed: float, timing: Timing = TIMING) -> None:
         self.base = Ros2Plant(s, timing.hold_sim_s)
         super().__init__(s, ClockMode.REALTIME, speed, timing, self.base)
 
-    def _command(self, c: wire.Cmd, at_s: float) -> None:
-        """A cmd_vel of robot c.id (its tick is ignored: a Twist has none): held from the tick in progress on."""
-        self.plant.command(c.id, self.k, c.v_mps, c.omega_radps)
-        self.unresponsive.discard(c.id)
-        sent = self.pub_time.get(self.k)
-        if sent is not None:
-            self.latency_ms.append((at_s - sent) * 1000.0)
-
 
 class WorldRos2:
-    """The node `simworld`: an odom publisher and a cmd_vel subscription per robot."""
+    """The node `simworld`: an odom publisher and a cmd_vel subscription per robot.
 
-    def __init__(self, session: Any, domain_id: int, base: Ros2Plant, callback: Any) -> None:
+    period_s: the run's period (wall seconds a tick lasts at its speed)."""
+
+    def __init__(self, session: Any, domain_id: int, base: Ros2Plant, callback: Any, period_s: float,
+                 timing: Timing = TIMING) -> None:
         """callback(sample): where cmd_vel samples go (the process's inbox)."""
         self.base = base
         self.node = Ros2Node(session, domain_id, "simworld")
@@ -75,20 +92,30 @@ class WorldRos2:
             self.node.subscription(ros2.cmd_vel_topic(a), ros2.TWIST, callback)
         self.agent_of = {ros2.cmd_vel_key(domain_id, a): a for a in base.ids}
         self.counted = 0
+        self.plan_age_ns = timing.ros2_plan_age_periods * period_s * 1e9
+        self.keep_ticks = 2 * base.hold_ticks + 4  # (a cmd_vel dated older than the hold is stale anyway)
+        self.published_ns: dict[int, int] = {}  # tick -> when its odometries were out (the last one's put, ns)
 
     def owns(self, key: str) -> bool:
         return key in self.agent_of
 
     def decode(self, key: str, payload: bytes, k: int) -> wire.Cmd:
-        """A cmd_vel sample as robot i's command for tick k, the newest published (Ros2Error when it must be
-        dropped); the port admits it (bounded, from agent i's session) before the node holds it."""
+        """A cmd_vel sample as robot i's command of the tick it was planned from at the earliest (`planned_tick`;
+        k: the newest tick published); Ros2Error when it must be dropped. The port admits it (bounded, from
+        agent i's session) before the node holds it."""
         v, om = ros2.twist_from_ros(payload)
-        return wire.Cmd(self.agent_of[key], k, v, om)
+        sent_ns = self.node.sent.take(payload)
+        if sent_ns is None:  # (its attachment was checked on arrival: one whose time went unnoted is stale)
+            return wire.Cmd(self.agent_of[key], k - self.keep_ticks, v, om)
+        return wire.Cmd(self.agent_of[key], planned_tick(self.published_ns, sent_ns, self.plan_age_ns), v, om)
 
     def publish(self, m: wire.State) -> None:
         """A robot's state at this tick as its odometry (body pose; twist = the last step's (v, ω))."""
         v, om = self.base.vw[self.base.index[m.id]]
         self.odom[m.id].put(ros2.odom_to_ros(ros2.Odom(m.id, m.t, m.x, m.y, m.theta, float(v), float(om))))
+        self.published_ns[m.k] = time.time_ns()  # (after the put: never earlier than what its attachment says)
+        if len(self.published_ns) > self.keep_ticks:
+            del self.published_ns[min(self.published_ns)]
 
     def new_bad_attachments(self) -> int:
         n, self.counted = self.node.bad_attachments - self.counted, self.node.bad_attachments

@@ -57,8 +57,8 @@ class Phase(Enum):
 
 @dataclass(frozen=True)
 class Command:
-    """A command the process's gate admitted (from agent i's own session, bounded; in ROS 2 mode a cmd_vel, which
-    counts for the tick in progress) and the wall time it arrived (its latency counts from then)."""
+    """A command the process's gate admitted (from agent i's own session, bounded; in ROS 2 mode a cmd_vel, of the
+    tick the port dates it to: simworld/ros2_io.py) and the wall time it arrived (its latency counts to then)."""
 
     cmd: wire.Cmd
     at_s: float

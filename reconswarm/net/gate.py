@@ -71,7 +71,8 @@ class Gate:
         return False
 
     def admit_twist(self, c: wire.Cmd, source: str, key: str, now_s: float) -> bool:
-        """A ROS 2 cmd_vel as the command of the tick in progress (no tick of its own): True to apply it."""
+        """A ROS 2 cmd_vel (no tick of its own: c.k is the one the plant dates it to, no later than the newest
+        published): True to apply it."""
         got = self.adm.check_cmd(c, source, key, now_s, self.world_k, ticked=False)
         if got is None:
             return True

@@ -7,7 +7,9 @@ entities alike, as rmw_zenoh counts them within a context (one zenoh session): t
 entity 0 and its entities 1, 2, ...; a second node on the same session (an agent host's) takes the next id
 and its entities the ones after. Samples reach the caller's callback with their
 attachment checked: one without a valid attachment is not delivered but counted in `bad_attachments`
-(read it on the caller's loop; nothing is logged or blocked inside zenoh's callback).
+(read it on the caller's loop; nothing is logged or blocked inside zenoh's callback); the attachment's source
+timestamp of each delivered sample waits in `sent` for the caller's decoder (the inbox keeps a sample's key
+and bytes, not its attachment).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from __future__ import annotations
 import itertools
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import suppress
 from typing import Any
@@ -35,14 +38,46 @@ def next_entity_id(session_id: str) -> int:
         return next(_IDS.setdefault(session_id, itertools.count()))
 
 
+class SentTimes:
+    """When each delivered sample was published (its attachment's source timestamp, ns since the epoch on the
+    publisher's clock), by its bytes, until the caller's decoder takes it: samples with equal bytes are taken
+    in the order they came. Bounded: past `LIMIT` distinct payloads nobody took, it starts afresh."""
+
+    LIMIT = 4096
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()  # (noted in zenoh's thread, taken on the process's loop)
+        self._by_payload: dict[bytes, deque[int]] = {}
+
+    def note(self, payload: bytes, sent_ns: int) -> None:
+        with self._lock:
+            if len(self._by_payload) >= self.LIMIT:
+                self._by_payload.clear()
+            self._by_payload.setdefault(payload, deque()).append(sent_ns)
+
+    def take(self, payload: bytes) -> int | None:
+        """When the oldest sample with these bytes not taken yet was published (None: none noted)."""
+        with self._lock:
+            got = self._by_payload.get(payload)
+            if not got:
+                return None
+            sent_ns = got.popleft()
+            if not got:
+                del self._by_payload[payload]
+            return sent_ns
+
+
 class Ros2Publisher:
     def __init__(self, session: Any, key: str) -> None:
         self.key = key
         self.publication = ros2.Publication(key)
         self.pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
 
-    def put(self, payload: bytes) -> None:
-        self.pub.put(payload, attachment=self.publication.next_attachment(time.time_ns()))
+    def put(self, payload: bytes, now_ns: int | None = None) -> int:
+        """Publish with the attachment's source timestamp `now_ns` (None: now); returns it."""
+        now_ns = time.time_ns() if now_ns is None else now_ns
+        self.pub.put(payload, attachment=self.publication.next_attachment(now_ns))
+        return now_ns
 
 
 class Ros2Node:
@@ -53,6 +88,7 @@ class Ros2Node:
         self.session_id = str(session.zid())
         self.node_id = next_entity_id(self.session_id)
         self.bad_attachments = 0
+        self.sent = SentTimes()  # when each sample the subscriptions delivered was published
         self.tokens = [session.liveliness().declare_token(
             graph.node_token(domain_id, self.session_id, self.node_id, name))]
         self.entities: list[Any] = []
@@ -75,10 +111,11 @@ class Ros2Node:
         def on_sample(sample: Any) -> None:
             att = sample.attachment
             try:
-                ros2.unpack_attachment(None if att is None else att.to_bytes())
+                got = ros2.unpack_attachment(None if att is None else att.to_bytes())
             except ros2.Ros2Error:
                 self.bad_attachments += 1
                 return
+            self.sent.note(sample.payload.to_bytes(), got.source_timestamp_ns)
             callback(sample)
 
         self.entities.append(self.z.declare_subscriber(ros2.topic_key(self.domain_id, topic, type_name), on_sample))

@@ -39,6 +39,11 @@ class Timing:
     world_silence_s: float = 30.0
     # Realtime: act this fraction of a period after a new state, with whatever has arrived by then.
     realtime_act_fraction: float = 0.25
+    # ROS 2 mode: an agent sends no cmd_vel planned from an odometry published more than this many periods (wall
+    # time, at the run's speed) before (its attachment's source timestamp against the cmd_vel's); the plant takes a
+    # cmd_vel as planned from the oldest tick it published within that long before the cmd_vel was sent (a Twist
+    # has no tick: simworld/ros2_io.py), and holds it as the project's own mode holds a command of that tick.
+    ros2_plan_age_periods: float = 1.0
     # While not commanding for more than `waiting_log_s`, log what the next tick lacks, this often.
     waiting_log_s: float = 1.0
     # With nothing queued, the agent looks again after this long.

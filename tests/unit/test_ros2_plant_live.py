@@ -30,9 +30,9 @@ def _started(world: Ros2World) -> float:
     return now
 
 
-def _twist(agent_id: int, v: float, w: float, at_s: float) -> Command:
-    """A cmd_vel as the port hands it over (a Twist has no tick: the one given is ignored)."""
-    return Command(wire.Cmd(agent_id, -1, v, w), at_s)
+def _twist(agent_id: int, v: float, w: float, at_s: float, k: int = 0) -> Command:
+    """A cmd_vel as the port hands it over: of the tick it dates it to (simworld/ros2_io.planned_tick)."""
+    return Command(wire.Cmd(agent_id, k, v, w), at_s)
 
 
 def _states(out: list) -> list[wire.State]:
