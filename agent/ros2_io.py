@@ -38,7 +38,7 @@ class AgentRos2:
         self.odom_key = ros2.odom_key(domain_id, agent_id)
         self.cmd_vel = self.node.publisher(ros2.cmd_vel_topic(agent_id), ros2.TWIST)
         self.node.subscription(ros2.odom_topic(agent_id), ros2.ODOMETRY, callback)
-        self.odom_in = self.cmd_out = self.counted = 0
+        self.counted = 0
         self.published_ns: dict[int, int] = {}  # tick -> when the plant published its odometry (its attachment)
         self.stale = 0  # commands not sent: planned from an odometry older than `ros2_plan_age_periods`
         self._told_s = -math.inf
@@ -59,13 +59,13 @@ class AgentRos2:
             if len(self.published_ns) > KEEP_TICKS:
                 del self.published_ns[min(self.published_ns)]
         px, py = o.x_m + self.l * math.cos(o.theta_rad), o.y_m + self.l * math.sin(o.theta_rad)
-        self.odom_in += 1
         return wire.State(self.id, k, o.t_s, o.x_m, o.y_m, o.theta_rad, px, py)  # (its scan: on its own key)
 
-    def command(self, c: wire.Cmd, period_s: float) -> bool:
-        """The node's command, already the unicycle's (v, ω), as a Twist, unless the odometry of its tick was
-        published more than `ros2_plan_age_periods` of `period_s` (the run's period, wall s) ago: False, not sent."""
-        now_ns = time.time_ns()
+    def command(self, c: wire.Cmd, period_s: float, now_ns: int | None = None) -> bool:
+        """The node's command, already the unicycle's (v, ω), as a Twist stamped `now_ns` (None: the wall clock's
+        now), unless the odometry of its tick was published more than `ros2_plan_age_periods` of `period_s` (the
+        run's period, wall s) before: False, not sent."""
+        now_ns = time.time_ns() if now_ns is None else now_ns
         basis_ns = self.published_ns.get(c.k)
         budget_ns = self.timing.ros2_plan_age_periods * period_s * 1e9
         if basis_ns is None or not now_ns - basis_ns <= budget_ns:
@@ -77,7 +77,6 @@ class AgentRos2:
                             "(the machine is behind the clock) [total %d]", self.id, age, budget_ns / 1e6, self.stale)
             return False
         self.cmd_vel.put(ros2.twist_to_ros(c.v_mps, c.omega_radps), now_ns)
-        self.cmd_out += 1
         return True
 
     def take_invalid(self) -> list[Invalid]:

@@ -67,6 +67,9 @@ CORE: dict[str, tuple[str, ...]] = {
     "reconswarm/net/cells.py": ("test_cells.py", "test_cells_cases.py", "test_neighbours.py", "test_plant_cases.py"),
     "agent/host.py": ("test_agent_host_routing.py", "test_agent_host_cases.py", "test_agent_host_sessions.py",
                       "test_tagged_inbox.py", "test_runtime.py", "test_law_batched.py"),
+    "agent/ros2_io.py": ("test_ros2_plan_age.py", "test_agent_host_sessions.py", "test_ros2_admission.py"),
+    "simworld/ros2_io.py": ("test_ros2_plan_age.py", "test_ros2_plant_live.py", "test_ros2.py", "test_plant_reach.py",
+                            "test_ros2_admission.py"),
 }
 
 # mutmut's exit codes (mutmut.stats.status_by_exit_code): 1 and 3 killed, 0 survived, the rest neither.

@@ -5,6 +5,8 @@ both ends on real zenoh sessions (127.0.0.1), with the times carried in rmw_zeno
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -15,9 +17,10 @@ import zenoh
 from hypothesis import given
 from hypothesis import strategies as st
 
-from agent.ros2_io import AgentRos2
+from agent.ros2_io import KEEP_TICKS, AgentRos2
 from reconswarm.net import ros2, wire
 from reconswarm.net.inbox import Inbox
+from reconswarm.net.node import Invalid
 from reconswarm.net.ros2_node import Ros2Publisher, SentTimes
 from reconswarm.net.session import ZenohOptions
 from reconswarm.scenario.model import load
@@ -36,8 +39,8 @@ def test_the_oldest_tick_published_within_the_plan_age_before_the_cmd_vel_was_se
     assert planned_tick(out, 1100 * MS, 50 * MS) == 11  # (sent with tick 12's: tick 11's was 50 ms before)
     assert planned_tick(out, 1020 * MS, 50 * MS) == 10  # (the agent's clock behind the plant's: the oldest)
     assert planned_tick({10: 1000 * MS, 11: 1200 * MS}, 1210 * MS, 50 * MS) == 11  # the plant behind its schedule
-    with pytest.raises(ros2.Ros2Error, match="clocks apart"):  # later than any odometry an agent may plan from
-        planned_tick(out, 1151 * MS, 50 * MS)
+    with pytest.raises(ros2.Ros2Error, match=r"over 50\.0 ms after .*\(1\.0 ms more after the newest\).*clocks apart"):
+        planned_tick(out, 1151 * MS, 50 * MS)  # later than any odometry an agent may plan from
     with pytest.raises(ros2.Ros2Error):
         planned_tick({}, 1000 * MS, 50 * MS)
 
@@ -110,14 +113,47 @@ def test_the_plant_dates_a_cmd_vel_by_its_attachments_source_timestamp() -> None
             agent.put(ros2.twist_to_ros(2.0, 0.0), world.published_ns[0] - 500 * MS)  # half a second before any
             agent.put(ros2.twist_to_ros(3.0, 0.0), world.published_ns[3] + 200 * MS)  # after what it can plan from
             got = _wait(lambda: inbox.take(1, 0.2), 4)
-            dated: list[int | str] = []
+            dated: list[wire.Cmd | str] = []
             for key, payload, *_rest in got:
                 try:
-                    dated.append(world.decode(key, payload, 3).k)
+                    dated.append(world.decode(key, payload, 3))
                 except ros2.Ros2Error as exc:
                     dated.append(str(exc))
-            assert dated[:3] == [1, 3, 0] and "clocks apart" in str(dated[3])
+            assert dated[:3] == [wire.Cmd(a, 1, 1.0, 0.0), wire.Cmd(a, 3, 1.0, 0.0), wire.Cmd(a, 0, 2.0, 0.0)]
+            assert "clocks apart" in str(dated[3])
+            # A cmd_vel whose time was never noted (none is delivered so): older than any tick a command holds from.
+            unnoted = world.decode(ros2.cmd_vel_key(0, a), ros2.twist_to_ros(0.5, -0.25), 3)
+            assert unnoted == wire.Cmd(a, 3 - world.keep_ticks, 0.5, -0.25)
+            world.node.bad_attachments = 2
+            assert (world.new_bad_attachments(), world.new_bad_attachments()) == (2, 0)
         finally:
+            world.close()
+
+
+def test_the_plant_publishes_each_robots_odometry_and_keeps_when_each_tick_was_out() -> None:
+    limited = dataclasses.replace(S, world=dataclasses.replace(S.world, max_speed_mps=1.0, max_turn_rate_radps=0.5))
+    with two_sessions() as (z, out):
+        base = Ros2Plant(limited, 0.2)
+        world = WorldRos2(z, 0, base, lambda _sample: None, PERIOD_S)
+        a, i = S.agents[1].id, 1
+        heard: list[Any] = []
+        sub = out.declare_subscriber(ros2.odom_key(0, a), heard.append)
+        try:
+            time.sleep(0.3)
+            base.integrate(base.vw + [[3.0, 2.0]] * len(base.ids))  # (v, ω) beyond the world's limits: saturated
+            assert tuple(base.vw[i]) == (1.0, 0.5)
+            before = time.time_ns()
+            world.publish(wire.State(a, 7, 0.375, 4.0, -5.0, 0.25, 4.5, -5.0))
+            assert before <= world.published_ns[7] <= time.time_ns()
+            [sample] = _wait(lambda: [heard.pop(0)] if heard else [], 1)
+            assert ros2.odom_from_ros(sample.payload.to_bytes(), a) == ros2.Odom(a, 0.375, 4.0, -5.0, 0.25, 1.0, 0.5)
+            for k in range(8, 8 + 2 * world.keep_ticks):
+                world.publish(wire.State(a, k, k * PERIOD_S, 0.0, 0.0, 0.0, 0.5, 0.0))
+            newest = 8 + 2 * world.keep_ticks - 1
+            assert sorted(world.published_ns) == list(range(newest - world.keep_ticks + 1, newest + 1))
+            assert world.keep_ticks > base.hold_ticks + 1  # (past the plant's poses: a command dated so is stale)
+        finally:
+            sub.undeclare()
             world.close()
 
 
@@ -141,7 +177,7 @@ def test_an_agent_sends_no_command_planned_from_odometry_older_than_a_period() -
             assert not agent.command(wire.Cmd(a, 5, 1.0, 0.0), period_s)  # its odometry 10 s old: not sent
             assert not agent.command(wire.Cmd(a, 7, 1.0, 0.0), period_s)  # no odometry of that tick
             assert agent.command(wire.Cmd(a, 6, 1.0, 0.0), period_s)
-            assert agent.stale == 2 and agent.cmd_out == 1
+            assert agent.stale == 2
             [sent] = _wait(lambda: [cmd_vels.pop(0)] if cmd_vels else [], 1)
             stamp = ros2.unpack_attachment(sent.attachment.to_bytes()).source_timestamp_ns
             assert now <= stamp <= now + period_s * 1e9  # (what the plant dates it by: tick 6's, within a period)
@@ -149,3 +185,67 @@ def test_an_agent_sends_no_command_planned_from_odometry_older_than_a_period() -
         finally:
             sub.undeclare()
             agent.close()
+
+
+@pytest.fixture
+def agent() -> Iterator[AgentRos2]:
+    """Agent 1's ROS 2 side on a session of its own (the tests note each odometry's time as its subscription
+    would, `Ros2Node.sent`)."""
+    z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{free_port()}",), "peer").config())
+    a = AgentRos2(z, 0, 1, 0.5, S.meta.dt_s, lambda _sample: None)
+    try:
+        yield a
+    finally:
+        a.close()
+        z.close()
+
+
+def odometry(agent: AgentRos2, k: int, sent_ns: int, x: float = 3.0, y: float = -2.0, theta: float = 0.7) -> bytes:
+    """Agent 1's odometry of tick k as the plant publishes it, noted as published at sent_ns."""
+    payload = ros2.odom_to_ros(ros2.Odom(1, k * S.meta.dt_s, x, y, theta, 0.0, 0.0))
+    agent.node.sent.note(payload, sent_ns)
+    return payload
+
+
+def test_an_odometry_is_the_state_of_its_tick_with_the_head_point_l_ahead_of_the_body(agent: AgentRos2) -> None:
+    m = agent.decode(agent.odom_key, odometry(agent, 7, 10**18))
+    assert isinstance(m, wire.State)
+    assert (m.id, m.k, m.t, m.x, m.y, m.theta) == (1, 7, 7 * S.meta.dt_s, 3.0, -2.0, 0.7)
+    assert (m.px, m.py) == (3.0 + 0.5 * math.cos(0.7), -2.0 + 0.5 * math.sin(0.7))  # p = s + l [cos θ, sin θ]
+    assert agent.published_ns == {7: 10**18}
+    other = ros2.odom_to_ros(ros2.Odom(2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))  # robot 2's frame on our topic
+    bad = agent.decode(agent.odom_key, other)
+    assert isinstance(bad, Invalid) and bad.key == agent.odom_key and "of agent 2 on the topic of agent 1" in bad.reason
+    assert agent.published_ns == {7: 10**18}
+    agent.node.bad_attachments = 2
+    assert agent.take_invalid() == [Invalid(agent.odom_key, "odometry without a valid rmw_zenoh attachment")] * 2
+    assert agent.take_invalid() == []
+
+
+def test_the_newest_odometries_times_are_kept(agent: AgentRos2) -> None:
+    for k in range(KEEP_TICKS + 5):
+        agent.decode(agent.odom_key, odometry(agent, k, 10**18 + k))
+    assert sorted(agent.published_ns) == list(range(5, KEEP_TICKS + 5))
+
+
+def test_a_command_goes_out_up_to_exactly_one_period_after_its_odometry_and_is_stamped_when_sent(
+        agent: AgentRos2, caplog: pytest.LogCaptureFixture) -> None:
+    t0, period_s = 10**18, 0.0125  # (--speed 4)
+    stamps: list[int] = []  # (the source timestamp of each cmd_vel put)
+    attach = agent.cmd_vel.publication.next_attachment
+
+    def stamped(now_ns: int) -> bytes:
+        stamps.append(now_ns)
+        return attach(now_ns)
+
+    agent.cmd_vel.publication.next_attachment = stamped  # type: ignore[method-assign]
+    agent.decode(agent.odom_key, odometry(agent, 3, t0))
+    with caplog.at_level("WARNING"):
+        assert not agent.command(wire.Cmd(1, 3, 1.0, 0.0), period_s, t0 + 12_500_001)
+        assert not agent.command(wire.Cmd(1, 4, 1.0, 0.0), period_s, t0)  # no odometry of tick 4 (yet)
+    assert agent.stale == 2 and stamps == []
+    said = [r.getMessage() for r in caplog.records]
+    assert said == ["agent 1: a command not sent: planned from odometry published 12.5 ms ago, more than 12.5 ms "
+                    "(the machine is behind the clock) [total 1]"]  # (then at most one line every 5 s)
+    assert agent.command(wire.Cmd(1, 3, 1.0, 0.0), period_s, t0 + 12_500_000)
+    assert stamps == [t0 + 12_500_000] and agent.stale == 2  # (sent once, stamped when it was judged)
