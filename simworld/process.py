@@ -108,8 +108,10 @@ class WorldPort(Member):
         a malformed one is Invalid (counted)."""
         try:
             if self.ros2 is not None and self.ros2.owns(key):
-                c = self.ros2.decode(key, payload, self.gate.world_k)
-                return Command(c, at_s) if self.gate.admit_twist(c, source, key, at_s) else None
+                c, sent_ns = self.ros2.decode(key, payload, self.gate.world_k)
+                if not self.gate.admit_twist(c, source, key, at_s):  # (first: a forger's timestamp is no excuse)
+                    return None
+                return Command(self.ros2.dated(c, sent_ns), at_s)
             what, aid, leaf = self.keys.parse(key)
             if what == "alive":
                 if leaf == "monitor":

@@ -19,6 +19,7 @@ ROS 2 topics carry no tick, so ROS 2 mode is realtime only. `WorldRos2` is the t
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Any
 
@@ -99,15 +100,19 @@ class WorldRos2:
     def owns(self, key: str) -> bool:
         return key in self.agent_of
 
-    def decode(self, key: str, payload: bytes, k: int) -> wire.Cmd:
-        """A cmd_vel sample as robot i's command of the tick it was planned from at the earliest (`planned_tick`;
-        k: the newest tick published); Ros2Error when it must be dropped. The port admits it (bounded, from
-        agent i's session) before the node holds it."""
+    def decode(self, key: str, payload: bytes, k: int) -> tuple[wire.Cmd, int | None]:
+        """A cmd_vel sample as robot i's command of tick k (the newest published), and when it was sent (its
+        attachment's source timestamp; None: unnoted); Ros2Error when it must be dropped. The port admits it
+        (bounded, from agent i's session), then has it `dated` before the node holds it."""
         v, om = ros2.twist_from_ros(payload)
-        sent_ns = self.node.sent.take(payload)
+        return wire.Cmd(self.agent_of[key], k, v, om), self.node.sent.take(payload)
+
+    def dated(self, c: wire.Cmd, sent_ns: int | None) -> wire.Cmd:
+        """An admitted cmd_vel as the command of the tick it was planned from at the earliest (`planned_tick`;
+        Ros2Error: sent too long after any odometry)."""
         if sent_ns is None:  # (its attachment was checked on arrival: one whose time went unnoted is stale)
-            return wire.Cmd(self.agent_of[key], k - self.keep_ticks, v, om)
-        return wire.Cmd(self.agent_of[key], planned_tick(self.published_ns, sent_ns, self.plan_age_ns), v, om)
+            return dataclasses.replace(c, k=c.k - self.keep_ticks)
+        return dataclasses.replace(c, k=planned_tick(self.published_ns, sent_ns, self.plan_age_ns))
 
     def publish(self, m: wire.State) -> None:
         """A robot's state at this tick as its odometry (body pose; twist = the last step's (v, ω))."""

@@ -24,7 +24,9 @@ from reconswarm.net.node import Invalid
 from reconswarm.net.ros2_node import Ros2Publisher, SentTimes
 from reconswarm.net.session import ZenohOptions
 from reconswarm.scenario.model import load
-from simworld.ros2_io import Ros2Plant, WorldRos2, planned_tick
+from simworld.process import WorldPort
+from simworld.ros2_io import Ros2Plant, Ros2World, WorldRos2, planned_tick
+from simworld.world import Command
 from tests.support import PAPER, free_port
 
 MS = 1_000_000  # ns
@@ -116,14 +118,15 @@ def test_the_plant_dates_a_cmd_vel_by_its_attachments_source_timestamp() -> None
             dated: list[wire.Cmd | str] = []
             for key, payload, *_rest in got:
                 try:
-                    dated.append(world.decode(key, payload, 3))
+                    dated.append(world.dated(*world.decode(key, payload, 3)))
                 except ros2.Ros2Error as exc:
                     dated.append(str(exc))
             assert dated[:3] == [wire.Cmd(a, 1, 1.0, 0.0), wire.Cmd(a, 3, 1.0, 0.0), wire.Cmd(a, 0, 2.0, 0.0)]
             assert "clocks apart" in str(dated[3])
             # A cmd_vel whose time was never noted (none is delivered so): older than any tick a command holds from.
             unnoted = world.decode(ros2.cmd_vel_key(0, a), ros2.twist_to_ros(0.5, -0.25), 3)
-            assert unnoted == wire.Cmd(a, 3 - world.keep_ticks, 0.5, -0.25)
+            assert unnoted == (wire.Cmd(a, 3, 0.5, -0.25), None)  # (as the gate judges it: of the newest tick)
+            assert world.dated(*unnoted) == wire.Cmd(a, 3 - world.keep_ticks, 0.5, -0.25)
             world.node.bad_attachments = 2
             assert (world.new_bad_attachments(), world.new_bad_attachments()) == (2, 0)
         finally:
@@ -155,6 +158,29 @@ def test_the_plant_publishes_each_robots_odometry_and_keeps_when_each_tick_was_o
         finally:
             sub.undeclare()
             world.close()
+
+
+def test_the_world_admits_a_cmd_vel_before_it_dates_it_so_a_forgers_timestamp_is_an_impersonation() -> None:
+    z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{free_port()}",), "peer").config())
+    port = WorldPort(Ros2World(S, speed=1.0), "plan-age", z, 0)
+    try:
+        assert port.ros2 is not None
+        a = S.agents[0].id
+        port.ros2.publish(wire.State(a, 0, 0.0, 0.0, 0.0, 0.0, 0.5, 0.0))
+        port.gate.world_k = 0  # (tick 0 out, as its clock says)
+        key, genuine, forged = ros2.cmd_vel_key(0, a), ros2.twist_to_ros(1.0, 0.0), ros2.twist_to_ros(2.0, 0.0)
+        port.ros2.node.sent.note(genuine, port.ros2.published_ns[0] + MS)
+        assert port.decode(key, genuine, "PUT", "agent-session", 0.0) == Command(wire.Cmd(a, 0, 1.0, 0.0), 0.0)
+        port.ros2.node.sent.note(forged, port.ros2.published_ns[0] + 10**12)  # "sent" 1000 s on: no odometry so old
+        assert port.decode(key, forged, "PUT", "forger", 0.0) is None
+        assert port.gate.count == 1 and set(port.gate.tally.rows) == {("impersonation", "forger")}
+        assert port.rej.count == 0
+        port.ros2.node.sent.note(forged, port.ros2.published_ns[0] + 10**12)  # from the agent's own session: invalid
+        got = port.decode(key, forged, "PUT", "agent-session", 0.0)
+        assert isinstance(got, Invalid) and "clocks apart" in got.reason and port.rej.count == 1
+    finally:
+        port.close()
+        z.close()
 
 
 def test_an_agent_sends_no_command_planned_from_odometry_older_than_a_period() -> None:
