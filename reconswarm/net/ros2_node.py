@@ -73,11 +73,9 @@ class Ros2Publisher:
         self.publication = ros2.Publication(key)
         self.pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
 
-    def put(self, payload: bytes, now_ns: int | None = None) -> int:
-        """Publish with the attachment's source timestamp `now_ns` (None: now); returns it."""
-        now_ns = time.time_ns() if now_ns is None else now_ns
-        self.pub.put(payload, attachment=self.publication.next_attachment(now_ns))
-        return now_ns
+    def put(self, payload: bytes, now_ns: int | None = None) -> None:
+        """Publish with the attachment's source timestamp `now_ns` (ns since the epoch; None: now)."""
+        self.pub.put(payload, attachment=self.publication.next_attachment(time.time_ns() if now_ns is None else now_ns))
 
 
 class Ros2Node:
