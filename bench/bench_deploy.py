@@ -75,36 +75,35 @@ def launch(out: Path, scen: Path, port: int, *extra: str, timeout: float = 1800,
     return json.loads(p.stdout)
 
 
+def exit_lines(out: Path) -> dict[Path, dict[str, float]]:
+    """Each process's exit line `usage: {...}` (CPU seconds, peak RSS, and messages in where logged), by its log
+    (a process killed by SIGKILL writes none)."""
+    return {log: ast.literal_eval(m[-1]) for log in (out / "logs").glob("*.log")
+            if (m := re.findall(r"usage: (\{.*\})", log.read_text(errors="replace")))}
+
+
 def role_usage(out: Path) -> dict[str, list[dict[str, float]]]:
-    """Each process's exit line `usage: {...}` (CPU seconds, peak RSS, and messages in where logged), by role;
-    an agent host's (logs/agent-1-5.log) as a K-th of it for each of its K agents (peak RSS: the host's)."""
+    """The exit lines by role; an agent host's (logs/agent-1-5.log) as a K-th of it for each of its K agents (peak
+    RSS: the host's)."""
     roles: dict[str, list[dict[str, float]]] = {}
-    for log in (out / "logs").glob("*.log"):
-        m = re.findall(r"usage: (\{.*\})", log.read_text(errors="replace"))
-        if m:
-            role, _, ids = log.stem.partition("-")
-            use = ast.literal_eval(m[-1])
-            k = len(parse_ids(None, ids)) if role == "agent" else 1
-            share = {key: (v if key == "max_rss_mb" else v / k) for key, v in use.items()}
-            roles.setdefault(role, []).extend([share] * k)
+    for log, use in exit_lines(out).items():
+        role, _, ids = log.stem.partition("-")
+        k = len(parse_ids(None, ids)) if role == "agent" else 1
+        share = {key: (v if key == "max_rss_mb" else v / k) for key, v in use.items()}
+        roles.setdefault(role, []).extend([share] * k)
     return roles
-
-
-def exit_usages(out: Path) -> list[dict[str, float]]:
-    """Each of the run's processes' resource usage from its exit line (a process killed by SIGKILL writes none)."""
-    return [ast.literal_eval(m[-1]) for log in (out / "logs").glob("*.log")
-            if (m := re.findall(r"usage: (\{.*\})", log.read_text(errors="replace")))]
 
 
 def peak_rss_mb(out: Path) -> tuple[float, int]:
     """The sum over the run's processes of each one's peak RSS (its exit line), and how many processes logged one."""
-    rss = [use.get("max_rss_mb", 0.0) for use in exit_usages(out)]
+    rss = [use.get("max_rss_mb", 0.0) for use in exit_lines(out).values()]
     return float(sum(rss)), len(rss)
 
 
-def cpu_s(out: Path) -> float:
-    """CPU seconds (user + sys) of all the run's processes, from their exit lines."""
-    return float(sum(use["cpu_user_s"] + use["cpu_sys_s"] for use in exit_usages(out)))
+def cpu_s(out: Path) -> tuple[float, int]:
+    """CPU seconds (user + sys) of all the run's processes, from their exit lines, and how many logged one."""
+    uses = exit_lines(out).values()
+    return float(sum(use["cpu_user_s"] + use["cpu_sys_s"] for use in uses)), len(uses)
 
 
 def hosts_agents(checkout: Path) -> bool:
@@ -312,10 +311,11 @@ def main() -> int:
                     except RuntimeError as exc:  # (a checkout that refuses --ros2 with agent hosts)
                         print(f"{name[-12:]:>12s} {fault or '-':>16s} {str(exc).splitlines()[-1][:80]}", flush=True)
                         continue
+                    cpu, procs = cpu_s(out)
                     print(f"{name[-12:]:>12s} {fault or '-':>16s} {s['converged']!s:>9s} "
                           f"{s['convergence_time_s'] or float('nan'):7.2f} {s.get('missed_deadline_ratio', 0):7.2%} "
                           f"{s.get('latency_p50_ms', 0):7.2f} {s.get('latency_p99_ms', 0):7.2f} {s['collisions']:10d} "
-                          f"{len(s['agents_lost']):5d} {cpu_s(out):7.1f} {peak_rss_mb(out)[1]:5d}", flush=True)
+                          f"{len(s['agents_lost']):5d} {cpu:7.1f} {procs:5d}", flush=True)
         if args.realtime_agents:
             print(f"\n## realtime at --speed 1 (20 Hz) on the grid, {args.realtime_sim_s:g} s per run")
             print(f"{'version':>12s} {'N':>4s} {'missed':>7s} {'ratio':>7s} {'lat p50 ms':>10s} {'lat p99 ms':>10s}")
