@@ -74,10 +74,12 @@ def run(cfg: AgentConfig) -> int:
     rejs = {a: Rejections(f"agent {a}") for a in ids}
     keys = Keys(cfg.run_id or s.meta.name)
     who = _who(ids)
+    zid: str | None = None  # our session's id, kept by the sessions that replace it
     while True:
-        with serving(cfg.zenoh, who, cfg.timing.session_open_timeout_s) as (session, stop):
+        with serving(cfg.zenoh, who, cfg.timing.session_open_timeout_s, zid) as (session, stop):
+            zid = str(session.info.zid())
             inbox = TaggedInbox()
-            own = str(session.info.zid()) if len(ids) > 1 else None  # co-hosted agents hear us through it
+            own = zid if len(ids) > 1 else None  # co-hosted agents hear us through it
             links = {a: AgentLink(nodes[a], keys, session, rejs[a], gates[a], cfg.ros2_domain_id, own,
                                   inbox.callback(("own", a), urgent=True)) for a in ids}
             host = AgentHost(session, keys, links, inbox)
@@ -93,7 +95,9 @@ def run(cfg: AgentConfig) -> int:
                 return code
             # A node stopped acting although the mission goes on (seen after a router restart: a route to one of
             # its keys was not restored): a new session re-declares everything; each node keeps all it knows
-            # (peers' last positions, lost peers, knowledge, revisions, escape state).
+            # (peers' last positions, lost peers, knowledge, revisions, escape state). It has the old one's id
+            # (which the old one, closed, gave back): whoever pinned our agents to that session (admission.Pins)
+            # keeps hearing them, even one that takes the old session's last samples late (after its own stall).
             n = min(nodes.values(), key=lambda n: n.last_act)
             log.warning("agent %d: no command for %.0f s%s: opening a new session%s", n.id,
                         time.monotonic() - n.last_act, " (the world's token gone)" if n.world_gone else "",

@@ -10,7 +10,10 @@ knows (head point p = s + l [cos θ, sin θ], tick k = round(t / dt)), and its c
 A Twist carries no tick, so the plant cannot tell which odometry a cmd_vel was planned from; it takes it as
 planned from the oldest it published within `ros2_plan_age_periods` before the cmd_vel was sent (both
 attachments' source timestamps), and the agent keeps to that: a command planned from an odometry published
-longer ago is not sent (`stale`; the robot then holds its last cmd_vel under the plant's rules, then stops).
+longer ago is not sent (`stale`; the robot then holds its last cmd_vel under the plant's rules, then stops). Once
+that hold is over the agent says so itself: a stop (a zero Twist), then one every `ros2_stop_every_s` while it
+sends nothing else, so that the world keeps hearing from it (it counts an agent alive while its cmd_vels come,
+reconswarm/net/membership.py): on a machine behind the clock the robots stand and their agents stay alive.
 """
 
 from __future__ import annotations
@@ -41,6 +44,9 @@ class AgentRos2:
         self.counted = 0
         self.published_ns: dict[int, int] = {}  # tick -> when the plant published its odometry (its attachment)
         self.stale = 0  # commands not sent: planned from an odometry older than `ros2_plan_age_periods`
+        self.stops = 0  # stops sent instead, once the plant's hold was over
+        self.sent_ns: int | None = None  # when the last cmd_vel went out (a plan or a stop)
+        self.stopping = False  # the last one was a stop
         self._told_s = -math.inf
 
     def owns(self, key: str) -> bool:
@@ -64,20 +70,33 @@ class AgentRos2:
     def command(self, c: wire.Cmd, period_s: float, now_ns: int | None = None) -> bool:
         """The node's command, already the unicycle's (v, ω), as a Twist stamped `now_ns` (None: the wall clock's
         now), unless the odometry of its tick was published more than `ros2_plan_age_periods` of `period_s` (the
-        run's period, wall s) before: False, not sent."""
+        run's period, wall s) before: False, not sent; a stop is sent instead once the last cmd_vel is older than
+        the plant's hold (`hold_sim_s`, in wall time at this period), then every `ros2_stop_every_s`."""
         now_ns = time.time_ns() if now_ns is None else now_ns
         basis_ns = self.published_ns.get(c.k)
         budget_ns = self.timing.ros2_plan_age_periods * period_s * 1e9
-        if basis_ns is None or not now_ns - basis_ns <= budget_ns:
-            self.stale += 1
-            if time.monotonic() - self._told_s >= 5.0:
-                self._told_s = time.monotonic()
-                age = "unknown" if basis_ns is None else f"{(now_ns - basis_ns) / 1e6:.1f} ms"
-                log.warning("agent %d: a command not sent: planned from odometry published %s ago, more than %.1f ms "
-                            "(the machine is behind the clock) [total %d]", self.id, age, budget_ns / 1e6, self.stale)
-            return False
-        self.cmd_vel.put(ros2.twist_to_ros(c.v_mps, c.omega_radps), now_ns)
-        return True
+        if basis_ns is not None and now_ns - basis_ns <= budget_ns:
+            self._send(c.v_mps, c.omega_radps, now_ns)
+            self.stopping = False
+            return True
+        self.stale += 1
+        hold_ns = self.timing.hold_sim_s / self.dt * period_s * 1e9
+        wait_ns = self.timing.ros2_stop_every_s * 1e9 if self.stopping else hold_ns
+        if self.sent_ns is None or now_ns - self.sent_ns >= wait_ns:  # (the plant has stopped the robot already)
+            self._send(0.0, 0.0, now_ns)
+            self.stops += 1
+            self.stopping = True
+        if time.monotonic() - self._told_s >= 5.0:
+            self._told_s = time.monotonic()
+            age = "unknown" if basis_ns is None else f"{(now_ns - basis_ns) / 1e6:.1f} ms"
+            log.warning("agent %d: a command not sent: planned from odometry published %s ago, more than %.1f ms "
+                        "(the machine is behind the clock) [total %d; %d stops sent instead]", self.id, age,
+                        budget_ns / 1e6, self.stale, self.stops)
+        return False
+
+    def _send(self, v_mps: float, omega_radps: float, now_ns: int) -> None:
+        self.cmd_vel.put(ros2.twist_to_ros(v_mps, omega_radps), now_ns)
+        self.sent_ns = now_ns
 
     def take_invalid(self) -> list[Invalid]:
         """Samples dropped for their attachment since the last call (for the node to count)."""

@@ -109,10 +109,21 @@ class WorldRos2:
 
     def dated(self, c: wire.Cmd, sent_ns: int | None) -> wire.Cmd:
         """An admitted cmd_vel as the command of the tick it was planned from at the earliest (`planned_tick`;
-        Ros2Error: sent too long after any odometry)."""
+        Ros2Error: sent too long after any odometry). A stop (a zero Twist) sent so late is dated stale instead:
+        it moves nothing, and an agent behind the clock sends one once its robot's hold is over
+        (agent/ros2_io.py), which tells the world it is alive although the plant applies nothing."""
         if sent_ns is None:  # (its attachment was checked on arrival: one whose time went unnoted is stale)
-            return dataclasses.replace(c, k=c.k - self.keep_ticks)
-        return dataclasses.replace(c, k=planned_tick(self.published_ns, sent_ns, self.plan_age_ns))
+            return self.stale(c)
+        try:
+            return dataclasses.replace(c, k=planned_tick(self.published_ns, sent_ns, self.plan_age_ns))
+        except ros2.Ros2Error:
+            if c.v_mps == 0.0 and c.omega_radps == 0.0:
+                return self.stale(c)
+            raise
+
+    def stale(self, c: wire.Cmd) -> wire.Cmd:
+        """c dated older than the plant holds any command (`keep_ticks` before the newest tick)."""
+        return dataclasses.replace(c, k=c.k - self.keep_ticks)
 
     def publish(self, m: wire.State) -> None:
         """A robot's state at this tick as its odometry (body pose; twist = the last step's (v, ω))."""

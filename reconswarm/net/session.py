@@ -82,11 +82,12 @@ class ZenohOptions:
 
 
 @contextmanager
-def serving(opts: ZenohOptions, what: str,
-            timeout_s: float = TIMING.session_open_timeout_s) -> Iterator[tuple[Any, Stopper]]:
-    """A process's session and its SIGINT/SIGTERM flag; the session is closed however the body ends."""
+def serving(opts: ZenohOptions, what: str, timeout_s: float = TIMING.session_open_timeout_s,
+            zid: str | None = None) -> Iterator[tuple[Any, Stopper]]:
+    """A process's session and its SIGINT/SIGTERM flag; the session is closed however the body ends. zid: the
+    session's id (that of a session the process closed, which it replaces; None: a fresh one)."""
     stop = Stopper()
-    session = open_session(opts, what, timeout_s)
+    session = open_session(opts, what, timeout_s, zid)
     try:
         yield session, stop
     finally:
@@ -104,15 +105,20 @@ class Member:
             self.token.undeclare()
 
 
-def open_session(opts: ZenohOptions, what: str, timeout_s: float = TIMING.session_open_timeout_s) -> Any:
-    """Open a session, retrying until the router answers or the timeout passes (then ProcessFailure)."""
+def open_session(opts: ZenohOptions, what: str, timeout_s: float = TIMING.session_open_timeout_s,
+                 zid: str | None = None) -> Any:
+    """Open a session, retrying until the router answers or the timeout passes (then ProcessFailure). zid: its id
+    (a router refuses it while it still holds a session of that id: until that one's close or lease is through)."""
     import zenoh
 
     deadline = time.monotonic() + timeout_s
     last: Exception | None = None
     while time.monotonic() < deadline:
         try:
-            return zenoh.open(opts.config())
+            conf = opts.config()
+            if zid is not None:
+                conf.insert_json5("id", json.dumps(zid))
+            return zenoh.open(conf)
         except BadInput:
             raise
         except Exception as exc:  # zenoh.ZError: router not up yet, port in use, ...

@@ -44,6 +44,11 @@ class Timing:
     # cmd_vel as planned from the oldest tick it published within that long before the cmd_vel was sent (a Twist
     # has no tick: simworld/ros2_io.py), and holds it as the project's own mode holds a command of that tick.
     ros2_plan_age_periods: float = 1.0
+    # ROS 2 mode: an agent that sends none for that reason sends a stop (a zero Twist) once its robot's hold is
+    # over, then this often while it still sends none: its heartbeat for the world, well inside the world's 2 s
+    # of silence after which an agent with a token is not counted alive (admission.Membership); a stop counts as
+    # its robot's command in the missed-deadline ratio, so it is sent no more often than that.
+    ros2_stop_every_s: float = 0.5
     # While not commanding for more than `waiting_log_s`, log what the next tick lacks, this often.
     waiting_log_s: float = 1.0
     # With nothing queued, the agent looks again after this long.

@@ -114,6 +114,13 @@ def test_the_plant_dates_a_cmd_vel_by_its_attachments_source_timestamp() -> None
             unnoted = world.decode(ros2.cmd_vel_key(0, a), ros2.twist_to_ros(0.5, -0.25), 3)
             assert unnoted == (wire.Cmd(a, 3, 0.5, -0.25), None)  # (as the gate judges it: of the newest tick)
             assert world.dated(*unnoted) == wire.Cmd(a, 3 - world.keep_ticks, 0.5, -0.25)
+            # A stop sent after any odometry it may be planned from (an agent behind the clock, its hold over): stale,
+            # which moves nothing but tells the world the agent is alive; any other Twist so late is refused.
+            late = world.published_ns[3] + 200 * MS
+            assert world.dated(wire.Cmd(a, 3, 0.0, 0.0), late) == wire.Cmd(a, 3 - world.keep_ticks, 0.0, 0.0)
+            with pytest.raises(ros2.Ros2Error, match="clocks apart"):
+                world.dated(wire.Cmd(a, 3, 0.0, 0.01), late)
+            assert world.dated(wire.Cmd(a, 3, 0.0, 0.0), world.published_ns[2] + MS) == wire.Cmd(a, 2, 0.0, 0.0)
             world.node.bad_attachments = 2
             assert (world.new_bad_attachments(), world.new_bad_attachments()) == (2, 0)
         finally:
@@ -187,11 +194,12 @@ def test_an_agent_sends_no_command_planned_from_odometry_older_than_a_period() -
             states = [agent.decode(str(s.key_expr), s.payload.to_bytes()) for s in got]
             assert [m.k if isinstance(m, wire.State) else m for m in states] == [5, 6]
             period_s = 2.0  # (--speed 0.025: room for this test's own delays)
-            assert not agent.command(wire.Cmd(a, 5, 1.0, 0.0), period_s)  # its odometry 10 s old: not sent
-            assert not agent.command(wire.Cmd(a, 7, 1.0, 0.0), period_s)  # no odometry of that tick
-            assert agent.command(wire.Cmd(a, 6, 1.0, 0.0), period_s)
-            assert agent.stale == 2
-            [sent] = _wait(lambda: [cmd_vels.pop(0)] if cmd_vels else [], 1)
+            assert not agent.command(wire.Cmd(a, 5, 1.0, 0.0), period_s)  # its odometry 10 s old: a stop instead
+            assert not agent.command(wire.Cmd(a, 7, 1.0, 0.0), period_s)  # no odometry of that tick (and a stop
+            assert agent.command(wire.Cmd(a, 6, 1.0, 0.0), period_s)  # went out less than a hold ago: nothing)
+            assert (agent.stale, agent.stops) == (2, 1)
+            stop, sent = _wait(lambda: [cmd_vels.pop(0)] if cmd_vels else [], 2)
+            assert ros2.twist_from_ros(stop.payload.to_bytes()) == (0.0, 0.0)
             stamp = ros2.unpack_attachment(sent.attachment.to_bytes()).source_timestamp_ns
             assert now <= stamp <= now + period_s * 1e9  # (what the plant dates it by: tick 6's, within a period)
             assert ros2.twist_from_ros(sent.payload.to_bytes()) == (1.0, 0.0)
@@ -253,12 +261,34 @@ def test_a_command_goes_out_up_to_exactly_one_period_after_its_odometry_and_is_s
 
     agent.cmd_vel.publication.next_attachment = stamped  # type: ignore[method-assign]
     agent.decode(agent.odom_key, odometry(agent, 3, t0))
+    agent.sent_ns = t0  # (a cmd_vel went out then: the plant holds it for 0.2 s of simulated time, 50 ms here)
     with caplog.at_level("WARNING"):
         assert not agent.command(wire.Cmd(1, 3, 1.0, 0.0), period_s, t0 + 12_500_001)
         assert not agent.command(wire.Cmd(1, 4, 1.0, 0.0), period_s, t0)  # no odometry of tick 4 (yet)
-    assert agent.stale == 2 and stamps == []
+    assert (agent.stale, agent.stops) == (2, 0) and stamps == []
     said = [r.getMessage() for r in caplog.records]
     assert said == ["agent 1: a command not sent: planned from odometry published 12.5 ms ago, more than 12.5 ms "
-                    "(the machine is behind the clock) [total 1]"]  # (then at most one line every 5 s)
+                    "(the machine is behind the clock) [total 1; 0 stops sent instead]"]  # (then one every 5 s)
     assert agent.command(wire.Cmd(1, 3, 1.0, 0.0), period_s, t0 + 12_500_000)
     assert stamps == [t0 + 12_500_000] and agent.stale == 2  # (sent once, stamped when it was judged)
+
+
+def test_an_agent_behind_the_clock_sends_a_stop_once_the_plants_hold_is_over_then_every_half_second(
+        agent: AgentRos2) -> None:
+    t0, period_s = 10**18, 0.0125  # (--speed 4: the hold, 0.2 s simulated, is 50 ms of wall time)
+    sent: list[tuple[int | None, tuple[float, float]]] = []
+    agent.cmd_vel.put = lambda payload, now_ns=None: sent.append(  # type: ignore[method-assign]
+        (now_ns, ros2.twist_from_ros(payload)))
+    agent.decode(agent.odom_key, odometry(agent, 3, t0))
+    assert agent.command(wire.Cmd(1, 3, 0.8, 0.1), period_s, t0 + 5 * MS)  # a plan, in time
+    late = [t0 + d * MS for d in (20, 54, 55, 70, 554, 555, 1055)]
+    assert not any(agent.command(wire.Cmd(1, 3, 0.8, 0.1), period_s, at) for at in late)  # (odometry 20+ ms old)
+    assert sent == [(t0 + 5 * MS, (0.8, 0.1)), (t0 + 55 * MS, (0.0, 0.0)), (t0 + 555 * MS, (0.0, 0.0)),
+                    (t0 + 1055 * MS, (0.0, 0.0))]
+    agent.decode(agent.odom_key, odometry(agent, 4, t0 + 1100 * MS))
+    assert agent.command(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1101 * MS)  # in time again
+    assert not agent.command(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1150 * MS)  # (late, within the hold)
+    assert agent.command(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1105 * MS)
+    assert not agent.command(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1155 * MS)  # the hold over: a stop
+    assert sent[4:] == [(t0 + 1101 * MS, (0.5, 0.0)), (t0 + 1105 * MS, (0.5, 0.0)), (t0 + 1155 * MS, (0.0, 0.0))]
+    assert (agent.stale, agent.stops, agent.sent_ns) == (9, 4, t0 + 1155 * MS)

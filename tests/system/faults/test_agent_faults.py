@@ -55,3 +55,5 @@ def test_dead_robot_is_still_avoided_after_a_world_stall(out: Path) -> None:
     assert s["collisions"] == 0 and 3 in s["agents_lost"] and s["converged"], s
     logs = [(out / "logs" / f"agent-{a}.log").read_text() for a in (1, 2, 4, 5, 6, 7, 8, 9, 10)]
     assert sum("opening a new session" in text for text in logs) >= 5  # the safety net did fire
+    # ... and a session that replaced one of ours is not taken for an impersonator (before: 9 refused, one per agent).
+    assert s["intrusions"] == 0, s["intrusions_by_kind"]

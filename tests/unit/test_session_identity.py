@@ -1,0 +1,50 @@
+"""A session that replaces one the process closed keeps its id (reconswarm/net/session.py `open_session(zid=)`,
+agent/process.py): whoever pinned an agent to the old session's id (admission.Pins) keeps hearing it through the
+new one. Real zenoh sessions on 127.0.0.1: a router, a listener and the replaced client."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from reconswarm.net.inbox import sample_source
+from reconswarm.net.session import ZenohOptions, open_session
+from tests.support import free_port
+
+
+def _wait(got: list[Any], n: int) -> None:
+    deadline = time.monotonic() + 5.0
+    while len(got) < n and time.monotonic() < deadline:
+        time.sleep(0.02)
+
+
+def test_a_replacing_session_speaks_with_the_closed_ones_id() -> None:
+    port = free_port()
+    router = open_session(ZenohOptions((), (f"tcp/127.0.0.1:{port}",), "router"), "router", timeout_s=10.0)
+    client = ZenohOptions.build([f"tcp/127.0.0.1:{port}"], None, "client", None)
+    listener = open_session(client, "listener", timeout_s=10.0)
+    got: list[str] = []
+    sub = listener.declare_subscriber("id/**", lambda sample: got.append(sample_source(sample)))
+    try:
+        first = open_session(client, "agent", timeout_s=10.0)
+        zid = str(first.info.zid())
+        time.sleep(0.3)
+        first.put("id/a", b"1")
+        _wait(got, 1)
+        first.close()
+        second = open_session(client, "agent", timeout_s=10.0, zid=zid)
+        try:
+            assert str(second.info.zid()) == zid
+            time.sleep(0.3)
+            second.put("id/a", b"2")
+            _wait(got, 2)
+        finally:
+            second.close()
+        fresh = open_session(client, "agent", timeout_s=10.0)
+        assert str(fresh.info.zid()) != zid
+        fresh.close()
+        assert got == [zid, zid]
+    finally:
+        sub.undeclare()
+        listener.close()
+        router.close()
