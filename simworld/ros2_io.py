@@ -113,15 +113,15 @@ class WorldRos2:
         it moves nothing, and an agent behind the clock sends one once its robot's hold is over
         (agent/ros2_io.py), which tells the world it is alive although the plant applies nothing."""
         if sent_ns is None:  # (its attachment was checked on arrival: one whose time went unnoted is stale)
-            return self.stale(c)
+            return self.dated_stale(c)
         try:
             return dataclasses.replace(c, k=planned_tick(self.published_ns, sent_ns, self.plan_age_ns))
         except ros2.Ros2Error:
             if c.v_mps == 0.0 and c.omega_radps == 0.0:
-                return self.stale(c)
+                return self.dated_stale(c)
             raise
 
-    def stale(self, c: wire.Cmd) -> wire.Cmd:
+    def dated_stale(self, c: wire.Cmd) -> wire.Cmd:
         """c dated older than the plant holds any command (`keep_ticks` before the newest tick)."""
         return dataclasses.replace(c, k=c.k - self.keep_ticks)
 

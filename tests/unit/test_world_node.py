@@ -269,7 +269,7 @@ def test_in_ros2_mode_a_stop_dated_stale_keeps_its_agent_alive_and_moves_nothing
     t, stood = 0.0, []
     while t < 11.0:
         t = round(t + 0.025, 3)
-        inputs = [m for m in commands(node.k, (0.5, 0.0), t) if m.cmd.id not in (stopper, silent)]  # type: ignore[union-attr]
+        inputs = commands(node.k, (0.5, 0.0), t, skip=(stopper, silent))
         if t % 0.5 == 0:
             inputs.append(Command(wire.Cmd(stopper, node.k - stale, 0.0, 0.0), t))
         node.step(inputs, t)
