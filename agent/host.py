@@ -40,7 +40,7 @@ from agent.brain import Plan, commands
 from agent.link import PEER_MESSAGES, AgentLink, Decoded, decode_sample
 from agent.messages import Input, Law, Reconnect
 from agent.neighbours import Cells
-from reconswarm.net import wire
+from reconswarm.net import trace, wire
 from reconswarm.net.cells import Cell, chunk_cell
 from reconswarm.net.inbox import Inbox, Item, to_item
 from reconswarm.net.keys import Keys
@@ -252,12 +252,14 @@ class AgentHost:
                  sent: wire.Beacon | None = None) -> None:
         """Hand one sample to the agents it is for (`only`: to that one alone); `sent`: the co-hosted agent's beacon
         the sample was put from (its bytes decode to it: not decoded again)."""
-        key, payload, kind, source, _at = item
+        key, payload, kind, source, at_s = item
         if tag[0] == "own":
             link = self.active.get(tag[1])
             mine = None if link is None else link.decode(key, payload, kind, source)
             if mine is not None:
                 batches[tag[1]].append(mine)
+                if isinstance(mine, wire.State):
+                    trace.mark(trace.Mark.STATE_IN, mine.k, mine.id, at_s)
             return
         if tag == ALL:
             who = list(self.active)
@@ -301,6 +303,8 @@ class AgentHost:
             if got is not None:
                 batches[aid].append(got)
                 admitted = admitted or got is m
+        if admitted and isinstance(m, wire.Beacon):
+            trace.mark(trace.Mark.BEACON_IN, m.k, m.id, at_s)
         # Kept for an agent that starts listening to its cell later: a set some hosted agent admitted (a co-hosted
         # agent's own is kept by `act`), never one that was refused (it would stand in for the genuine one).
         if (admitted and forged is None and isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known

@@ -20,7 +20,7 @@ from agent.messages import Heard, Output
 from agent.neighbours import Cells
 from agent.node import AgentNode
 from agent.ros2_io import AgentRos2
-from reconswarm.net import wire
+from reconswarm.net import trace, wire
 from reconswarm.net.admission import Intrusion, IntrusionKind
 from reconswarm.net.cells import Cell
 from reconswarm.net.gate import Gate
@@ -163,9 +163,11 @@ class AgentLink(Member):
                 self.ros2.command(out, self.node.period_s)
             elif self.pub_cmd is not None:
                 self.pub_cmd.put(wire.cmd_to_wire(out))
+                trace.mark(trace.Mark.CMD_PUT, out.k, out.id)
         elif isinstance(out, wire.Beacon):
             payload = wire.beacon_to_wire(out)
             self.pub_beacon.put(payload)
+            trace.mark(trace.Mark.BEACON_PUT, out.k, out.id)
             assert self.home is not None
             return self.keys.beacon(self.home, self.id), payload
         elif isinstance(out, wire.ObstacleSet):

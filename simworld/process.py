@@ -21,7 +21,7 @@ import zenoh
 from zenoh import ext
 
 from reconswarm.errors import BadInput
-from reconswarm.net import ros2, wire
+from reconswarm.net import ros2, trace, wire
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Inbox, Item, Rejections
 from reconswarm.net.keys import Keys, WireError
@@ -111,7 +111,9 @@ class WorldPort(Member):
                 c, sent_ns = self.ros2.decode(key, payload, self.gate.world_k)
                 if not self.gate.admit_twist(c, source, key, at_s):  # (first: a forger's timestamp is no excuse)
                     return None
-                return Command(self.ros2.dated(c, sent_ns), at_s)
+                c = self.ros2.dated(c, sent_ns)
+                trace.mark(trace.Mark.CMD_IN, c.k, c.id, at_s)
+                return Command(c, at_s)
             what, aid, leaf = self.keys.parse(key)
             if what == "alive":
                 if leaf == "monitor":
@@ -120,7 +122,10 @@ class WorldPort(Member):
             if what != "agent" or leaf != "cmd" or aid is None:
                 return None
             c = wire.cmd_from_wire(payload, aid)
-            return Command(c, at_s) if self.gate.admit(c, source, key, at_s) else None
+            if not self.gate.admit(c, source, key, at_s):
+                return None
+            trace.mark(trace.Mark.CMD_IN, c.k, c.id, at_s)
+            return Command(c, at_s)
         except (ros2.Ros2Error, WireError) as exc:
             return self._invalid(key, str(exc))
 
@@ -133,6 +138,7 @@ class WorldPort(Member):
     def act(self, who: Any, out: WorldOutput, now_s: float) -> bool:
         """Put what the node returned under its key (in ROS 2 mode a state as odometry, its scan on its own key)."""
         if isinstance(out, wire.Clock):
+            trace.mark(trace.Mark.CLOCK_PUT, out.k, 0)
             self.pub_clock.put(wire.clock_to_wire(out))
             self.gate.world_k, self.gate.t = out.k, out.t  # (the newest tick published; the intrusions' first_t)
         elif isinstance(out, wire.Truth):
@@ -144,6 +150,7 @@ class WorldPort(Member):
                 self.ros2.publish(out)
                 if out.scan is not None:
                     self.pub_scan[out.id].put(wire.scan_to_wire(out.scan))
+            trace.mark(trace.Mark.STATE_PUT, out.k, out.id)
         return False
 
     def idle(self, who: Any, now_s: float) -> None:

@@ -1,0 +1,140 @@
+"""Where a lockstep tick's wall time goes: the serial path of one run, segment by segment.
+
+Each tick the world puts its clock and every robot's state; a state reaches its agent's process (its host); the
+host puts each of its agents' beacons; the beacons of agents in other processes come back; the host plans and
+puts the commands; the commands reach the world, which steps the robots and puts the next tick. The run's
+processes stamp each put and each arrival with the monotonic clock (reconswarm/net/trace.py, on while
+RECONSWARM_TRACE_DIR names a directory); this script runs the mission with that on and prints each segment's
+median and mean over the ticks (past the first `--skip-ticks`) and the hosts, one column per
+`--agents-per-process` value, with the run's wall time and the tracing's own cost left in it (a row per mark).
+
+    .venv/bin/python bench/tick_path.py                              # the paper at K = 5
+    .venv/bin/python bench/tick_path.py --agents-per-process 1 5 10
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+from collections import defaultdict
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import command_line, machine
+from bench_deploy import PAPER, free_port, launch
+
+from reconswarm.net.trace import ENV, Mark
+
+Events = dict[tuple[str, int], dict[int, float]]  # (mark, tick) -> agent -> seconds (the first, if several)
+
+KINDS = {"world": "the world computing", "host": "a host computing", "hop": "samples travelling (and waits)"}
+SEGMENTS = (  # (name, kind); the kinds' sums are a rough split of a tick, not its median
+    ("world: clock put -> last state put", "world"),
+    ("state: put -> arrival in its host", "hop"),
+    ("host: last own state in -> last own beacon put", "host"),
+    ("host: last own beacon put -> last beacon of another process in (0: in already)", "hop"),
+    ("host: beacons in -> last command put", "host"),
+    ("command: put -> arrival in the world", "hop"),
+    ("world: last command in -> next clock put", "world"),
+    ("tick: clock put -> next clock put", "tick"),
+    ("beacon: put -> arrival in another process (beside the path)", "beside"),
+)
+
+
+def read(directory: Path) -> dict[int, Events]:
+    """Each process's marks (by pid) from the trace files in `directory`."""
+    out: dict[int, Events] = {}
+    for path in directory.glob("*.tsv"):
+        ev: Events = defaultdict(dict)
+        for line in path.read_text().splitlines():
+            what, k, agent, t = line.split("\t")
+            ev[(what, int(k))].setdefault(int(agent), float(t))
+        out[int(path.stem)] = ev
+    return out
+
+
+def segments(world: Events, hosts: Mapping[int, Events], ticks: Iterable[int]) -> dict[str, list[float]]:
+    """Each segment's durations (seconds) over the ticks and, for the hosts' segments, over the hosts (pid -> its
+    marks; a host's agents are those whose states it took). A tick missing a mark is left out of the segments
+    that need it."""
+    names = [name for name, _ in SEGMENTS]
+    out: dict[str, list[float]] = {name: [] for name in names}
+    for k in ticks:
+        clock, clock_next = world.get((Mark.CLOCK_PUT.value, k), {}), world.get((Mark.CLOCK_PUT.value, k + 1), {})
+        states, cmds_in = world.get((Mark.STATE_PUT.value, k), {}), world.get((Mark.CMD_IN.value, k), {})
+        if not clock or not states:
+            continue
+        out[names[0]].append(max(states.values()) - clock[0])
+        if clock_next:
+            out[names[7]].append(clock_next[0] - clock[0])
+            if cmds_in:
+                out[names[6]].append(clock_next[0] - max(cmds_in.values()))
+        put = {a: t for ev in hosts.values() for a, t in ev.get((Mark.BEACON_PUT.value, k), {}).items()}
+        for ev in hosts.values():
+            got = ev.get((Mark.STATE_IN.value, k), {})
+            beacons = ev.get((Mark.BEACON_PUT.value, k), {})
+            others = ev.get((Mark.BEACON_IN.value, k), {})
+            cmds = ev.get((Mark.CMD_PUT.value, k), {})
+            if not got or not beacons or not cmds:
+                continue
+            out[names[1]].append(statistics.median(got[a] - states[a] for a in got if a in states))
+            out[names[2]].append(max(beacons.values()) - max(got.values()))
+            ready = max(beacons.values())
+            if others:
+                out[names[3]].append(max(0.0, max(others.values()) - ready))
+                ready = max(ready, max(others.values()))
+                if hops := [t - put[a] for a, t in others.items() if a in put]:
+                    out[names[8]].append(statistics.median(hops))
+            out[names[4]].append(max(cmds.values()) - ready)
+            if arrived := [cmds_in[a] - cmds[a] for a in cmds if a in cmds_in]:
+                out[names[5]].append(statistics.median(arrived))
+    return out
+
+
+def run(k: str, scenario: Path, skip: int) -> tuple[dict[str, list[float]], dict]:
+    with tempfile.TemporaryDirectory(prefix="tick-path-") as tmp:
+        trace_dir = Path(tmp) / "trace"
+        trace_dir.mkdir()
+        os.environ[ENV] = str(trace_dir)
+        try:
+            summary = launch(Path(tmp) / "run", scenario, free_port(), "--agents-per-process", k)
+        finally:
+            del os.environ[ENV]
+        marks = read(trace_dir)
+    world = next((ev for ev in marks.values() if any(what == Mark.CLOCK_PUT.value for what, _ in ev)), {})
+    hosts = {pid: ev for pid, ev in marks.items() if any(what == Mark.STATE_IN.value for what, _ in ev)}
+    return segments(world, hosts, range(skip, int(summary["ticks"]) - 1)), summary
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", type=Path, default=PAPER)
+    ap.add_argument("--agents-per-process", nargs="+", default=["5"], metavar="K")
+    ap.add_argument("--skip-ticks", type=int, default=100, help="ticks left out at the start (start-up)")
+    a = ap.parse_args()
+    print(machine())
+    print(command_line())
+    got = {k: run(k, a.scenario, a.skip_ticks) for k in a.agents_per_process}
+    head = "".join(f" | K = {k:>4} p50 / mean ms" for k in got)
+    print(f"{'segment':80s}{head}")
+    for name, _kind in SEGMENTS:
+        cells = "".join(f" | {statistics.median(x) * 1e3:9.3f} / {statistics.mean(x) * 1e3:6.3f}" if (x := seg[name])
+                        else f" | {'-':>18s}" for seg, _ in got.values())
+        print(f"{name:80s}{cells}")
+    for kind in KINDS:
+        sums = "".join(f" | {sum(statistics.median(seg[n]) for n, kd in SEGMENTS if kd == kind and seg[n]) * 1e3:18.3f}"
+                       for seg, _ in got.values())
+        print(f"{'sum of the medians: ' + KINDS[kind]:80s}{sums}")
+    for k, (_seg, summary) in got.items():
+        print(f"K = {k}: {summary['ticks']} ticks, {summary['wall_time_s']:.2f} s of wall "
+              f"({summary['duration_s'] / summary['wall_time_s']:.1f}x real time), collisions {summary['collisions']}, "
+              f"deterministic {summary['deterministic']}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
