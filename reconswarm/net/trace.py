@@ -11,6 +11,7 @@ from __future__ import annotations
 import atexit
 import enum
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -44,8 +45,12 @@ def write(directory: str | None = None) -> Path | None:
     if where is None or not _rows:
         return None
     path = Path(where) / f"{os.getpid()}.tsv"
-    with path.open("w") as f:
-        f.writelines(f"{what}\t{k}\t{agent}\t{t:.7f}\n" for what, k, agent, t in _rows)
+    try:
+        with path.open("w") as f:
+            f.writelines(f"{what}\t{k}\t{agent}\t{t:.7f}\n" for what, k, agent, t in _rows)
+    except OSError as exc:  # (at exit: one line, the process's own outcome stands)
+        print(f"{ENV}={where}: cannot write the trace: {exc.strerror or exc}", file=sys.stderr)
+        return None
     return path
 
 

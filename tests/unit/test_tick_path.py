@@ -43,6 +43,13 @@ def test_marks_are_kept_only_while_tracing_and_written_as_rows(tracing: Path) ->
     assert trace.write(str(tracing)) is None  # (nothing kept: tracing is off)
 
 
+def test_a_trace_that_cannot_be_written_says_so_in_one_line(tracing: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    trace.mark(Mark.CLOCK_PUT, 1, 0, 1.0)
+    assert trace.write(str(tracing / "missing")) is None
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"{trace.ENV}={tracing / 'missing'}: cannot write the trace: ")
+
+
 def test_a_mark_without_a_time_is_stamped_with_the_monotonic_clock(tracing: Path) -> None:
     before = time.monotonic()
     trace.mark(Mark.STATE_PUT, 1, 2)
