@@ -8,7 +8,7 @@ RECONSWARM_TRACE_DIR names a directory); this script runs the mission with that 
 median and mean over the ticks (past the first `--skip-ticks`) and the hosts, one column per
 `--agents-per-process` value, with the run's wall time and the tracing's own cost left in it (a row per mark).
 Made for lockstep; in realtime the world does not wait, so its last segment is negative for a command that came
-after the next tick.
+after the next tick. ROS 2 mode is not marked (its odometry and cmd_vel travel on ROS 2 topics).
 
     .venv/bin/python bench/tick_path.py                              # the paper at K = 5
     .venv/bin/python bench/tick_path.py --agents-per-process 1 5 10

@@ -111,9 +111,7 @@ class WorldPort(Member):
                 c, sent_ns = self.ros2.decode(key, payload, self.gate.world_k)
                 if not self.gate.admit_twist(c, source, key, at_s):  # (first: a forger's timestamp is no excuse)
                     return None
-                c = self.ros2.dated(c, sent_ns)
-                trace.mark(trace.Mark.CMD_IN, c.k, c.id, at_s)
-                return Command(c, at_s)
+                return Command(self.ros2.dated(c, sent_ns), at_s)
             what, aid, leaf = self.keys.parse(key)
             if what == "alive":
                 if leaf == "monitor":
@@ -146,11 +144,11 @@ class WorldPort(Member):
         elif isinstance(out, wire.State):
             if self.ros2 is None:
                 self.pub_state[out.id].put(wire.state_to_wire(out))
+                trace.mark(trace.Mark.STATE_PUT, out.k, out.id)
             else:
                 self.ros2.publish(out)
                 if out.scan is not None:
                     self.pub_scan[out.id].put(wire.scan_to_wire(out.scan))
-            trace.mark(trace.Mark.STATE_PUT, out.k, out.id)
         return False
 
     def idle(self, who: Any, now_s: float) -> None:

@@ -3,7 +3,8 @@
 Off unless the environment names a directory (`RECONSWARM_TRACE_DIR`); then each process keeps one row per mark
 (what, tick, agent, monotonic seconds) in memory and writes them to `<dir>/<pid>.tsv` when it exits. The
 monotonic clock is one clock for every process of a machine, so a put in one process and the arrival of its
-sample in another subtract. A mark costs one test while tracing is off.
+sample in another subtract. A mark costs one test while tracing is off. The marks are on the project's keys:
+ROS 2 mode's odometry and cmd_vel are not marked.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import time
 from pathlib import Path
 
 ENV = "RECONSWARM_TRACE_DIR"
-MAX_ROWS = 2_000_000  # (about 100 MB at most: a long run keeps its beginning)
+MAX_ROWS = 1_000_000  # (about 130 MB at most: a longer run keeps its beginning)
 
 
 class Mark(enum.Enum):
