@@ -27,7 +27,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import command_line, machine
+from _common import command_line, machine, median
 from bench_deploy import PAPER, free_port, launch
 
 from reconswarm.net.trace import ENV, Mark
@@ -35,17 +35,17 @@ from reconswarm.net.trace import ENV, Mark
 Events = dict[tuple[str, int], dict[int, float]]  # (mark, tick) -> agent -> seconds (the first, if several)
 
 KINDS = {"world": "the world computing", "host": "a host computing", "hop": "samples travelling (and waits)"}
-SEGMENTS = (  # (name, kind); the kinds' sums are a rough split of a tick, not its median
-    ("world: clock put -> last state put", "world"),
-    ("state: put -> arrival in its host", "hop"),
-    ("host: last own state in -> last own beacon put", "host"),
-    ("host: last own beacon put -> last beacon of another process in (0: in already)", "hop"),
-    ("host: beacons in -> last command put", "host"),
-    ("command: put -> arrival in the world", "hop"),
-    ("world: last command in -> next clock put", "world"),
-    ("tick: clock put -> next clock put", "tick"),
-    ("beacon: put -> arrival in another process (beside the path)", "beside"),
-)
+SEGMENTS = {  # key -> (what it measures, its kind); the kinds' sums are a rough split of a tick, not its median
+    "world_puts": ("world: clock put -> last state put", "world"),
+    "state_hop": ("state: put -> arrival in its host", "hop"),
+    "to_beacons": ("host: last own state in -> last own beacon put", "host"),
+    "beacon_wait": ("host: last own beacon put -> last beacon of another process in (0: in already)", "hop"),
+    "to_commands": ("host: beacons in -> last command put", "host"),
+    "command_hop": ("command: put -> arrival in the world", "hop"),
+    "world_step": ("world: last command in -> next clock put", "world"),
+    "tick": ("tick: clock put -> next clock put", "tick"),
+    "beacon_hop": ("beacon: put -> arrival in another process (beside the path)", "beside"),
+}
 
 
 def read(directory: Path) -> dict[int, Events]:
@@ -61,21 +61,20 @@ def read(directory: Path) -> dict[int, Events]:
 
 
 def segments(world: Events, hosts: Mapping[int, Events], ticks: Iterable[int]) -> dict[str, list[float]]:
-    """Each segment's durations (seconds) over the ticks and, for the hosts' segments, over the hosts (pid -> its
-    marks; a host's agents are those whose states it took). A tick missing a mark is left out of the segments
-    that need it."""
-    names = [name for name, _ in SEGMENTS]
-    out: dict[str, list[float]] = {name: [] for name in names}
+    """Each segment's durations in seconds (by its key in SEGMENTS) over the ticks and, for the hosts' segments, over
+    the hosts (pid -> its marks; a host's agents are those whose states it took). A tick missing a mark is left out
+    of the segments that need it."""
+    out: dict[str, list[float]] = {key: [] for key in SEGMENTS}
     for k in ticks:
         clock, clock_next = world.get((Mark.CLOCK_PUT.value, k), {}), world.get((Mark.CLOCK_PUT.value, k + 1), {})
         states, cmds_in = world.get((Mark.STATE_PUT.value, k), {}), world.get((Mark.CMD_IN.value, k), {})
         if not clock or not states:
             continue
-        out[names[0]].append(max(states.values()) - clock[0])
+        out["world_puts"].append(max(states.values()) - clock[0])
         if clock_next:
-            out[names[7]].append(clock_next[0] - clock[0])
+            out["tick"].append(clock_next[0] - clock[0])
             if cmds_in:
-                out[names[6]].append(clock_next[0] - max(cmds_in.values()))
+                out["world_step"].append(clock_next[0] - max(cmds_in.values()))
         put = {a: t for ev in hosts.values() for a, t in ev.get((Mark.BEACON_PUT.value, k), {}).items()}
         for ev in hosts.values():
             got = ev.get((Mark.STATE_IN.value, k), {})
@@ -84,17 +83,17 @@ def segments(world: Events, hosts: Mapping[int, Events], ticks: Iterable[int]) -
             cmds = ev.get((Mark.CMD_PUT.value, k), {})
             if not got or not beacons or not cmds:
                 continue
-            out[names[1]].append(statistics.median(got[a] - states[a] for a in got if a in states))
-            out[names[2]].append(max(beacons.values()) - max(got.values()))
+            out["state_hop"].append(median([got[a] - states[a] for a in got if a in states]))
+            out["to_beacons"].append(max(beacons.values()) - max(got.values()))
             ready = max(beacons.values())
             if others:
-                out[names[3]].append(max(0.0, max(others.values()) - ready))
+                out["beacon_wait"].append(max(0.0, max(others.values()) - ready))
                 ready = max(ready, max(others.values()))
                 if hops := [t - put[a] for a, t in others.items() if a in put]:
-                    out[names[8]].append(statistics.median(hops))
-            out[names[4]].append(max(cmds.values()) - ready)
+                    out["beacon_hop"].append(median(hops))
+            out["to_commands"].append(max(cmds.values()) - ready)
             if arrived := [cmds_in[a] - cmds[a] for a in cmds if a in cmds_in]:
-                out[names[5]].append(statistics.median(arrived))
+                out["command_hop"].append(median(arrived))
     return out
 
 
@@ -125,14 +124,14 @@ def main() -> int:
     got = {k: run(k, a.scenario, a.skip_ticks, a.launcher_args) for k in a.agents_per_process}
     head = "".join(f" | K = {k:>4} p50 / mean ms" for k in got)
     print(f"{'segment':80s}{head}")
-    for name, _kind in SEGMENTS:
-        cells = "".join(f" | {statistics.median(x) * 1e3:9.3f} / {statistics.mean(x) * 1e3:6.3f}" if (x := seg[name])
+    for key, (label, _kind) in SEGMENTS.items():
+        cells = "".join(f" | {median(x) * 1e3:9.3f} / {statistics.mean(x) * 1e3:6.3f}" if (x := seg[key])
                         else f" | {'-':>18s}" for seg, _ in got.values())
-        print(f"{name:80s}{cells}")
-    for kind in KINDS:
-        sums = "".join(f" | {sum(statistics.median(seg[n]) for n, kd in SEGMENTS if kd == kind and seg[n]) * 1e3:18.3f}"
-                       for seg, _ in got.values())
-        print(f"{'sum of the medians: ' + KINDS[kind]:80s}{sums}")
+        print(f"{label:80s}{cells}")
+    for kind, says in KINDS.items():
+        keys = [key for key, (_label, of) in SEGMENTS.items() if of == kind]
+        sums = "".join(f" | {sum(median(seg[key]) for key in keys if seg[key]) * 1e3:18.3f}" for seg, _ in got.values())
+        print(f"{'sum of the medians: ' + says:80s}{sums}")
     for k, (_seg, summary) in got.items():
         missed = summary.get("missed_deadline_ratio")
         print(f"K = {k}: {summary['ticks']} ticks, {summary['wall_time_s']:.2f} s of wall "

@@ -77,15 +77,15 @@ def test_segments_of_a_tick_with_two_hosts() -> None:
     seg = tick_path.segments(world, {1: host_a, 2: host_b}, range(0, 10))
     got = {name: [round(x * 1e4, 6) for x in xs] for name, xs in seg.items()}  # (in tenths of a millisecond)
     assert got == {
-        "world: clock put -> last state put": [10.0],
-        "state: put -> arrival in its host": [4.0, 3.0],  # (b: the median of 2 and 4)
-        "host: last own state in -> last own beacon put": [5.0, 3.0],
-        "host: last own beacon put -> last beacon of another process in (0: in already)": [7.0, 2.0],
-        "host: beacons in -> last command put": [9.0, 25.0],  # (b: from the other's last beacon, the later)
-        "command: put -> arrival in the world": [10.0, 3.5],
-        "world: last command in -> next clock put": [6.0],
-        "tick: clock put -> next clock put": [52.0],
-        "beacon: put -> arrival in another process (beside the path)": [4.5, 3.5],
+        "world_puts": [10.0],
+        "state_hop": [4.0, 3.0],  # (b: the median of 2 and 4)
+        "to_beacons": [5.0, 3.0],
+        "beacon_wait": [7.0, 2.0],
+        "to_commands": [9.0, 25.0],  # (b: from the other's last beacon, the later)
+        "command_hop": [10.0, 3.5],
+        "world_step": [6.0],
+        "tick": [52.0],
+        "beacon_hop": [4.5, 3.5],
     }
 
 
@@ -93,7 +93,7 @@ def test_a_host_alone_waits_for_no_other_process_and_a_tick_without_marks_is_lef
     world = _events([(Mark.CLOCK_PUT, 1, 0, 1.0), (Mark.STATE_PUT, 1, 1, 1.001), (Mark.CMD_IN, 1, 1, 1.004)])
     host = _events([(Mark.STATE_IN, 1, 1, 1.002), (Mark.BEACON_PUT, 1, 1, 1.0025), (Mark.CMD_PUT, 1, 1, 1.003)])
     seg = tick_path.segments(world, {9: host}, range(0, 3))
-    assert seg["host: last own beacon put -> last beacon of another process in (0: in already)"] == []
-    assert [round(x, 9) for x in seg["host: beacons in -> last command put"]] == [0.0005]
-    assert seg["tick: clock put -> next clock put"] == [] and seg["world: last command in -> next clock put"] == []
-    assert [round(x, 9) for x in seg["world: clock put -> last state put"]] == [0.001]  # (tick 1 only)
+    assert seg["beacon_wait"] == []
+    assert [round(x, 9) for x in seg["to_commands"]] == [0.0005]
+    assert seg["tick"] == [] and seg["world_step"] == []
+    assert [round(x, 9) for x in seg["world_puts"]] == [0.001]  # (tick 1 only)
