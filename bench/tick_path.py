@@ -60,6 +60,14 @@ def read(directory: Path) -> dict[int, Events]:
     return out
 
 
+def roles(marks: Mapping[int, Events]) -> tuple[list[Events], dict[int, Events]]:
+    """The processes' marks as (the world's: those that put clocks, one in a run; the hosts': pid -> marks of those
+    that took their agents' states)."""
+    worlds = [ev for ev in marks.values() if any(what == Mark.CLOCK_PUT.value for what, _k in ev)]
+    hosts = {pid: ev for pid, ev in marks.items() if any(what == Mark.STATE_IN.value for what, _k in ev)}
+    return worlds, hosts
+
+
 def segments(world: Events, hosts: Mapping[int, Events], ticks: Iterable[int]) -> dict[str, list[float]]:
     """Each segment's durations in seconds (by its key in SEGMENTS) over the ticks and, for the hosts' segments, over
     the hosts (pid -> its marks; a host's agents are those whose states it took). A tick missing a mark is left out
@@ -87,8 +95,9 @@ def segments(world: Events, hosts: Mapping[int, Events], ticks: Iterable[int]) -
             out["to_beacons"].append(max(beacons.values()) - max(got.values()))
             ready = max(beacons.values())
             if others:
-                out["beacon_wait"].append(max(0.0, max(others.values()) - ready))
-                ready = max(ready, max(others.values()))
+                last_in = max(others.values())
+                out["beacon_wait"].append(max(0.0, last_in - ready))
+                ready = max(ready, last_in)
                 if hops := [t - put[a] for a, t in others.items() if a in put]:
                     out["beacon_hop"].append(median(hops))
             out["to_commands"].append(max(cmds.values()) - ready)
@@ -107,9 +116,8 @@ def run(k: str, scenario: Path, skip: int, extra: list[str]) -> tuple[dict[str, 
         finally:
             del os.environ[ENV]
         marks = read(trace_dir)
-    world = next((ev for ev in marks.values() if any(what == Mark.CLOCK_PUT.value for what, _ in ev)), {})
-    hosts = {pid: ev for pid, ev in marks.items() if any(what == Mark.STATE_IN.value for what, _ in ev)}
-    return segments(world, hosts, range(skip, int(summary["ticks"]) - 1)), summary
+    worlds, hosts = roles(marks)
+    return segments(worlds[0] if worlds else {}, hosts, range(skip, int(summary["ticks"]) - 1)), summary
 
 
 def main() -> int:

@@ -27,8 +27,7 @@ def test_a_traced_run_gives_every_segment_of_the_tick(tmp_path: Path) -> None:
     ticks = json.loads(p.stdout)["ticks"]
     assert ticks == 101
     marks = tick_path.read(trace_dir)
-    worlds = [ev for ev in marks.values() if (Mark.CLOCK_PUT.value, 0) in ev]
-    hosts = {pid: ev for pid, ev in marks.items() if any(what == Mark.STATE_IN.value for what, _k in ev)}
+    worlds, hosts = tick_path.roles(marks)
     assert len(worlds) == 1 and len(hosts) == 2
     world = worlds[0]
     assert all((Mark.CLOCK_PUT.value, k) in world for k in range(ticks))
