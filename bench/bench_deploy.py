@@ -106,10 +106,15 @@ def cpu_s(out: Path) -> tuple[float, int]:
     return float(sum(use["cpu_user_s"] + use["cpu_sys_s"] for use in uses)), len(uses)
 
 
+def has_option(checkout: Path, option: str) -> bool:
+    """Does that checkout's launcher take `option`?"""
+    cli = checkout / "reconswarm_bringup" / "cli_launch.py"
+    return cli.exists() and option in cli.read_text()
+
+
 def hosts_agents(checkout: Path) -> bool:
     """Has that checkout agent hosts (`--agents-per-process`)?"""
-    cli = checkout / "reconswarm_bringup" / "cli_launch.py"
-    return cli.exists() and "--agents-per-process" in cli.read_text()
+    return has_option(checkout, "--agents-per-process")
 
 
 def launcher_cmd(checkout: Path | None) -> tuple[list[str], Path]:
@@ -230,6 +235,8 @@ def main() -> int:
                     help="the paper in ROS 2 mode at --speed SPEED: plain, with kill:agent:3@60")
     ap.add_argument("--agents-per-process", nargs="*", default=["1"], metavar="K",
                     help="each row with K agents per process (agent hosts), side by side: 1 5 auto ...")
+    ap.add_argument("--zenoh-mode", nargs="*", default=["client"], choices=["client", "peer"],
+                    help="each row with the processes as zenoh clients of the router and/or as peers, side by side")
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args()
     if args.quick:
@@ -242,25 +249,29 @@ def main() -> int:
     versions: list[tuple[str, Path | None, tuple[str, ...]]] = []
     for name, co in [("this", None), *((str(c), c) for c in args.checkout)]:
         for k in args.agents_per_process if co is None or hosts_agents(co) else ["1"]:
-            versions.append((name, co, ()) if k == "1" else (f"{name} K={k}", co, ("--agents-per-process", k)))
+            for mode in args.zenoh_mode if co is None or has_option(co, "--zenoh-mode") else ["client"]:
+                extra = (() if k == "1" else ("--agents-per-process", k)) + (
+                    () if mode == "client" else ("--zenoh-mode", mode))
+                versions.append((" ".join([name, *([f"K={k}"] if k != "1" else []), *([mode] if mode != "client"
+                                                                                     else [])]), co, extra))
     with tempfile.TemporaryDirectory(prefix="bench_deploy_") as t:
         tmp = Path(t)
         if args.grid_agents:
             print(f"\n## lockstep on a sparse grid (about 8 neighbours each), {args.grid_sim_s:g} s simulated per run")
             print("CPU-ms per tick (user + sys, from each process's exit line); messages in and loop wake-ups per "
                   "agent per tick")
-            print(f"{'version':>12s} {'N':>4s} {'sim/wall':>8s} {'agent':>7s} {'agents':>8s} {'world':>7s} "
+            print(f"{'version':>16s} {'N':>4s} {'sim/wall':>8s} {'agent':>7s} {'agents':>8s} {'world':>7s} "
                   f"{'monitor':>7s} {'router':>7s} {'msgs in':>7s} {'wakeups':>7s}")
         for n in args.grid_agents:
             for name, co, extra in versions:
                 r = grid_row(tmp, n, args.grid_sim_s, co, extra)
-                print(f"{name[-12:]:>12s} {n:4d} {r['sim_wall']:8.2f} {r['agent_ms']:7.2f} {r['agents_ms']:8.1f} "
+                print(f"{name[-16:]:>16s} {n:4d} {r['sim_wall']:8.2f} {r['agent_ms']:7.2f} {r['agents_ms']:8.1f} "
                       f"{r['world_ms']:7.1f} {r['monitor_ms']:7.1f} {r['router_ms']:7.1f} {r['msgs_in']:7.1f} "
                       f"{r['wakeups']:7.1f}",
                       flush=True)
             for pat in args.floor:  # the same ticks as a row's long run minus its short one
                 f = floor_run(n, pat, ticks=round(args.grid_sim_s * 2 / 3 / 0.05))
-                print(f"{'floor-' + pat:>12s} {n:4d} {f['ticks_per_s'] * 0.05:8.2f} {f['agent_ms']:7.2f} "
+                print(f"{'floor-' + pat:>16s} {n:4d} {f['ticks_per_s'] * 0.05:8.2f} {f['agent_ms']:7.2f} "
                       f"{f['agents_ms']:8.1f} {f['world_ms']:7.1f} {'-':>7s} {f['router_ms']:7.1f} "
                       f"{f['msgs_in']:7.1f} {f['wakeups']:7.1f}", flush=True)
             print(f"# after N = {n}: {machine()}", flush=True)
@@ -268,11 +279,11 @@ def main() -> int:
             print("\n## the paper mission in lockstep (until it converges)")
             for i, (name, co, extra) in enumerate(versions):
                 s = launch(tmp / f"paper-{i}", PAPER, free_port(), *extra, launcher=launcher_cmd(co))
-                print(f"{name[-12:]:>12s} converged {s['converged']} at {s['convergence_time_s']} s in "
+                print(f"{name[-16:]:>16s} converged {s['converged']} at {s['convergence_time_s']} s in "
                       f"{s['wall_time_s']:.1f} s wall: sim/wall {s['duration_s'] / s['wall_time_s']:.2f}", flush=True)
         if args.large_agents:
             print(f"\n## large swarms in lockstep on the grid, {args.large_sim_s:g} s simulated")
-            print(f"{'version':>12s} {'N':>4s} {'finished':>8s} {'sim/wall':>8s} {'collisions':>10s} {'lost':>5s} "
+            print(f"{'version':>16s} {'N':>4s} {'finished':>8s} {'sim/wall':>8s} {'collisions':>10s} {'lost':>5s} "
                   f"{'RSS MB':>8s} {'MB/agent':>8s} {'procs':>5s}")
             for n in args.large_agents:
                 scen = tmp / f"large{n}.toml"
@@ -281,12 +292,12 @@ def main() -> int:
                     out = tmp / f"large{n}-{i}"
                     s = launch(out, scen, free_port(), *extra, launcher=launcher_cmd(co))
                     rss, procs = peak_rss_mb(out)
-                    print(f"{name[-12:]:>12s} {n:4d} {s['finished']!s:>8s} "
+                    print(f"{name[-16:]:>16s} {n:4d} {s['finished']!s:>8s} "
                           f"{s['duration_s'] / s['wall_time_s']:8.2f} {s['collisions']:10d} {len(s['agents_lost']):5d} "
                           f"{rss:8.0f} {rss / n:8.2f} {procs:5d}", flush=True)
         if args.paper_realtime is not None:
             print(f"\n## the paper at --clock realtime --speed {args.paper_realtime:g}")
-            print(f"{'version':>12s} {'fault':>18s} {'converged':>9s} {'t (s)':>7s} {'missed':>7s} {'collisions':>10s} "
+            print(f"{'version':>16s} {'fault':>18s} {'converged':>9s} {'t (s)':>7s} {'missed':>7s} {'collisions':>10s} "
                   f"{'lost':>5s}")
             for fault in ("", "kill:agent:3@60", "flood@30"):
                 for i, (name, co, extra) in enumerate(versions):
@@ -294,12 +305,12 @@ def main() -> int:
                     s = launch(tmp / f"paper-rt-{i}-{fault.replace(':', '_')}", PAPER, free_port(), "--clock",
                                "realtime", "--speed", f"{args.paper_realtime:g}", *more, *extra,
                                launcher=launcher_cmd(co))
-                    print(f"{name[-12:]:>12s} {fault or '-':>18s} {s['converged']!s:>9s} "
+                    print(f"{name[-16:]:>16s} {fault or '-':>18s} {s['converged']!s:>9s} "
                           f"{s['convergence_time_s'] or float('nan'):7.2f} {s.get('missed_deadline_ratio', 0):7.2%} "
                           f"{s['collisions']:10d} {len(s['agents_lost']):5d}", flush=True)
         if args.paper_ros2 is not None:
             print(f"\n## the paper in ROS 2 mode (--ros2) at --speed {args.paper_ros2:g}")
-            print(f"{'version':>12s} {'fault':>16s} {'converged':>9s} {'t (s)':>7s} {'missed':>7s} {'p50 ms':>7s} "
+            print(f"{'version':>16s} {'fault':>16s} {'converged':>9s} {'t (s)':>7s} {'missed':>7s} {'p50 ms':>7s} "
                   f"{'p99 ms':>7s} {'collisions':>10s} {'lost':>5s} {'CPU s':>7s} {'procs':>5s}")
             for fault in ("", "kill:agent:3@60"):
                 for i, (name, co, extra) in enumerate(versions):
@@ -309,16 +320,16 @@ def main() -> int:
                         s = launch(out, PAPER, free_port(), "--ros2", "--speed", f"{args.paper_ros2:g}", *more,
                                    *extra, launcher=launcher_cmd(co))
                     except RuntimeError as exc:  # (a checkout that refuses --ros2 with agent hosts)
-                        print(f"{name[-12:]:>12s} {fault or '-':>16s} {str(exc).splitlines()[-1][:80]}", flush=True)
+                        print(f"{name[-16:]:>16s} {fault or '-':>16s} {str(exc).splitlines()[-1][:80]}", flush=True)
                         continue
                     cpu, procs = cpu_s(out)
-                    print(f"{name[-12:]:>12s} {fault or '-':>16s} {s['converged']!s:>9s} "
+                    print(f"{name[-16:]:>16s} {fault or '-':>16s} {s['converged']!s:>9s} "
                           f"{s['convergence_time_s'] or float('nan'):7.2f} {s.get('missed_deadline_ratio', 0):7.2%} "
                           f"{s.get('latency_p50_ms', 0):7.2f} {s.get('latency_p99_ms', 0):7.2f} {s['collisions']:10d} "
                           f"{len(s['agents_lost']):5d} {cpu:7.1f} {procs:5d}", flush=True)
         if args.realtime_agents:
             print(f"\n## realtime at --speed 1 (20 Hz) on the grid, {args.realtime_sim_s:g} s per run")
-            print(f"{'version':>12s} {'N':>4s} {'missed':>7s} {'ratio':>7s} {'lat p50 ms':>10s} {'lat p99 ms':>10s}")
+            print(f"{'version':>16s} {'N':>4s} {'missed':>7s} {'ratio':>7s} {'lat p50 ms':>10s} {'lat p99 ms':>10s}")
             for i, (name, co, extra) in enumerate(versions):
                 best = 0
                 for n in args.realtime_agents:
@@ -327,12 +338,12 @@ def main() -> int:
                     s = launch(tmp / f"rt{n}-{i}", scen, free_port(), "--clock", "realtime", "--speed", "1", *extra,
                                launcher=launcher_cmd(co))
                     ratio = s.get("missed_deadline_ratio", float("nan"))
-                    print(f"{name[-12:]:>12s} {n:4d} {int(s.get('missed_deadlines', -1)):7d} {ratio:7.2%} "
+                    print(f"{name[-16:]:>16s} {n:4d} {int(s.get('missed_deadlines', -1)):7d} {ratio:7.2%} "
                           f"{s.get('latency_p50_ms', 0):10.2f} {s.get('latency_p99_ms', 0):10.2f}", flush=True)
                     if not ratio < 0.01:
                         break
                     best = n
-                print(f"{name[-12:]:>12s}: largest N at 20 Hz with < 1 % missed: {best or 'none of those tried'}")
+                print(f"{name[-16:]:>16s}: largest N at 20 Hz with < 1 % missed: {best or 'none of those tried'}")
         if args.equal_agents or args.equal_paper:
             print(f"\n## lockstep = in-process (reconswarm sim): the grid, {args.equal_sim_s:g} s simulated; the paper")
             for n in [*args.equal_agents, *([None] if args.equal_paper else [])]:

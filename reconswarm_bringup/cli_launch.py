@@ -33,6 +33,19 @@ def optional_values(argv: list[str]) -> list[str]:
     return out
 
 
+def check_zenoh_mode(mode: str, secure: bool, hosts: int) -> None:
+    """--zenoh-mode: client or peer; peer on a plain run of one host only (secure mode's access control and each
+    host's own router hold only if every sample goes through the routers)."""
+    if mode not in ("client", "peer"):
+        raise BadInput(f"--zenoh-mode: expected client or peer, got {mode!r}")
+    if mode == "peer" and secure:
+        raise BadInput("--zenoh-mode peer: not with --secure (its access control is in the router: every sample must "
+                       "go through it)")
+    if mode == "peer" and hosts != 1:
+        raise BadInput("--zenoh-mode peer: not with --hosts 2 (each host's processes reach the other host through "
+                       "their own router)")
+
+
 def launch_cmd(
     agents: Annotated[int | None, typer.Option("-n", "--agents",
         help="Generate a scenario with N agents (instead of -s).")] = None,
@@ -63,6 +76,9 @@ def launch_cmd(
     agents_per_process: Annotated[str, typer.Option("--agents-per-process", metavar="K|auto",
         help="Agents per process (one zenoh session each; default 1); auto: one process for up to 48 agents, "
              "then one per CPU.")] = "1",
+    zenoh_mode: Annotated[str, typer.Option("--zenoh-mode", metavar="client|peer",
+        help="The processes' zenoh mode: client (default: every sample through the router) or peer (samples "
+             "straight from process to process; the router for discovery and outside tools).")] = "client",
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
     no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress bar, nor the lines logged instead.")
                            ] = False,
@@ -95,6 +111,7 @@ def launch_cmd(
         domain = resolve_domain_id(ros_domain_id, os.environ) if ros2 else None
         if hosts not in (1, 2):
             raise BadInput(f"--hosts: expected 1 or 2, got {hosts}")
+        check_zenoh_mode(zenoh_mode, secure=secure, hosts=hosts)
         validate.launch(agents=agents, scenario=scenario, out=out.resolve(), timeout_s=timeout, speed=speed,
                         router=router, hosts=hosts, available_mb=validate.available_memory_mb(),
                         per_process=per_process)
@@ -102,7 +119,8 @@ def launch_cmd(
                            planner=planner, router=router, secure=secure,
                            faults=tuple(faults_mod.parse(f) for f in fault or []), timeout_s=timeout,
                            progress=not no_progress, as_json=as_json, hosts=hosts,
-                           foxglove_port=foxglove, ros_domain_id=domain, agents_per_process=per_process)
+                           foxglove_port=foxglove, ros_domain_id=domain, agents_per_process=per_process,
+                           zenoh_mode=zenoh_mode)
         code = run(cfg)
     except ReconswarmError as exc:
         fail(exc, PROG)

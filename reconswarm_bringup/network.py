@@ -118,5 +118,18 @@ def plan_network(cfg: LaunchConfig, s: Scenario, run: str, lock: runid.EndpointL
         runid.refuse_if_live(endpoint)
         log.info("using the router already listening on %s (no run's world is alive on it)", endpoint)
         routers = []
-    return Net(ZenohOptions.build([endpoint], None, "client", None), routers, {}, ["--connect", endpoint],
-               wait_on=endpoint if routers else None)
+    if cfg.zenoh_mode == "peer":
+        log.info("zenoh: the processes as peers (samples straight from process to process on 127.0.0.1; the router "
+                 "%s for discovery and outside tools)", endpoint)
+    return Net(ZenohOptions.build([endpoint], None, "client", None), routers, {},
+               ["--connect", endpoint, *peer_args(cfg.zenoh_mode)], wait_on=endpoint if routers else None)
+
+
+PEER_LISTEN = "tcp/127.0.0.1:0"  # a peer's own endpoint: loopback, a port of the system's choosing
+
+
+def peer_args(mode: str) -> list[str]:
+    """The run's processes' own zenoh options for `--zenoh-mode`: as peers, each listens on a loopback port of its
+    own and learns the others' from the router (zenoh's gossip), so samples go straight from process to process
+    (as rmw_zenoh's nodes do); the router stays for discovery and for outside tools. As clients: none."""
+    return ["--mode", "peer", "--listen", PEER_LISTEN] if mode == "peer" else []

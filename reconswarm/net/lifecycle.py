@@ -6,6 +6,7 @@ import logging
 import signal
 import threading
 import time
+from collections.abc import Callable
 from contextlib import suppress
 from typing import Any
 
@@ -76,15 +77,18 @@ def usage() -> dict[str, float]:
 
 class StartMark:
     """Logs `usage at start: {...}` once, when the mission starts: benchmarks take CPU per tick as the exit
-    line's figures minus these (start-up and imports are not per-tick work)."""
+    line's figures minus these (start-up and imports are not per-tick work); and whom the session is connected to
+    then (`zenoh at start: 1 router, 3 peers`)."""
 
-    def __init__(self) -> None:
-        self.done = False
+    def __init__(self, links: Callable[[], str] | None = None) -> None:
+        self.done, self.links = False, links
 
     def __call__(self, started: bool) -> None:
         if started and not self.done:
             self.done = True
             log.info("usage at start: %s", usage())
+            if self.links is not None:
+                log.info("zenoh at start: %s", self.links())
 
 
 def setup_logging(debug: bool = False) -> None:

@@ -87,7 +87,7 @@ class Runtime:
         """Step the nodes until each has exited (or a port's `act` stops the loop); how each left."""
         active = dict(nodes)
         stepped: dict[Any, float] = {}
-        mark, stopping = StartMark(), False
+        mark, stopping = StartMark(self.uplink.links), False
         while active:
             mark(started())
             now = time.monotonic()

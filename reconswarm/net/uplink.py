@@ -31,6 +31,15 @@ def router_ids(session: Any) -> frozenset[str]:
     return frozenset()
 
 
+def neighbours(session: Any) -> str:
+    """Whom a session is connected to, for its log: its zenoh mode's direct neighbours, routers and peers (a peer
+    of a run in `--zenoh-mode peer` has the run's other processes among them)."""
+    with suppress(Exception):
+        routers, peers = list(session.info.routers_zid()), list(session.info.peers_zid())
+        return f"{len(routers)} router{'s' * (len(routers) != 1)}, {len(peers)} peer{'s' * (len(peers) != 1)}"
+    return "neighbours unknown"
+
+
 class Uplink:
     """Follows a session's routers; a session that had none when opened (a peer, a router) is not followed."""
 
@@ -39,6 +48,10 @@ class Uplink:
         self.routers = router_ids(session)
         self.followed = bool(self.routers)
         self.down = False
+
+    def links(self) -> str:
+        """`neighbours` of the session (for its log)."""
+        return neighbours(self.session)
 
     def poll(self) -> LinkChange | None:
         """What changed since the last poll (~2 µs: cheap enough for every turn of a loop)."""

@@ -56,13 +56,15 @@ def short(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
     return scen, trajectories(tmp / "sim" / "run.db")
 
 
-@pytest.mark.parametrize(("k", "hosts"), [(5, [IDS[:5], IDS[5:]]),
-                                          # hosts of 3 and a lone agent (10) in one run
-                                          (3, [IDS[:3], IDS[3:6], IDS[6:9], IDS[9:]])])
+@pytest.mark.parametrize(("k", "hosts", "mode"), [(5, [IDS[:5], IDS[5:]], "client"),
+                                                  # hosts of 3 and a lone agent (10) in one run
+                                                  (3, [IDS[:3], IDS[3:6], IDS[6:9], IDS[9:]], "client"),
+                                                  # the processes as zenoh peers: samples go direct
+                                                  (5, [IDS[:5], IDS[5:]], "peer")])
 def test_packed_lockstep_equals_inprocess_engine(short: tuple[Path, dict], out: Path, k: int,
-                                                 hosts: list[tuple[int, ...]]) -> None:
+                                                 hosts: list[tuple[int, ...]], mode: str) -> None:
     scen, ref = short
-    p = run_launcher(out, "-s", str(scen), "--agents-per-process", str(k), "--json")
+    p = run_launcher(out, "-s", str(scen), "--agents-per-process", str(k), "--zenoh-mode", mode, "--json")
     assert p.returncode == 1, p.stderr[-2000:]  # not converged in 60 s: the documented "mission failed"
     s = json.loads(p.stdout)
     assert s["ticks"] == 1201 and s["collisions"] == 0 and s["agents_lost"] == []
@@ -75,6 +77,12 @@ def test_packed_lockstep_equals_inprocess_engine(short: tuple[Path, dict], out: 
     assert len(set(pids.values())) == len(hosts)
     logs = sorted(f.name for f in (out / "logs").glob("agent-*.log"))
     assert logs == sorted(f"agent-{h[0]}.log" if len(h) == 1 else f"agent-{h[0]}-{h[-1]}.log" for h in hosts)
+    # Whom each process was connected to when the mission started: the router alone, or also every other process
+    # of the run (the world, the monitor, the other hosts) as a peer.
+    peers = len(hosts) + 1 if mode == "peer" else 0
+    for name in [*logs, "simworld.log", "monitor.log"]:
+        (line,) = [x for x in (out / "logs" / name).read_text().splitlines() if "zenoh at start:" in x]
+        assert line.endswith(f"zenoh at start: 1 router, {peers} peer{'s' * (peers != 1)}"), (name, line)
 
 
 def _open(ep: str, launcher: subprocess.Popen[str], timeout_s: float = 300.0) -> Any:
@@ -88,10 +96,12 @@ def _open(ep: str, launcher: subprocess.Popen[str], timeout_s: float = 300.0) ->
             time.sleep(0.3)
 
 
-def test_an_outside_client_sees_each_hosted_agent_as_its_own(tmp_path: Path, out: Path) -> None:
+@pytest.mark.parametrize("mode", ["client", "peer"])  # (peers: the run's samples reach the router all the same)
+def test_an_outside_client_sees_each_hosted_agent_as_its_own(tmp_path: Path, out: Path, mode: str) -> None:
     scen = scenario_with(tmp_path, "s.toml", PAPER.read_text(), **{"duration_s = 300.0": "duration_s = 20.0"})
     port = free_port()
-    proc = subprocess.Popen(launcher_cmd(out, "-s", str(scen), "--agents-per-process", "5", "--json", port=port),
+    proc = subprocess.Popen(launcher_cmd(out, "-s", str(scen), "--agents-per-process", "5", "--zenoh-mode", mode,
+                                         "--json", port=port),
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     tokens: queue.SimpleQueue[tuple[str, str]] = queue.SimpleQueue()
     data: queue.SimpleQueue[tuple[str, bytes, str]] = queue.SimpleQueue()
@@ -180,8 +190,11 @@ def test_secure_mode_runs_agent_hosts_on_their_own_credentials(tmp_path: Path, o
 @pytest.mark.parametrize(("args", "line"), [
     (["--agents-per-process", "0"], "--agents-per-process: expected a positive integer or auto, got '0'"),
     (["--agents-per-process", "many"], "--agents-per-process: expected a positive integer or auto, got 'many'"),
+    (["--zenoh-mode", "router"], "--zenoh-mode: expected client or peer, got 'router'"),
+    (["--zenoh-mode", "peer", "--secure"], "--zenoh-mode peer: not with --secure"),
+    (["--zenoh-mode", "peer", "--hosts", "2"], "--zenoh-mode peer: not with --hosts 2"),
 ])
-def test_bad_agents_per_process_is_one_line_exit_2(out: Path, args: list[str], line: str) -> None:
+def test_bad_packing_or_zenoh_mode_is_one_line_exit_2(out: Path, args: list[str], line: str) -> None:
     p = run_launcher(out, *args, timeout=60)
     assert p.returncode == 2 and p.stdout == ""
     (last,) = p.stderr.strip().splitlines()

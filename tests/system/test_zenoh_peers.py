@@ -1,0 +1,80 @@
+"""`run_local.sh --zenoh-mode peer`: the run's processes as zenoh peers, with real sessions on 127.0.0.1. Each
+learns the others' endpoints from the router (zenoh's gossip) and connects to them, so their samples go straight
+from process to process: once linked, two peers keep hearing each other with the router gone."""
+
+from __future__ import annotations
+
+import queue
+import time
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from reconswarm.net.session import ZenohOptions
+from reconswarm.net.uplink import neighbours
+from reconswarm.scenario.model import load
+from reconswarm_bringup.config import LaunchConfig
+from reconswarm_bringup.network import PEER_LISTEN, peer_args, plan_network
+from tests.support import PAPER, free_port
+
+
+def _open(opts: ZenohOptions) -> Any:
+    return zenoh.open(opts.config())
+
+
+def _until(check: Any, timeout_s: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while not check():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
+
+
+def test_the_processes_options_for_each_mode(tmp_path: Path) -> None:
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    s = load(PAPER)
+    client = plan_network(LaunchConfig(out=tmp_path, router=ep), s, "r1")
+    peer = plan_network(LaunchConfig(out=tmp_path, router=ep, zenoh_mode="peer"), s, "r1")
+    assert client.zopt("agent", "3") == ([], ["--connect", ep])
+    assert peer.zopt("agent", "3") == peer.zopt("simworld") == ([], ["--connect", ep, "--mode", "peer",
+                                                                     "--listen", "tcp/127.0.0.1:0"])
+    assert peer.watch == client.watch  # (the launcher's own session stays a client)
+    assert peer_args("client") == []
+
+
+def test_peers_linked_through_the_router_keep_hearing_each_other_without_it() -> None:
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    router = _open(ZenohOptions.build(None, [ep], "router", None))
+    a = b = None
+    got: queue.SimpleQueue[bytes] = queue.SimpleQueue()
+    try:
+        a = _open(ZenohOptions.build([ep], [PEER_LISTEN], "peer", None))
+        b = _open(ZenohOptions.build([ep], [PEER_LISTEN], "peer", None))
+        b.declare_subscriber("swarm/t/x", lambda smp: got.put(smp.payload.to_bytes()))
+        assert _until(lambda: str(b.info.zid()) in {str(z) for z in a.info.peers_zid()})  # linked directly
+        assert neighbours(a) == "1 router, 1 peer"
+        router.close()
+        router = None
+        assert _until(lambda: neighbours(a) == "0 routers, 1 peer")
+        pub = a.declare_publisher("swarm/t/x")
+        assert _until(lambda: (pub.put(b"direct"), not got.empty())[1], 5.0)
+        assert got.get() == b"direct"
+    finally:
+        for z in (a, b, router):
+            if z is not None:
+                z.close()
+
+
+def test_a_client_has_the_router_alone() -> None:
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    router = _open(ZenohOptions.build(None, [ep], "router", None))
+    c = None
+    try:
+        c = _open(ZenohOptions.build([ep], None, "client", None))
+        assert _until(lambda: neighbours(c) == "1 router, 0 peers")
+    finally:
+        for z in (c, router):
+            if z is not None:
+                z.close()
