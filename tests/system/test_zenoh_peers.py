@@ -1,6 +1,7 @@
 """`run_local.sh --zenoh-mode peer`: the run's processes as zenoh peers, with real sessions on 127.0.0.1. Each
 learns the others' endpoints from the router (zenoh's gossip) and connects to them, so their samples go straight
-from process to process: once linked, two peers keep hearing each other with the router gone."""
+from process to process: once linked, two peers keep hearing each other with the router gone, and each takes no
+payload over the wire's limit on its direct links (as the router forwards none)."""
 
 from __future__ import annotations
 
@@ -12,11 +13,14 @@ from typing import Any
 import zenoh
 
 from reconswarm.net.session import ZenohOptions
+from reconswarm.scenario.wire_limits import MAX_PAYLOAD_BYTES
 from reconswarm.net.uplink import neighbours
 from reconswarm.scenario.model import load
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.network import PEER_LISTEN, peer_args, plan_network
 from tests.support import PAPER, free_port
+
+SIZES = [0, 1000, MAX_PAYLOAD_BYTES, MAX_PAYLOAD_BYTES + 1, 3 * MAX_PAYLOAD_BYTES, 10]
 
 
 def _open(opts: ZenohOptions) -> Any:
@@ -58,9 +62,21 @@ def test_peers_linked_through_the_router_keep_hearing_each_other_without_it() ->
         router.close()
         router = None
         assert _until(lambda: neighbours(a) == "0 routers, 1 peer")
-        pub = a.declare_publisher("swarm/t/x")
+        pub = a.declare_publisher("swarm/t/x", congestion_control=zenoh.CongestionControl.BLOCK)
         assert _until(lambda: (pub.put(b"direct"), not got.empty())[1], 5.0)
-        assert got.get() == b"direct"
+        # The wire's limit holds on a direct link too: a peer takes no payload over it (whoever links to it).
+        for n in SIZES:
+            pub.put(bytes(n))
+        sizes: list[int] = []
+
+        def heard_last() -> bool:
+            while not got.empty():
+                if (x := got.get()) != b"direct":  # (the probes put until the first came may still be coming)
+                    sizes.append(len(x))
+            return sizes[-1:] == [SIZES[-1]]
+
+        assert _until(heard_last)
+        assert sizes == [n for n in SIZES if n <= MAX_PAYLOAD_BYTES]
     finally:
         for z in (a, b, router):
             if z is not None:
