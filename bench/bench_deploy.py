@@ -235,8 +235,9 @@ def main() -> int:
                     help="the paper in ROS 2 mode at --speed SPEED: plain, with kill:agent:3@60")
     ap.add_argument("--agents-per-process", nargs="*", default=["1"], metavar="K",
                     help="each row with K agents per process (agent hosts), side by side: 1 5 auto ...")
-    ap.add_argument("--zenoh-mode", nargs="*", default=["client"], choices=["client", "peer"],
-                    help="each row with the processes as zenoh clients of the router and/or as peers, side by side")
+    ap.add_argument("--zenoh-mode", nargs="*", default=["auto"], choices=["auto", "client", "peer"],
+                    help="each row with the processes as zenoh clients of the router and/or as peers, side by side "
+                         "(auto: the launcher's rule; a checkout without the option: its own transport)")
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args()
     if args.quick:
@@ -249,11 +250,11 @@ def main() -> int:
     versions: list[tuple[str, Path | None, tuple[str, ...]]] = []
     for name, co in [("this", None), *((str(c), c) for c in args.checkout)]:
         for k in args.agents_per_process if co is None or hosts_agents(co) else ["1"]:
-            for mode in args.zenoh_mode if co is None or has_option(co, "--zenoh-mode") else ["client"]:
+            for mode in args.zenoh_mode if co is None or has_option(co, "--zenoh-mode") else [None]:
                 extra = (() if k == "1" else ("--agents-per-process", k)) + (
-                    () if mode == "client" else ("--zenoh-mode", mode))
-                versions.append((" ".join([name, *([f"K={k}"] if k != "1" else []), *([mode] if mode != "client"
-                                                                                     else [])]), co, extra))
+                    () if mode is None else ("--zenoh-mode", mode))
+                versions.append((" ".join([name, *([f"K={k}"] if k != "1" else []), *([mode] if mode not in (
+                    None, "auto") else [])]), co, extra))
     with tempfile.TemporaryDirectory(prefix="bench_deploy_") as t:
         tmp = Path(t)
         if args.grid_agents:

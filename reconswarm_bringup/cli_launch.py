@@ -34,10 +34,10 @@ def optional_values(argv: list[str]) -> list[str]:
 
 
 def check_zenoh_mode(mode: str, secure: bool, hosts: int) -> None:
-    """--zenoh-mode: client or peer; peer on a plain run of one host only (secure mode's access control and each
+    """--zenoh-mode: auto, client or peer; peer on a plain run of one host only (secure mode's access control and each
     host's own router hold only if every sample goes through the routers)."""
-    if mode not in ("client", "peer"):
-        raise BadInput(f"--zenoh-mode: expected client or peer, got {mode!r}")
+    if mode not in ("auto", "client", "peer"):
+        raise BadInput(f"--zenoh-mode: expected auto, client or peer, got {mode!r}")
     if mode == "peer" and secure:
         raise BadInput("--zenoh-mode peer: not with --secure (its access control is in the router: every sample must "
                        "go through it)")
@@ -76,9 +76,10 @@ def launch_cmd(
     agents_per_process: Annotated[str, typer.Option("--agents-per-process", metavar="K|auto",
         help="Agents per process (one zenoh session each; default 1); auto: one process for up to 48 agents, "
              "then one per CPU.")] = "1",
-    zenoh_mode: Annotated[str, typer.Option("--zenoh-mode", metavar="client|peer",
-        help="The processes' zenoh mode: client (default: every sample through the router) or peer (samples "
-             "straight from process to process; the router for discovery and outside tools).")] = "client",
+    zenoh_mode: Annotated[str, typer.Option("--zenoh-mode", metavar="auto|client|peer",
+        help="The processes' zenoh mode: client (every sample through the router), peer (samples straight from "
+             "process to process; the router for discovery and outside tools); auto (default): peer for agent "
+             "hosts in a run of at most 8 processes, without --secure or --hosts 2, else client.")] = "auto",
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
     no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress bar, nor the lines logged instead.")
                            ] = False,

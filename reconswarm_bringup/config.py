@@ -27,4 +27,4 @@ class LaunchConfig:
     foxglove_port: int | None = None  # the monitor serves the run live on 127.0.0.1:PORT
     ros_domain_id: int | None = None  # ROS 2 mode (None: off) in this domain
     agents_per_process: int | str = 1  # K, or "auto" (reconswarm_bringup/packing.py)
-    zenoh_mode: str = "client"  # the run's processes as zenoh clients of the router, or peers (direct samples)
+    zenoh_mode: str = "auto"  # the run's processes as zenoh clients of the router, peers (direct samples), or auto

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 import os
 import socket
 import time
@@ -13,7 +14,7 @@ from typing import Any
 from reconswarm.errors import BadInput, ProcessFailure
 from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions
 from reconswarm.scenario.model import Scenario
-from reconswarm_bringup import netns, runid, secure_net
+from reconswarm_bringup import netns, packing, runid, secure_net
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.endpoints import addresses, host_port
 
@@ -118,14 +119,27 @@ def plan_network(cfg: LaunchConfig, s: Scenario, run: str, lock: runid.EndpointL
         runid.refuse_if_live(endpoint)
         log.info("using the router already listening on %s (no run's world is alive on it)", endpoint)
         routers = []
-    if cfg.zenoh_mode == "peer":
+    mode = zenoh_mode(cfg, len(s.agents))
+    if mode == "peer":
         log.info("zenoh: the processes as peers (samples straight from process to process on 127.0.0.1; the router "
                  "%s for discovery and outside tools)", endpoint)
     return Net(ZenohOptions.build([endpoint], None, "client", None), routers, {},
-               ["--connect", endpoint, *peer_args(cfg.zenoh_mode)], wait_on=endpoint if routers else None)
+               ["--connect", endpoint, *peer_args(mode)], wait_on=endpoint if routers else None)
 
 
 PEER_LISTEN = "tcp/127.0.0.1:0"  # a peer's own endpoint: loopback, a port of the system's choosing
+AUTO_PEER_PROCESSES = 8  # `--zenoh-mode auto`: peers up to this many processes of a run (the router's not counted)
+
+
+def zenoh_mode(cfg: LaunchConfig, n_agents: int) -> str:
+    """The processes' zenoh mode for `--zenoh-mode`: `auto` is peer for agent hosts (K > 1) in a plain run on one host
+    of at most 8 processes (the world, the monitor, the hosts), client otherwise: every pair of peers holds a link,
+    and each sample goes out once per subscribing process (measured on 2 CPUs: docs/benchmarks.md)."""
+    if cfg.zenoh_mode != "auto":
+        return cfg.zenoh_mode
+    k = packing.per_process(cfg.agents_per_process, n_agents)
+    processes = 2 + math.ceil(n_agents / k)
+    return "peer" if k > 1 and processes <= AUTO_PEER_PROCESSES and not cfg.secure and cfg.hosts == 1 else "client"
 
 
 def peer_args(mode: str) -> list[str]:

@@ -78,7 +78,8 @@ class ZenohOptions:
             conf.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
         # What anyone can send to directly (a router; a peer, whose endpoint the router's gossip tells whoever asks)
         # takes no payload over the wire's limit; a client gets only what its router forwards.
-        if json.loads(conf.get_json("mode")) in ("router", "peer") and json.loads(conf.get_json("low_pass_filter")) == []:
+        open_to_all = json.loads(conf.get_json("mode")) in ("router", "peer")
+        if open_to_all and json.loads(conf.get_json("low_pass_filter")) == []:
             conf.insert_json5("low_pass_filter", json.dumps([PAYLOAD_CAP]))
         return conf
 

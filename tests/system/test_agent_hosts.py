@@ -60,7 +60,9 @@ def short(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
                                                   # hosts of 3 and a lone agent (10) in one run
                                                   (3, [IDS[:3], IDS[3:6], IDS[6:9], IDS[9:]], "client"),
                                                   # the processes as zenoh peers: samples go direct
-                                                  (5, [IDS[:5], IDS[5:]], "peer")])
+                                                  (5, [IDS[:5], IDS[5:]], "peer"),
+                                                  # by default: peers for agent hosts in a run of 4 processes
+                                                  (5, [IDS[:5], IDS[5:]], "auto")])
 def test_packed_lockstep_equals_inprocess_engine(short: tuple[Path, dict], out: Path, k: int,
                                                  hosts: list[tuple[int, ...]], mode: str) -> None:
     scen, ref = short
@@ -79,7 +81,7 @@ def test_packed_lockstep_equals_inprocess_engine(short: tuple[Path, dict], out: 
     assert logs == sorted(f"agent-{h[0]}.log" if len(h) == 1 else f"agent-{h[0]}-{h[-1]}.log" for h in hosts)
     # Whom each process was connected to when the mission started: the router alone, or also every other process
     # of the run (the world, the monitor, the other hosts) as a peer.
-    peers = len(hosts) + 1 if mode == "peer" else 0
+    peers = len(hosts) + 1 if mode != "client" else 0
     for name in [*logs, "simworld.log", "monitor.log"]:
         (line,) = [x for x in (out / "logs" / name).read_text().splitlines() if "zenoh at start:" in x]
         assert line.endswith(f"zenoh at start: 1 router, {peers} peer{'s' * (peers != 1)}"), (name, line)
@@ -190,7 +192,7 @@ def test_secure_mode_runs_agent_hosts_on_their_own_credentials(tmp_path: Path, o
 @pytest.mark.parametrize(("args", "line"), [
     (["--agents-per-process", "0"], "--agents-per-process: expected a positive integer or auto, got '0'"),
     (["--agents-per-process", "many"], "--agents-per-process: expected a positive integer or auto, got 'many'"),
-    (["--zenoh-mode", "router"], "--zenoh-mode: expected client or peer, got 'router'"),
+    (["--zenoh-mode", "router"], "--zenoh-mode: expected auto, client or peer, got 'router'"),
     (["--zenoh-mode", "peer", "--secure"], "--zenoh-mode peer: not with --secure"),
     (["--zenoh-mode", "peer", "--hosts", "2"], "--zenoh-mode peer: not with --hosts 2"),
 ])

@@ -13,11 +13,11 @@ from typing import Any
 import zenoh
 
 from reconswarm.net.session import ZenohOptions
-from reconswarm.scenario.wire_limits import MAX_PAYLOAD_BYTES
 from reconswarm.net.uplink import neighbours
 from reconswarm.scenario.model import load
+from reconswarm.scenario.wire_limits import MAX_PAYLOAD_BYTES
 from reconswarm_bringup.config import LaunchConfig
-from reconswarm_bringup.network import PEER_LISTEN, peer_args, plan_network
+from reconswarm_bringup.network import PEER_LISTEN, peer_args, plan_network, zenoh_mode
 from tests.support import PAPER, free_port
 
 SIZES = [0, 1000, MAX_PAYLOAD_BYTES, MAX_PAYLOAD_BYTES + 1, 3 * MAX_PAYLOAD_BYTES, 10]
@@ -39,13 +39,26 @@ def _until(check: Any, timeout_s: float = 10.0) -> bool:
 def test_the_processes_options_for_each_mode(tmp_path: Path) -> None:
     ep = f"tcp/127.0.0.1:{free_port()}"
     s = load(PAPER)
-    client = plan_network(LaunchConfig(out=tmp_path, router=ep), s, "r1")
+    client = plan_network(LaunchConfig(out=tmp_path, router=ep, zenoh_mode="client"), s, "r1")
     peer = plan_network(LaunchConfig(out=tmp_path, router=ep, zenoh_mode="peer"), s, "r1")
     assert client.zopt("agent", "3") == ([], ["--connect", ep])
     assert peer.zopt("agent", "3") == peer.zopt("simworld") == ([], ["--connect", ep, "--mode", "peer",
                                                                      "--listen", "tcp/127.0.0.1:0"])
     assert peer.watch == client.watch  # (the launcher's own session stays a client)
     assert peer_args("client") == []
+
+
+def test_auto_is_peer_for_agent_hosts_in_a_few_processes_without_secure_or_two_hosts(tmp_path: Path) -> None:
+    def mode(n: int, k: int | str, **kw: Any) -> str:
+        return zenoh_mode(LaunchConfig(out=tmp_path, agents_per_process=k, **kw), n)
+
+    # (the paper's 10: one process per agent, 12 processes; K = 2 to 10, 7 to 3 processes with the world and monitor)
+    assert [mode(10, k) for k in (1, 2, 3, 5, 10, "auto")] == ["client", "peer", "peer", "peer", "peer", "peer"]
+    assert mode(12, 2) == "peer" and mode(14, 2) == "client"  # 6 hosts: 8 processes; 7 hosts: 9
+    assert mode(5, 1) == "client"  # (7 processes, but one agent each: no agent host)
+    assert mode(144, 8) == "client" and mode(400, "auto") == "peer"  # 18 hosts: 20 processes; 2 hosts of 200
+    assert mode(10, 5, secure=True) == mode(10, 5, hosts=2) == "client"
+    assert mode(10, 1, zenoh_mode="peer") == "peer" and mode(10, 5, zenoh_mode="client") == "client"
 
 
 def test_peers_linked_through_the_router_keep_hearing_each_other_without_it() -> None:
