@@ -251,10 +251,10 @@ def main() -> int:
     for name, co in [("this", None), *((str(c), c) for c in args.checkout)]:
         for k in args.agents_per_process if co is None or hosts_agents(co) else ["1"]:
             for mode in args.zenoh_mode if co is None or has_option(co, "--zenoh-mode") else [None]:
-                extra = (() if k == "1" else ("--agents-per-process", k)) + (
-                    () if mode is None else ("--zenoh-mode", mode))
-                versions.append((" ".join([name, *([f"K={k}"] if k != "1" else []), *([mode] if mode not in (
-                    None, "auto") else [])]), co, extra))
+                packed = () if k == "1" else ("--agents-per-process", k)
+                linked = () if mode is None else ("--zenoh-mode", mode)
+                label = [name, *([f"K={k}"] if packed else []), *([mode] if mode in ("client", "peer") else [])]
+                versions.append((" ".join(label), co, packed + linked))
     with tempfile.TemporaryDirectory(prefix="bench_deploy_") as t:
         tmp = Path(t)
         if args.grid_agents:

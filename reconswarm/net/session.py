@@ -98,7 +98,6 @@ def serving(opts: ZenohOptions, what: str, timeout_s: float = TIMING.session_ope
         log.info("usage: %s", usage())
 
 
-
 class Member:
     """A process that announces itself with a liveliness token (closing withdraws it)."""
 
