@@ -79,7 +79,7 @@ def launch_cmd(
     zenoh_mode: Annotated[str, typer.Option("--zenoh-mode", metavar="auto|client|peer",
         help="The processes' zenoh mode: client (every sample through the router), peer (samples straight from "
              "process to process; the router for discovery and outside tools); auto (default): peer for agent "
-             "hosts in a run of at most 8 processes, without --secure or --hosts 2, else client.")] = "auto",
+             "hosts in an open-mode run of at most 8 processes on one host, else client.")] = "auto",
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
     no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress bar, nor the lines logged instead.")
                            ] = False,
