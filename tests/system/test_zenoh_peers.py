@@ -12,7 +12,7 @@ from typing import Any
 
 import zenoh
 
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.session import ZenohOptions, open_session
 from reconswarm.net.uplink import neighbours
 from reconswarm.scenario.model import load
 from reconswarm.scenario.wire_limits import MAX_PAYLOAD_BYTES
@@ -21,10 +21,6 @@ from reconswarm_bringup.network import PEER_LISTEN, peer_args, plan_network, zen
 from tests.support import PAPER, free_port
 
 SIZES = [0, 1000, MAX_PAYLOAD_BYTES, MAX_PAYLOAD_BYTES + 1, 3 * MAX_PAYLOAD_BYTES, 10]
-
-
-def _open(opts: ZenohOptions) -> Any:
-    return zenoh.open(opts.config())
 
 
 def _until(check: Any, timeout_s: float = 10.0) -> bool:
@@ -63,12 +59,12 @@ def test_auto_is_peer_for_agent_hosts_in_a_few_processes_without_secure_or_two_h
 
 def test_peers_linked_through_the_router_keep_hearing_each_other_without_it() -> None:
     ep = f"tcp/127.0.0.1:{free_port()}"
-    router = _open(ZenohOptions.build(None, [ep], "router", None))
+    router = open_session(ZenohOptions.build(None, [ep], "router", None), "test", timeout_s=10.0)
     a = b = None
     got: queue.SimpleQueue[bytes] = queue.SimpleQueue()
     try:
-        a = _open(ZenohOptions.build([ep], [PEER_LISTEN], "peer", None))
-        b = _open(ZenohOptions.build([ep], [PEER_LISTEN], "peer", None))
+        a = open_session(ZenohOptions.build([ep], [PEER_LISTEN], "peer", None), "test", timeout_s=10.0)
+        b = open_session(ZenohOptions.build([ep], [PEER_LISTEN], "peer", None), "test", timeout_s=10.0)
         b.declare_subscriber("swarm/t/x", lambda smp: got.put(smp.payload.to_bytes()))
         assert _until(lambda: str(b.info.zid()) in {str(z) for z in a.info.peers_zid()})  # linked directly
         assert neighbours(a) == "1 router, 1 peer"
@@ -98,10 +94,10 @@ def test_peers_linked_through_the_router_keep_hearing_each_other_without_it() ->
 
 def test_a_client_has_the_router_alone() -> None:
     ep = f"tcp/127.0.0.1:{free_port()}"
-    router = _open(ZenohOptions.build(None, [ep], "router", None))
+    router = open_session(ZenohOptions.build(None, [ep], "router", None), "test", timeout_s=10.0)
     c = None
     try:
-        c = _open(ZenohOptions.build([ep], None, "client", None))
+        c = open_session(ZenohOptions.build([ep], None, "client", None), "test", timeout_s=10.0)
         assert _until(lambda: neighbours(c) == "1 router, 0 peers")
     finally:
         for z in (c, router):
