@@ -334,8 +334,9 @@ class WorldNode:
     # ------------------------------------------------------------------------------------- what a tick says
 
     def tick_out(self, k: int, reason: str, now_s: float) -> list[WorldOutput]:
-        """Tick k's clock (the end of the mission, with the statistics, if `reason`), truth and states, published
-        at now_s (state-to-command latency counts from then)."""
+        """Tick k's clock (the end of the mission, with the statistics, if `reason`), states and truth, published
+        at now_s (state-to-command latency counts from then): the agents' data first, the truth (the monitor's,
+        beside the tick's path) last."""
         end = bool(reason)
         clock = wire.Clock(k, k * self.s.meta.dt_s, tuple(sorted(self.alive)), self.clock,
                            self.speed if self.clock == ClockMode.REALTIME else 0.0, end, reason, self.rejected,
@@ -344,7 +345,7 @@ class WorldNode:
         self.pub_time[k] = now_s
         while (oldest := next(iter(self.pub_time))) < k - 1000:  # (oldest first: ticks go out in order)
             del self.pub_time[oldest]
-        return [clock, truth, *states]
+        return [clock, *states, truth]
 
     def stats(self) -> dict[str, float]:
         out: dict[str, float] = {"world_overruns": float(self.overruns)}

@@ -116,6 +116,35 @@ def test_a_peer_session_is_not_followed() -> None:
         session.close()
 
 
+class _Routers:
+    """A session object whose routers the test sets (only `info.routers_zid`, what the uplink reads), counting
+    the reads."""
+
+    def __init__(self) -> None:
+        self.ids, self.reads = ["r1"], 0
+        self.info = self
+
+    def routers_zid(self) -> list[str]:
+        self.reads += 1
+        return list(self.ids)
+
+
+def test_the_uplink_reads_the_routers_at_most_every_poll_s() -> None:
+    """Polled on every turn of a loop, the uplink reads the routers once per POLL_S: a change shows at the first
+    poll after that, not before; then the next read waits POLL_S again."""
+    session = _Routers()
+    uplink = Uplink(session, "test")
+    assert uplink.followed and session.reads == 1
+    session.ids = []
+    assert uplink.poll() is None and session.reads == 1  # (read a moment ago: not again yet)
+    time.sleep(Uplink.POLL_S * 1.5)
+    assert uplink.poll() is LinkChange.DOWN and uplink.down and session.reads == 2
+    session.ids = ["r2"]
+    assert uplink.poll() is None and session.reads == 2
+    time.sleep(Uplink.POLL_S * 1.5)
+    assert uplink.poll() is LinkChange.UP and not uplink.down and uplink.routers == frozenset({"r2"})
+
+
 def test_the_world_holds_while_its_own_link_is_gone_and_steps_nobody_uncommanded() -> None:
     """Lockstep: the router dies while tick 3 waits for commands (two are in), taking every token with it a
     moment before our session sees its link go. The world neither times the step out nor holds a robot nor

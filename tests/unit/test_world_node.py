@@ -44,18 +44,18 @@ class Tick:
 
 
 def ticks(out: Sequence[WorldOutput]) -> list[Tick]:
-    """The ticks in a step's outputs, each its clock, truth and states in that order."""
+    """The ticks in a step's outputs, each its clock, states and truth in that order."""
     got: list[Tick] = []
     for m in out:
         if isinstance(m, wire.Clock):
             got.append(Tick(m, None, []))  # type: ignore[arg-type]
         elif isinstance(m, wire.Truth):
-            assert got and got[-1].truth is None and not got[-1].states
+            assert got and got[-1].truth is None and len(got[-1].states) == len(IDS)
             got[-1].truth = m
         elif isinstance(m, wire.State):
-            assert got and got[-1].truth is not None
+            assert got and got[-1].truth is None
             got[-1].states.append(m)
-    assert all(len(t.states) == len(IDS) for t in got)
+    assert all(len(t.states) == len(IDS) and t.truth is not None for t in got)
     return got
 
 
@@ -135,7 +135,7 @@ def test_stopped_before_the_start() -> None:
 def test_lockstep_waits_for_every_command_then_integrates() -> None:
     node = started()
     out = node.step([], 0.0)
-    assert [type(m) for m in out] == [wire.Clock, wire.Truth] + [wire.State] * len(IDS)  # the order it goes out
+    assert [type(m) for m in out] == [wire.Clock] + [wire.State] * len(IDS) + [wire.Truth]  # the order it goes out
     (tick,) = ticks(out)
     assert tick.clock.k == 0 and tick.clock.alive == tuple(sorted(IDS)) and not tick.clock.end
     assert [m.id for m in tick.states] == IDS and tick.truth.ids == tuple(IDS)
