@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from reconswarm.geometry.plane import Edges, norm2
 from reconswarm.paper.blocked import Group, inside, lost_groups, merged_hulls, pass_gap_m
-from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
+from reconswarm.paper.deadlock import StackedStalls, StallState, generator, stall_step, window_ticks
 from reconswarm.paper.knowledge import KnownObstacles, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
 from reconswarm.paper.planner import Neighbours, ObstacleView, command, errors, repulsion
@@ -226,6 +226,9 @@ class AgentBrain:
         return dict(self.known.hulls)
 
 
+_STALLS = StackedStalls()  # the stall rows of `law`'s last batch (a process's host computes the same agents each tick)
+
+
 def law(plans: Sequence[Plan]) -> Array:
     """Eq. (7) and Remark 1's escape for several agents' ticks at once: their commands u (P, 2), row by row.
 
@@ -245,14 +248,14 @@ def law(plans: Sequence[Plan]) -> Array:
         center = np.concatenate([x.center for x in plans])  # (P, 2)
         lead = None if one.lead_vel is None else np.concatenate([x.lead_vel for x in plans if x.lead_vel is not None])
         nb, ob = Neighbours.stack([x.nb for x in plans]), ObstacleView.stack([x.ob for x in plans])
-        st = StallState.stack([x.brain.stall for x in plans])
+        st = _STALLS.take([x.brain.stall for x in plans])
     e = errors(pos, center, offset)
     rep = repulsion(c, pos, r, nb, ob)
     push = rep[0] + rep[1]
     pert = stall_step(st, one.k, pos, e, c.perturbation_mps, c.k_att, c.target_radius_m, c.converge_tol_m,
                       dt_s, push)
     if n > 1:
-        st.unstack([x.brain.stall for x in plans])
+        _STALLS.give_back(st, [x.brain.stall for x in plans])
     return command(c, pos, r, offset, center, nb, ob, pert, lead, rep)
 
 

@@ -78,6 +78,39 @@ class StallState:
             at += n
 
 
+class StackedStalls:
+    """Several agents' states stacked once and kept from one call to the next (an agent host's law, tick after
+    tick, over the same agents): `take` stacks them only if they changed since `give_back` wrote the rows back
+    (each state's fields are then views of the kept stack, so the stack is current: written in place through a
+    view, it changed too; a field replaced by other code is no longer the view, and the states are stacked
+    again)."""
+
+    def __init__(self) -> None:
+        self._states: list[StallState] = []
+        self._views: list[tuple[object, ...]] = []  # each state's fields as `give_back` left them
+        self._stacked: StallState | None = None
+
+    def take(self, states: list[StallState]) -> StallState:
+        """The states' rows as one (`StallState.stack`, or the kept stack while it is current)."""
+        kept = self._stacked
+        current = kept is not None and len(states) == len(self._states) and all(
+            s is t and _same(_fields(s), v) for s, t, v in zip(states, self._states, self._views, strict=True))
+        return kept if kept is not None and current else StallState.stack(states)
+
+    def give_back(self, stacked: StallState, states: list[StallState]) -> None:
+        """Write the rows back into the states (`unstack`) and keep the stack for the next `take`."""
+        stacked.unstack(states)
+        self._states, self._views, self._stacked = list(states), [_fields(s) for s in states], stacked
+
+
+def _fields(s: StallState) -> tuple[object, ...]:
+    return (s.hist_p, s.hist_e, s.filled, s.pert, s.hold, s.rngs, s.stalls, s.side, s.turned, s.e0, s.free_dir)
+
+
+def _same(a: tuple[object, ...], b: tuple[object, ...]) -> bool:
+    return all(x is y for x, y in zip(a, b, strict=True))
+
+
 ESCAPE_WINDOWS = 6
 
 

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.brain import AgentBrain, Peer, commands
-from reconswarm.paper.deadlock import StallState, generator
+from reconswarm.paper.deadlock import StackedStalls, StallState, generator
 from reconswarm.paper.planner import Neighbours, ObstacleView
 from reconswarm.scenario.model import load
 from tests.support import PAPER
@@ -48,6 +48,30 @@ def test_stall_states_stack_as_copies_and_unstack_row_by_row() -> None:
     assert states[1].hold.tolist() == [5] and states[2].hist_p[3, 0].tolist() == [9.0, 8.0]
 
 
+def test_a_kept_stack_is_taken_again_while_its_rows_are_the_states_own() -> None:
+    """StackedStalls: after `give_back`, the same states are not stacked again (the kept stack, current through
+    the views: a write through one shows in it); a state whose field was replaced, another state, or another
+    list of states is stacked again, and the stack then holds what the states hold."""
+    states = [StallState.create(1, 4, [generator(7, a)]) for a in (1, 2, 3)]
+    kept = StackedStalls()
+    first = kept.take(states)
+    first.side[1] = -1.0
+    kept.give_back(first, states)
+    assert states[1].side.tolist() == [-1.0]
+    states[2].hist_p[0, 0] = (4.0, 5.0)  # (in place, through its view)
+    again = kept.take(states)
+    assert again is first and again.hist_p[0, 2].tolist() == [4.0, 5.0]
+    kept.give_back(again, states)
+    states[0].hold = np.array([7])  # (replaced, as stall_step on one agent alone does)
+    fresh = kept.take(states)
+    assert fresh is not first and fresh.hold.tolist() == [7, 0, 0] and fresh.side.tolist() == [0.0, -1.0, 0.0]
+    kept.give_back(fresh, states)
+    assert kept.take(states) is fresh
+    assert kept.take(states[:2]) is not fresh and kept.take(states[:2]).hold.tolist() == [7, 0]
+    other = [StallState.create(1, 4, [generator(7, a)]) for a in (1, 2, 3)]
+    assert kept.take(other) is not fresh and kept.take(other).side.tolist() == [0.0, 0.0, 0.0]
+
+
 S = load(PAPER)
 ESCAPING = dataclasses.replace(S, planner=dataclasses.replace(S.planner, perturbation_mps=0.4, stall_window_s=0.5))
 DIAMOND = S.polygon(0)  # (4, 2) around (300, 0)
@@ -61,6 +85,17 @@ def test_the_law_of_many_plans_is_each_agents_alone(spots: list[tuple[float, flo
     """Agents held still beside the diamond (so they stall and escape: W = 10 ticks, episodes of 60, turning
     round once), a different subset of them acting at each tick: the commands (v, ω) of one `commands` call
     (the law, then eq. 3 inverted) equal each agent's own, tick after tick, and so do their stall histories."""
+    _compare(spots, acting, heading)
+
+
+def test_the_same_agents_tick_after_tick_with_one_alone_between() -> None:
+    """A host's usual run: the same agents' plans in every call (the kept stack taken again), one agent's alone
+    now and then (its rows replaced: stacked again), then the others again; escape episodes included."""
+    spots = [(262.0, 8.0), (262.0, -8.0), (300.0, 53.0), (300.0, -53.0), (338.0, 6.0), (338.0, -6.0)]
+    _compare(spots, [63] * 70 + [4] * 3 + [63] * 70 + [5] * 20 + [63] * 40, 0.3)
+
+
+def _compare(spots: list[tuple[float, float]], acting: list[int], heading: float) -> None:
     ids = [int(a) for a in ESCAPING.ids[:len(spots)]]
     together = [AgentBrain(ESCAPING, a) for a in ids]
     alone = copy.deepcopy(together)
@@ -76,6 +111,10 @@ def test_the_law_of_many_plans_is_each_agents_alone(spots: list[tuple[float, flo
             u_i, _grew = alone[i].tick(k, p, scan, peers, [])
             solo.append(alone[i].inputs(u_i, theta))
         assert commands(plans) == solo, k
+    _same_histories(together, alone)
+
+
+def _same_histories(together: list[AgentBrain], alone: list[AgentBrain]) -> None:
     for a, b in zip(together, alone, strict=True):
         for f in ("hist_p", "hist_e", "filled", "pert", "hold", "stalls", "side", "turned", "e0", "free_dir"):
             assert getattr(a.stall, f).tolist() == getattr(b.stall, f).tolist(), f
