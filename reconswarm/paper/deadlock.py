@@ -93,9 +93,10 @@ class StackedStalls:
     def take(self, states: list[StallState]) -> StallState:
         """The states' rows as one (`StallState.stack`, or the kept stack while it is current)."""
         kept = self._stacked
-        current = kept is not None and len(states) == len(self._states) and all(
-            s is t and _same(_fields(s), v) for s, t, v in zip(states, self._states, self._views, strict=True))
-        return kept if kept is not None and current else StallState.stack(states)
+        if kept is not None and len(states) == len(self._states) and all(
+                s is t and _same(_fields(s), v) for s, t, v in zip(states, self._states, self._views, strict=True)):
+            return kept
+        return StallState.stack(states)
 
     def give_back(self, stacked: StallState, states: list[StallState]) -> None:
         """Write the rows back into the states (`unstack`) and keep the stack for the next `take`."""

@@ -111,10 +111,6 @@ def _compare(spots: list[tuple[float, float]], acting: list[int], heading: float
             u_i, _grew = alone[i].tick(k, p, scan, peers, [])
             solo.append(alone[i].inputs(u_i, theta))
         assert commands(plans) == solo, k
-    _same_histories(together, alone)
-
-
-def _same_histories(together: list[AgentBrain], alone: list[AgentBrain]) -> None:
     for a, b in zip(together, alone, strict=True):
         for f in ("hist_p", "hist_e", "filled", "pert", "hold", "stalls", "side", "turned", "e0", "free_dir"):
             assert getattr(a.stall, f).tolist() == getattr(b.stall, f).tolist(), f
