@@ -30,7 +30,7 @@ from reconswarm.scenario.model import Scenario, load, parse, to_toml, warnings
 from reconswarm_bringup import chaos, netns, outcome, outdir, packing, runid, validate
 from reconswarm_bringup.clockwatch import ClockWatch
 from reconswarm_bringup.config import LaunchConfig
-from reconswarm_bringup.fleet import ROOT, Fleet, Proc
+from reconswarm_bringup.fleet import ROOT, Fleet, Proc, allowed_cpus
 from reconswarm_bringup.network import Net, check_live_port, plan_network
 
 log = logging.getLogger("reconswarm.launch")
@@ -83,7 +83,8 @@ def run(cfg: LaunchConfig) -> int:
     # routers: a router whose one tx thread waits on a dead link (a partition, until the lease runs out and
     # after) stops forwarding for everyone else too; measured: the whole of host A stalled for the 10 s cut.
     env.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)
-    fleet = Fleet(cfg.out, env, router_env=router_env, batch=cfg.clock == "lockstep")
+    fleet = Fleet(cfg.out, env, router_env=router_env, batch=cfg.clock == "lockstep",
+                  cpus=allowed_cpus() if cfg.pin_cpus else ())
     stop_sig: list[int] = []
 
     def on_signal(signum: int, _frame: Any) -> None:
@@ -115,6 +116,8 @@ def run(cfg: LaunchConfig) -> int:
         mon = fleet.start("monitor", "-", ["monitor", "record", "--scenario", str(scen_path), "--db",
                                            str(cfg.out / "run.db"), "--no-live", *live, *run_arg, *zargs], prefix)
         ros = [] if cfg.ros_domain_id is None else ["--ros2", "--ros-domain-id", str(cfg.ros_domain_id)]
+        if len(fleet.cpus) > 1:
+            log.info("agent processes on CPUs %s in turn, one each (--no-pin-cpus: free)", ", ".join(map(str, fleet.cpus)))
         packing.start_agents(fleet, s, cfg.agents_per_process, net.zopt, ["--scenario", str(scen_path), *ros, *run_arg])
         prefix, zargs = net.zopt("simworld")
         world = fleet.start("simworld", "-", ["simworld", "--scenario", str(scen_path), "--clock", cfg.clock,
