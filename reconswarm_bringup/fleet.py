@@ -19,11 +19,12 @@ ROOT = Path(__file__).resolve().parent.parent
 # 10 weighs about a tenth of a default process) and catches up.
 OBSERVERS = frozenset({"monitor"})  # roles on no tick's path
 OBSERVER_NICE = 10  # added to their nice value
-# Each agent process runs on one CPU of its own while there are as many CPUs as processes (round robin beyond):
-# the scheduler otherwise moves them about, at times both of a run's agent hosts onto one CPU while the world and
-# the monitor hold the other, and every tick waits for the slower. Measured on 2 CPUs, side by side with the
-# processes free: the paper in lockstep 11-18 % faster at K = 1, 5 and 10; realtime x10 at K = 5 misses 4-6 %
-# of its deadlines instead of 9-13 % (docs/benchmarks.md). The world, the monitor and the routers stay free.
+# Each agent process runs on a CPU of its own while a run has no more agent processes than CPUs (agent hosts;
+# with more, the scheduler balances them: reconswarm_bringup/packing.py): left free, the scheduler moves them
+# about, at times both of a run's agent hosts onto one CPU while the world and the monitor hold the other, and
+# every tick waits for the slower. Measured on 2 CPUs beside the processes free (docs/benchmarks.md): the paper
+# in lockstep 12-21 % faster at K = 5 and 10; realtime x10 at K = 5 missed 4-6 % of its deadlines, not 9-13 %.
+# The world, the monitor and the routers stay free.
 PINNED = frozenset({"agent"})  # roles given a CPU each (`--no-pin-cpus`: none)
 
 
@@ -64,7 +65,7 @@ class Fleet:
     # with the default policy: 25-40 % less kernel CPU in the agents, sim/wall median 5.4 against 4.8.
     # Realtime keeps the default policy: there a woken process should run at once.
     batch: bool = False
-    cpus: tuple[int, ...] = ()  # the CPUs the PINNED roles' processes are spread over, in turn (none: not pinned)
+    cpus: tuple[int, ...] = ()  # the CPUs the PINNED roles' processes take, one each in turn (none: not pinned)
     pinned: dict[str, int] = field(default_factory=dict)  # process id (`1-5`) -> its CPU (a restart keeps it)
 
     def start(self, role: str, ident: str, args: list[str], prefix: list[str] | None = None,

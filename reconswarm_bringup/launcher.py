@@ -116,8 +116,6 @@ def run(cfg: LaunchConfig) -> int:
         mon = fleet.start("monitor", "-", ["monitor", "record", "--scenario", str(scen_path), "--db",
                                            str(cfg.out / "run.db"), "--no-live", *live, *run_arg, *zargs], prefix)
         ros = [] if cfg.ros_domain_id is None else ["--ros2", "--ros-domain-id", str(cfg.ros_domain_id)]
-        if len(fleet.cpus) > 1:
-            log.info("agent processes on CPUs %s in turn, one each (--no-pin-cpus: free)", ", ".join(map(str, fleet.cpus)))
         packing.start_agents(fleet, s, cfg.agents_per_process, net.zopt, ["--scenario", str(scen_path), *ros, *run_arg])
         prefix, zargs = net.zopt("simworld")
         world = fleet.start("simworld", "-", ["simworld", "--scenario", str(scen_path), "--clock", cfg.clock,

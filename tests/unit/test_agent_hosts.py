@@ -5,6 +5,7 @@ speaking for them."""
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
@@ -76,6 +77,32 @@ def test_hosts_pack_consecutive_agents_that_reach_the_router_alike() -> None:
     assert packing.hosts(ids, 1, lambda a: "") == [(a,) for a in ids]
     # Two hosts (network namespaces): agents 6-10 reach another router; never packed with 1-5.
     assert packing.hosts(ids, 4, lambda a: a > 5) == [(1, 2, 3, 4), (5,), (6, 7, 8, 9), (10,)]
+
+
+@dataclass
+class _Started:
+    """What start_agents asks of the launcher's Fleet: its CPUs to pin agent processes to, and each start."""
+
+    cpus: tuple[int, ...]
+    started: list[tuple[str, list[str]]] = field(default_factory=list)
+
+    def start(self, role: str, ident: str, args: list[str], prefix: list[str], members: tuple[str, ...]) -> None:
+        self.started.append((ident, args))
+
+
+@pytest.mark.parametrize(("k", "cpus", "idents", "pinned"), [
+    (5, (0, 1), ["1-5", "6-10"], (0, 1)),  # two hosts on two CPUs: one each
+    (10, (0, 1), ["1-10"], (0, 1)),  # one host: the first CPU
+    ("auto", (2, 3, 5), ["1-10"], (2, 3, 5)),
+    (4, (0, 1), ["1-4", "5-8", "9-10"], ()),  # three processes on two CPUs: the scheduler balances them
+    (1, (0, 1), [str(a) for a in range(1, 11)], ()),
+])
+def test_agent_processes_are_pinned_only_while_each_can_have_a_cpu_of_its_own(
+        k: int | str, cpus: tuple[int, ...], idents: list[str], pinned: tuple[int, ...]) -> None:
+    fleet = _Started(cpus)
+    packing.start_agents(fleet, S, k, lambda role, who: ([], []), ["--scenario", "s.toml"])
+    assert [ident for ident, _args in fleet.started] == idents
+    assert fleet.cpus == pinned
 
 
 def _beacon(aid: int) -> wire.Beacon:
