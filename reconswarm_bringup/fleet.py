@@ -19,12 +19,12 @@ ROOT = Path(__file__).resolve().parent.parent
 # 10 weighs about a tenth of a default process) and catches up.
 OBSERVERS = frozenset({"monitor"})  # roles on no tick's path
 OBSERVER_NICE = 10  # added to their nice value
-# Each agent process runs on a CPU of its own while a run has no more agent processes than CPUs (agent hosts;
-# with more, the scheduler balances them: reconswarm_bringup/packing.py): left free, the scheduler moves them
-# about, at times both of a run's agent hosts onto one CPU while the world and the monitor hold the other, and
-# every tick waits for the slower. Measured on 2 CPUs beside the processes free (docs/benchmarks.md): the paper
-# in lockstep 12-21 % faster at K = 5 and 10; realtime x10 at K = 5 missed 4-6 % of its deadlines, not 9-13 %.
-# The world, the monitor and the routers stay free.
+# Agent hosts run on the CPUs in turn, one CPU each while there are as many CPUs as hosts (one process per agent
+# stays free: reconswarm_bringup/packing.py): left free, the scheduler moves them about, at times both of the
+# paper's hosts onto one CPU while the world and the monitor hold the other, and every tick waits for the slower.
+# Measured on 2 CPUs beside the processes free (docs/benchmarks.md): the paper in lockstep 8-21 % faster at K = 5
+# and 10; realtime x10 at K = 5 missed 6-9 % of its deadlines, not 12-13 %. The world, the monitor and the
+# routers stay free.
 PINNED = frozenset({"agent"})  # roles given a CPU each (`--no-pin-cpus`: none)
 
 

@@ -97,10 +97,10 @@ def start_agents(fleet: Any, s: Scenario, k: int | str, zopt: Callable[[str, str
     if per > 1:
         log.info("%d agents in %d process%s (%s %s: up to %d each)", len(ids), len(packed),
                  "" if len(packed) == 1 else "es", OPTION, k, per)
-    if len(packed) > len(fleet.cpus):  # (more processes than CPUs: the scheduler balances them, pinned it could not)
+    if per == 1:  # (one process per agent: many light processes, which the scheduler balances best)
         fleet.cpus = ()
     elif len(fleet.cpus) > 1:
-        log.info("agent process%s on CPU%s %s, one each (--no-pin-cpus: free)", "" if len(packed) == 1 else "es",
+        log.info("agent host%s on CPU%s %s in turn (--no-pin-cpus: free)", "" if len(packed) == 1 else "s",
                  "" if len(packed) == 1 else "s", ", ".join(map(str, fleet.cpus[:len(packed)])))
     for group in packed:
         prefix, zargs = zopt("agent", str(group[0]))

@@ -94,10 +94,10 @@ class _Started:
     (5, (0, 1), ["1-5", "6-10"], (0, 1)),  # two hosts on two CPUs: one each
     (10, (0, 1), ["1-10"], (0, 1)),  # one host: the first CPU
     ("auto", (2, 3, 5), ["1-10"], (2, 3, 5)),
-    (4, (0, 1), ["1-4", "5-8", "9-10"], ()),  # three processes on two CPUs: the scheduler balances them
-    (1, (0, 1), [str(a) for a in range(1, 11)], ()),
+    (4, (0, 1), ["1-4", "5-8", "9-10"], (0, 1)),  # three hosts on two CPUs: in turn
+    (1, (0, 1), [str(a) for a in range(1, 11)], ()),  # one process per agent: the scheduler places them
 ])
-def test_agent_processes_are_pinned_only_while_each_can_have_a_cpu_of_its_own(
+def test_agent_hosts_are_pinned_to_the_cpus_in_turn_and_one_agent_processes_are_free(
         k: int | str, cpus: tuple[int, ...], idents: list[str], pinned: tuple[int, ...]) -> None:
     fleet = _Started(cpus)
     packing.start_agents(fleet, S, k, lambda role, who: ([], []), ["--scenario", "s.toml"])
