@@ -76,9 +76,9 @@ def launch_cmd(
     agents_per_process: Annotated[str, typer.Option("--agents-per-process", metavar="K|auto",
         help="Agents per process (one zenoh session each; default 1); auto: one process for up to 48 agents, "
              "then one per CPU.")] = "1",
-    pin_cpus: Annotated[bool, typer.Option("--pin-cpus/--no-pin-cpus",
-        help="Each agent process on a CPU of its own, in turn (default); off: the scheduler places them (e.g. "
-             "while other work shares the machine).")] = True,
+    no_pin_cpus: Annotated[bool, typer.Option("--no-pin-cpus",
+        help="Leave the agent hosts to the scheduler (by default each runs on one CPU, the CPUs in turn), e.g. "
+             "while other work shares the machine.")] = False,
     zenoh_mode: Annotated[str, typer.Option("--zenoh-mode", metavar="auto|client|peer",
         help="The processes' zenoh mode: client (every sample through the router), peer (samples straight from "
              "process to process; the router for discovery and outside tools); auto (default): peer for agent "
@@ -124,7 +124,7 @@ def launch_cmd(
                            faults=tuple(faults_mod.parse(f) for f in fault or []), timeout_s=timeout,
                            progress=not no_progress, as_json=as_json, hosts=hosts,
                            foxglove_port=foxglove, ros_domain_id=domain, agents_per_process=per_process,
-                           pin_cpus=pin_cpus, zenoh_mode=zenoh_mode)
+                           pin_cpus=not no_pin_cpus, zenoh_mode=zenoh_mode)
         code = run(cfg)
     except ReconswarmError as exc:
         fail(exc, PROG)
