@@ -7,6 +7,7 @@ survivors avoid."""
 from __future__ import annotations
 
 import json
+import os
 import queue
 import subprocess
 import time
@@ -21,6 +22,7 @@ from reconswarm.net import wire
 from reconswarm.net.inbox import sample_source
 from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions
+from reconswarm_bringup.fleet import allowed_cpus
 from tests.support import (
     PAPER,
     ROOT,
@@ -43,6 +45,20 @@ def agent_pids(out: Path) -> dict[int, int]:
     got = [(int(r[1]), int(r[2])) for r in rows if r[0] == "agent"]
     assert len(got) == len({a for a, _ in got}), got  # one line per agent
     return dict(got)
+
+
+def host_cpus(out: Path, proc: subprocess.Popen[str], hosts: int) -> dict[int, set[int]]:
+    """Each running agent host's CPUs, once `hosts` of them are in processes.tsv (agent id -> its host's CPUs)."""
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:
+        try:
+            pids = agent_pids(out)
+        except (OSError, ValueError, IndexError):  # (not there yet, or a line half written)
+            pids = {}
+        if len(set(pids.values())) == hosts:
+            return {a: os.sched_getaffinity(pid) for a, pid in pids.items()}
+        time.sleep(0.05)
+    raise AssertionError(f"{hosts} agent hosts never ran")
 
 
 @pytest.fixture(scope="module")
@@ -115,6 +131,7 @@ def test_an_outside_client_sees_each_hosted_agent_as_its_own(tmp_path: Path, out
         for key in ("swarm/*/cell/*/agent/*/beacon", "swarm/*/agent/*/cmd", "swarm/*/report/*"):
             z.declare_subscriber(key, lambda smp: data.put(
                 (str(smp.key_expr), smp.payload.to_bytes(), sample_source(smp))))
+        cpus = host_cpus(out, proc, 2)
         stdout, stderr = proc.communicate(timeout=600)
     finally:
         if proc.poll() is None:
@@ -124,6 +141,9 @@ def test_an_outside_client_sees_each_hosted_agent_as_its_own(tmp_path: Path, out
             z.close()
     assert proc.returncode in (0, 1), stderr[-3000:]
     assert json.loads(stdout)["deterministic"] is True
+    mine = allowed_cpus()
+    if len(mine) > 1:  # each host on a CPU of its own, the CPUs in turn
+        assert cpus[1] == {mine[0]} and cpus[6] == {mine[1]}, cpus
     keys = Keys((out / "run_id").read_text().strip())
     seen_tokens = set()
     while not tokens.empty():
