@@ -27,5 +27,5 @@ class LaunchConfig:
     foxglove_port: int | None = None  # the monitor serves the run live on 127.0.0.1:PORT
     ros_domain_id: int | None = None  # ROS 2 mode (None: off) in this domain
     agents_per_process: int | str = 1  # K, or "auto" (reconswarm_bringup/packing.py)
-    pin_cpus: bool = True  # each agent process on a CPU of its own, in turn (reconswarm_bringup/fleet.py)
+    pin_cpus: bool = True  # agent hosts each on one CPU, the CPUs in turn (reconswarm_bringup/fleet.py)
     zenoh_mode: str = "auto"  # the run's processes as zenoh clients of the router, peers (direct samples), or auto

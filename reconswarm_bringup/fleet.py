@@ -23,7 +23,7 @@ OBSERVER_NICE = 10  # added to their nice value
 # stays free: reconswarm_bringup/packing.py): left free, the scheduler moves them about, at times both of the
 # paper's hosts onto one CPU while the world and the monitor hold the other, and every tick waits for the slower.
 # Measured on 2 CPUs beside the processes free (docs/benchmarks.md): the paper in lockstep 8-21 % faster at K = 5
-# and 10; realtime x10 at K = 5 missed 6-9 % of its deadlines, not 12-13 %. The world, the monitor and the
+# and 10; realtime x10 at K = 5 missed 4-7 % of its deadlines, not 11-13 %. The world, the monitor and the
 # routers stay free.
 PINNED = frozenset({"agent"})  # roles given a CPU each (`--no-pin-cpus`: none)
 
