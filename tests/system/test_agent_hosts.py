@@ -246,7 +246,7 @@ def test_restarting_a_hosted_agent_restarts_its_host_and_all_its_agents_rejoin(o
 
 
 def test_a_frozen_host_rejoins_and_its_agents_do_not_plan_with_ghosts(tmp_path: Path, out: Path) -> None:
-    """Freezing a host of 5 for 6 s: the others go on without them; back, each of the 5 drops the old places of
+    """Freezing a host of 5 for 4 s: the others go on without them; back, each of the 5 drops the old places of
     peers that left its cells meanwhile (alive, commanding, unheard) and the mission converges. Planning with
     those ghosts, two of them stood still to the end of the mission (without the fix: not converged at 600 s).
 
