@@ -20,8 +20,8 @@ ROOT = Path(__file__).resolve().parent.parent
 OBSERVERS = frozenset({"monitor"})  # roles on no tick's path
 OBSERVER_NICE = 10  # added to their nice value
 # Agent hosts run on the CPUs in turn, one CPU each while there are as many CPUs as hosts (one process per agent
-# stays free: reconswarm_bringup/packing.py): left free, the scheduler moves them about, at times both of the
-# paper's hosts onto one CPU while the world and the monitor hold the other, and every tick waits for the slower.
+# stays free: reconswarm_bringup/packing.py): left free, the scheduler may put both of the paper's hosts on one
+# CPU for a while as the world and the monitor wake on the other, and every lockstep tick waits for the slower.
 # Measured on 2 CPUs beside the processes free (docs/benchmarks.md): the paper in lockstep 8-21 % faster at K = 5
 # and 10; realtime x10 at K = 5 missed 4-7 % of its deadlines, not 11-13 %. The world, the monitor and the
 # routers stay free.
