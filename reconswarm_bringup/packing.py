@@ -20,6 +20,7 @@ from typing import Any
 
 from reconswarm.errors import BadInput
 from reconswarm.scenario.model import Scenario
+from reconswarm_bringup.fleet import allowed_cpus
 
 log = logging.getLogger("reconswarm.launch")
 
@@ -38,10 +39,7 @@ def parse(value: str) -> int | str:
 
 
 def cpus() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return max(1, os.cpu_count() or 1)
+    return len(allowed_cpus()) or max(1, os.cpu_count() or 1)
 
 
 AUTO_HOST_AGENTS = 48  # `auto`: agents per host before a second host pays (measured on 2 CPUs)
