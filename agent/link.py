@@ -123,7 +123,10 @@ class AgentLink(Member):
                 self.rej.reject(key, odom.reason)
                 return odom
             # The plant's (the world's session), a pose the robot can have reached: else refused and counted.
-            return odom if self.gate.admit_odometry(odom, source, key, time.monotonic()) else None
+            if not self.gate.admit_odometry(odom.state, source, key, time.monotonic()):
+                return None
+            self.ros2.keep(odom)
+            return odom.state
         if key.endswith("/obstacles") and not self.admit_bytes(len(payload), source, key):
             return None
         return self.take(decode_sample(self.keys, key, payload, kind), key, source)

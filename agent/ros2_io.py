@@ -4,8 +4,11 @@ Instead of its state and command keys, agent i reads `/robot_<i>/odom` (nav_msgs
 s, θ and the simulated time) and publishes `/robot_<i>/cmd_vel` (geometry_msgs/Twist: linear.x = v,
 angular.z = ω), as node `agent_<i>` with rmw_zenoh's keys, attachments and liveliness tokens
 (reconswarm/net/ros2_node.py). The node (agent/node.py) does not change: an odometry becomes the state it
-knows (head point p = s + l [cos θ, sin θ], tick k = round(t / dt)), and its command, already the unicycle's
-(v, ω) = M(θ)⁻¹ u at the heading of the state it was planned from (eq. 3 inverted), becomes the Twist.
+knows (head point p = s + l [cos θ, sin θ], tick k = round(t / dt)), and its command u becomes the Twist a robot
+base holds: the (v, ω) whose arc over the step, from the state it was planned from, moves the head point by
+exactly u dt, as the project's own plant moves it (not the continuous inverse (v, ω) = M(θ)⁻¹ u of eq. 3: held
+as a twist over a step it turns the robot by |u| dt / l, and past |u| = 2 l / dt, 20 m/s in the paper, the head
+point no longer goes toward u: the robot spins by a lost robot or an obstacle instead of keeping off it).
 
 A Twist carries no tick, so the plant cannot tell which odometry a cmd_vel was planned from; it takes it as
 planned from the oldest it published within `ros2_plan_age_periods` before the cmd_vel was sent (both
@@ -21,15 +24,27 @@ from __future__ import annotations
 import logging
 import math
 import time
+from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
 
 from reconswarm.net import ros2, wire
 from reconswarm.net.node import Invalid
 from reconswarm.net.ros2_node import Ros2Node
 from reconswarm.net.timing import TIMING, Timing
+from reconswarm.plant import unicycle
 
 log = logging.getLogger("reconswarm.agent")
 KEEP_TICKS = 64  # the odometries' source timestamps kept (a command is planned from one of the newest)
+
+
+@dataclass(frozen=True)
+class Odometry:
+    """A decoded odometry: the node's state, and when the plant published it (its attachment; None: unknown)."""
+
+    state: wire.State
+    sent_ns: int | None
 
 
 class AgentRos2:
@@ -43,6 +58,7 @@ class AgentRos2:
         self.node.subscription(ros2.odom_topic(agent_id), ros2.ODOMETRY, callback)
         self.counted = 0
         self.published_ns: dict[int, int] = {}  # tick -> when the plant published its odometry (its attachment)
+        self.theta: dict[int, float] = {}  # tick -> the robot's heading in its odometry
         self.stale = 0  # commands not sent: planned from an odometry older than `ros2_plan_age_periods`
         self.stops = 0  # stops sent instead, once the plant's hold was over
         self.sent_ns: int | None = None  # when the last cmd_vel went out (a plan or a stop)
@@ -52,23 +68,29 @@ class AgentRos2:
     def owns(self, key: str) -> bool:
         return key == self.odom_key
 
-    def decode(self, key: str, payload: bytes) -> wire.State | Invalid:
-        """An odometry sample as the node's state at tick round(t / dt)."""
+    def decode(self, key: str, payload: bytes) -> Odometry | Invalid:
+        """An odometry sample as the node's state at tick round(t / dt), and when the plant published it."""
         try:
             o = ros2.odom_from_ros(payload, self.id)
         except ros2.Ros2Error as exc:
             return Invalid(key, str(exc))
         k = round(o.t_s / self.dt)
-        sent_ns = self.node.sent.take(payload)
-        if sent_ns is not None:
-            self.published_ns[k] = sent_ns
-            if len(self.published_ns) > KEEP_TICKS:
-                del self.published_ns[min(self.published_ns)]
         px, py = o.x_m + self.l * math.cos(o.theta_rad), o.y_m + self.l * math.sin(o.theta_rad)
-        return wire.State(self.id, k, o.t_s, o.x_m, o.y_m, o.theta_rad, px, py)  # (its scan: on its own key)
+        # (its scan: on its own key)
+        return Odometry(wire.State(self.id, k, o.t_s, o.x_m, o.y_m, o.theta_rad, px, py), self.node.sent.take(payload))
+
+    def keep(self, o: Odometry) -> None:
+        """An admitted odometry (the plant's): its tick's heading and publication time, what a command of that
+        tick is turned into a twist with and judged by (`command`)."""
+        self.theta[o.state.k] = o.state.theta
+        if o.sent_ns is not None:
+            self.published_ns[o.state.k] = o.sent_ns
+        for kept in (self.theta, self.published_ns):
+            while len(kept) > KEEP_TICKS:
+                del kept[min(kept)]
 
     def command(self, c: wire.Cmd, period_s: float, now_ns: int | None = None) -> bool:
-        """The node's command, already the unicycle's (v, ω), as a Twist stamped `now_ns` (None: the wall clock's
+        """The node's command as the Twist a robot base holds (`twist`), stamped `now_ns` (None: the wall clock's
         now), unless the odometry of its tick was published more than `ros2_plan_age_periods` of `period_s` (the
         run's period, wall s) before: False, not sent; a stop is sent instead once the last cmd_vel is older than
         the plant's hold (`hold_sim_s`, in wall time at this period), then every `ros2_stop_every_s`."""
@@ -76,7 +98,7 @@ class AgentRos2:
         basis_ns = self.published_ns.get(c.k)
         budget_ns = self.timing.ros2_plan_age_periods * period_s * 1e9
         if basis_ns is not None and now_ns - basis_ns <= budget_ns:
-            self._send(c.v_mps, c.omega_radps, now_ns)
+            self._send(*self.twist(c), now_ns)
             self.stopping = False
             return True
         self.stale += 1
@@ -93,6 +115,18 @@ class AgentRos2:
                         "(the machine is behind the clock) [total %d; %d stops sent instead]", self.id, age,
                         budget_ns / 1e6, self.stale, self.stops)
         return False
+
+    def twist(self, c: wire.Cmd) -> tuple[float, float]:
+        """The twist a robot base holds for the command of tick c.k: the (v, ω) whose arc over a step moves the
+        head point by exactly u dt, u = M(θ_k) [v, ω] the law's (unicycle.arc_inputs; the continuous inverse the
+        node sent, held as a twist, spins the robot in place once |u| passes 2 l / dt)."""
+        theta = self.theta.get(c.k)
+        if theta is None:  # (no admitted odometry of its tick: not sent anyway, `command`)
+            return c.v_mps, c.omega_radps
+        th, l_m = np.array([theta]), np.array([self.l])
+        u = unicycle.head_velocity(np.array([c.v_mps]), np.array([c.omega_radps]), th, l_m)
+        v, w = unicycle.arc_inputs(u, th, l_m, self.dt)
+        return float(v[0]), float(w[0])
 
     def _send(self, v_mps: float, omega_radps: float, now_ns: int) -> None:
         self.cmd_vel.put(ros2.twist_to_ros(v_mps, omega_radps), now_ns)

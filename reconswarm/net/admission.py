@@ -12,7 +12,8 @@ which the receiver drops, counts (`IntrusionTally`) and logs. The rules:
   boundary within `HULL_TOL_M`: agents only share hulls of sensed contour points, which lie on the true
   boundary, so a shared hull is never larger than the real obstacle whoever sent it;
 - commands: |u| at most `command_bound_mps` (what the planner can output with bounded repulsion) and for a
-  tick the world has published;
+  tick the world has published; a ROS 2 cmd_vel, which a robot base holds as a twist, moves the head point
+  no faster than that over the step's arc and turns at most half a turn in a step;
 - the world's messages (clock, state, scan, truth): only from the world's session, pinned at its first
   clock; the clock keeps its mode and speed, t = k dt, and k is no later than the mission's last tick;
 - an agent's messages (beacon, cmd): only from the session that agent speaks from (`Pins`, pinned at first
@@ -43,6 +44,7 @@ from reconswarm.geometry.plane import SAMPLE_SPACING_M, Edges, sample_boundary, 
 from reconswarm.net import wire
 from reconswarm.net.membership import Membership as Membership  # (its home before; re-exported)
 from reconswarm.paper.planner import max_repulsion_speed
+from reconswarm.plant.unicycle import arc_head_speed
 from reconswarm.scenario.model import Scenario
 
 HULL_TOL_M = 1e-3  # a shared vertex must lie within this of the true boundary (float error is ~1e-12 m)
@@ -183,6 +185,13 @@ class Admission:
 
     # -- helpers -------------------------------------------------------------------------------------
 
+    def _arc_speed(self, v_mps: float, omega_radps: float, head_offset_m: float) -> float:
+        """The head point's speed over a step under a twist held (unicycle.arc_head_speed); not finite: inf."""
+        if not (math.isfinite(v_mps) and math.isfinite(omega_radps)):
+            return math.inf
+        return float(arc_head_speed(np.array([v_mps]), np.array([omega_radps]), np.array([head_offset_m]),
+                                    self.s.meta.dt_s)[0])
+
     def reach_m(self, dt_s: float) -> float:
         """How far a head point can move in dt_s of simulated time (|ṗ| = |u| for the unicycle's head)."""
         return self.u_max * max(0.0, dt_s) + POSITION_MARGIN_M
@@ -228,7 +237,14 @@ class Admission:
         names its tick (the project's own; a ROS 2 cmd_vel does not), and an agent has one command a tick: a
         different one for a tick already commanded is a conflict (whoever sent it: the world cannot tell
         which of two sessions stamped with the agent's id is the agent, but the record must say)."""
-        u = math.hypot(c.v_mps, self.head_offset.get(c.id, 0.0) * c.omega_radps)  # |u| = |M(θ) [v, ω]|
+        l_m = self.head_offset.get(c.id, 0.0)
+        if ticked:  # the project's command: u = M(θ) [v, ω], held over the step
+            u = math.hypot(c.v_mps, l_m * c.omega_radps)
+        else:  # a robot base holds the twist itself: the head point's speed over the step's arc (agent/ros2_io.py)
+            u = self._arc_speed(c.v_mps, c.omega_radps, l_m)
+            if not abs(c.omega_radps) * self.s.meta.dt_s <= math.pi * (1.0 + COMMAND_TOL):
+                return Intrusion(IntrusionKind.COMMAND, source, key, f"ω = {c.omega_radps:.6g} rad/s turns more than "
+                                 f"half a turn in a step")
         if not u <= self.u_max * (1.0 + COMMAND_TOL):
             return Intrusion(IntrusionKind.COMMAND, source, key, f"|u| = {u:.6g} m/s above the bound {self.u_max:.6g}")
         if c.k > world_k:

@@ -113,3 +113,34 @@ def step_vw(p: Array, theta: Array, v: Array, w: Array, l: Array, dt: float, max
     s = body_centre(p, theta, l) + np.stack([chord * np.cos(mid), chord * np.sin(mid)], axis=1)
     th = wrap(theta + w * dt)
     return head_point(s, th, l), th, v, w
+
+
+def arc_inputs(u: Array, theta: Array, l: Array, dt: float) -> tuple[Array, Array]:
+    """The [v, ω] whose exact arc over dt (a robot base holding its twist: `step_vw`) moves the head point by
+    exactly u·dt: (N, 2), (N,), (N,) -> v (N,), ω (N,). The continuous inverse (`inputs`) held over a step moves
+    it elsewhere once ‖u‖ dt / l is not small: at ‖u‖ > 2 l / dt heading toward u is unstable and the robot spins
+    in place instead of going where the law sent it (the repulsion's ‖u‖ reaches 65 m/s; 2 l / dt is 20 m/s at
+    l = 0.5 m, dt = 0.05 s).
+
+    In the body frame the head point must move by D = (X, Y) = R(-θ) u dt. A body that turns by a = ω dt on an
+    arc moves its head point by ρ (sin a, 1 - cos a) + l (cos a - 1, sin a), ρ = v / ω; eliminating ρ leaves
+    sin(a/2) ((X + 2l) sin(a/2) - Y cos(a/2)) = 0, so a = 2 atan(Y / (X + 2l)) (the root with |a| <= π; Y = 0
+    gives a straight line), and v dt is the body centre's chord, D - l (cos a - 1, sin a), over sinc(a/2).
+    For small ‖u‖ dt / l it tends to `inputs`."""
+    c, s = np.cos(theta), np.sin(theta)
+    x = (u[:, 0] * c + u[:, 1] * s) * dt  # (N,) D in the body frame
+    y = (-u[:, 0] * s + u[:, 1] * c) * dt
+    half = np.arctan2(y, x + 2.0 * l)  # a / 2, then the root within [-π/2, π/2]
+    half = np.where(half > np.pi / 2, half - np.pi, np.where(half < -np.pi / 2, half + np.pi, half))
+    a = 2.0 * half
+    cx, cy = x + l * (1.0 - np.cos(a)), y - l * np.sin(a)  # the body centre's chord
+    chord = cx * np.cos(half) + cy * np.sin(half)
+    return chord / (dt * np.sinc(half / np.pi)), a / dt
+
+
+def arc_head_speed(v: Array, w: Array, l: Array, dt: float) -> Array:
+    """How fast the head point goes over a step of dt under (v, ω) held (`step_vw`, no limits): its displacement
+    over dt, which the heading does not change. (N,) x 3 -> (N,)."""
+    z = np.zeros_like(v)
+    p, _th, _v, _w = step_vw(np.stack([l, z], axis=1), z, v, w, l, dt)  # (the body centre at the origin, θ = 0)
+    return norm2(p - np.stack([l, z], axis=1)) / dt

@@ -11,17 +11,19 @@ import time
 from collections.abc import Iterator
 from typing import Any
 
+import numpy as np
 import pytest
 import zenoh
 from hypothesis import given
 from hypothesis import strategies as st
 
-from agent.ros2_io import KEEP_TICKS, AgentRos2
+from agent.ros2_io import KEEP_TICKS, AgentRos2, Odometry
 from reconswarm.net import ros2, wire
 from reconswarm.net.inbox import Inbox
 from reconswarm.net.node import Invalid
 from reconswarm.net.ros2_node import Ros2Publisher, SentTimes
 from reconswarm.net.session import ZenohOptions
+from reconswarm.plant import unicycle
 from reconswarm.scenario.model import load
 from simworld.process import WorldPort
 from simworld.ros2_io import Ros2Plant, Ros2World, WorldRos2, planned_tick
@@ -192,7 +194,10 @@ def test_an_agent_sends_no_command_planned_from_odometry_older_than_a_period() -
             plant.put(ros2.odom_to_ros(ros2.Odom(a, 6 * S.meta.dt_s, 0.0, 0.0, 0.0, 0.0, 0.0)), now)
             got = _wait(lambda: [samples.pop(0)] if samples else [], 2)
             states = [agent.decode(str(s.key_expr), s.payload.to_bytes()) for s in got]
-            assert [m.k if isinstance(m, wire.State) else m for m in states] == [5, 6]
+            for o in states:
+                assert not isinstance(o, Invalid)
+                agent.keep(o)
+            assert [o.state.k for o in states if not isinstance(o, Invalid)] == [5, 6]
             period_s = 2.0  # (--speed 0.025: room for this test's own delays)
             assert not agent.command(wire.Cmd(a, 5, 1.0, 0.0), period_s)  # its odometry 10 s old: a stop instead
             assert not agent.command(wire.Cmd(a, 7, 1.0, 0.0), period_s)  # no odometry of that tick (and a stop
@@ -228,12 +233,23 @@ def odometry(agent: AgentRos2, k: int, sent_ns: int, x: float = 3.0, y: float = 
     return payload
 
 
+def kept(agent: AgentRos2, payload: bytes) -> wire.State:
+    """An odometry decoded and kept, as the agent's link keeps one its gate admitted."""
+    o = agent.decode(agent.odom_key, payload)
+    assert isinstance(o, Odometry)
+    agent.keep(o)
+    return o.state
+
+
 def test_an_odometry_is_the_state_of_its_tick_with_the_head_point_l_ahead_of_the_body(agent: AgentRos2) -> None:
-    m = agent.decode(agent.odom_key, odometry(agent, 7, 10**18))
-    assert isinstance(m, wire.State)
+    o = agent.decode(agent.odom_key, odometry(agent, 7, 10**18))
+    assert isinstance(o, Odometry) and o.sent_ns == 10**18
+    m = o.state
     assert (m.id, m.k, m.t, m.x, m.y, m.theta) == (1, 7, 7 * S.meta.dt_s, 3.0, -2.0, 0.7)
     assert (m.px, m.py) == (3.0 + 0.5 * math.cos(0.7), -2.0 + 0.5 * math.sin(0.7))  # p = s + l [cos θ, sin θ]
-    assert agent.published_ns == {7: 10**18}
+    assert agent.published_ns == {} and agent.theta == {}  # (decoded, not admitted: nothing is kept)
+    agent.keep(o)
+    assert agent.published_ns == {7: 10**18} and agent.theta == {7: 0.7}
     other = ros2.odom_to_ros(ros2.Odom(2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))  # robot 2's frame on our topic
     bad = agent.decode(agent.odom_key, other)
     assert isinstance(bad, Invalid) and bad.key == agent.odom_key and "of agent 2 on the topic of agent 1" in bad.reason
@@ -245,8 +261,8 @@ def test_an_odometry_is_the_state_of_its_tick_with_the_head_point_l_ahead_of_the
 
 def test_the_newest_odometries_times_are_kept(agent: AgentRos2) -> None:
     for k in range(KEEP_TICKS + 5):
-        agent.decode(agent.odom_key, odometry(agent, k, 10**18 + k))
-    assert sorted(agent.published_ns) == list(range(5, KEEP_TICKS + 5))
+        kept(agent, odometry(agent, k, 10**18 + k))
+    assert sorted(agent.published_ns) == sorted(agent.theta) == list(range(5, KEEP_TICKS + 5))
 
 
 def test_a_command_goes_out_up_to_exactly_one_period_after_its_odometry_and_is_stamped_when_sent(
@@ -260,7 +276,7 @@ def test_a_command_goes_out_up_to_exactly_one_period_after_its_odometry_and_is_s
         return attach(now_ns)
 
     agent.cmd_vel.publication.next_attachment = stamped  # type: ignore[method-assign]
-    agent.decode(agent.odom_key, odometry(agent, 3, t0))
+    kept(agent, odometry(agent, 3, t0))
     agent.sent_ns = t0  # (a cmd_vel went out then: the plant holds it for 0.2 s of simulated time, 50 ms here)
     with caplog.at_level("WARNING"):
         assert not agent.command(wire.Cmd(1, 3, 1.0, 0.0), period_s, t0 + 12_500_001)
@@ -279,16 +295,43 @@ def test_an_agent_behind_the_clock_sends_a_stop_once_the_plants_hold_is_over_the
     sent: list[tuple[int | None, tuple[float, float]]] = []
     agent.cmd_vel.put = lambda payload, now_ns=None: sent.append(  # type: ignore[method-assign]
         (now_ns, ros2.twist_from_ros(payload)))
-    agent.decode(agent.odom_key, odometry(agent, 3, t0))
+    kept(agent, odometry(agent, 3, t0))
     assert agent.command(wire.Cmd(1, 3, 0.8, 0.1), period_s, t0 + 5 * MS)  # a plan, in time
     late = [t0 + d * MS for d in (20, 54, 55, 70, 554, 555, 1055)]
     assert not any(agent.command(wire.Cmd(1, 3, 0.8, 0.1), period_s, at) for at in late)  # (odometry 20+ ms old)
-    assert sent == [(t0 + 5 * MS, (0.8, 0.1)), (t0 + 55 * MS, (0.0, 0.0)), (t0 + 555 * MS, (0.0, 0.0)),
+    plan = agent.twist(wire.Cmd(1, 3, 0.8, 0.1))  # (the twist of that command: `test_..._exactly_u_dt`)
+    assert sent == [(t0 + 5 * MS, plan), (t0 + 55 * MS, (0.0, 0.0)), (t0 + 555 * MS, (0.0, 0.0)),
                     (t0 + 1055 * MS, (0.0, 0.0))]
-    agent.decode(agent.odom_key, odometry(agent, 4, t0 + 1100 * MS))
+    kept(agent, odometry(agent, 4, t0 + 1100 * MS))
     assert agent.command(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1101 * MS)  # in time again
     assert not agent.command(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1150 * MS)  # (late, within the hold)
     assert agent.command(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1105 * MS)
     assert not agent.command(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1155 * MS)  # the hold over: a stop
-    assert sent[4:] == [(t0 + 1101 * MS, (0.5, 0.0)), (t0 + 1105 * MS, (0.5, 0.0)), (t0 + 1155 * MS, (0.0, 0.0))]
+    plan = agent.twist(wire.Cmd(1, 4, 0.5, 0.0))
+    assert sent[4:] == [(t0 + 1101 * MS, plan), (t0 + 1105 * MS, plan), (t0 + 1155 * MS, (0.0, 0.0))]
     assert (agent.stale, agent.stops, agent.sent_ns) == (9, 4, t0 + 1155 * MS)
+
+
+
+def test_the_twist_sent_moves_the_head_point_where_the_law_sends_it(agent: AgentRos2) -> None:
+    """A robot base holds its twist over the step (the plant's exact arc, unicycle.step_vw): the agent sends the
+    (v, ω) that takes the head point to p + u dt from the odometry the command was planned from, as the project's
+    own plant moves it. The node's (v, ω) = M(θ)⁻¹ u held so would turn the robot by |u| dt / l: at the
+    repulsion's 65 m/s beside a robot, 6.5 rad in a step, and the head point ends metres from where it was sent."""
+    s = kept(agent, odometry(agent, 3, 10**18))  # θ = 0.7
+    l_m, dt, th = np.array([0.5]), S.meta.dt_s, np.array([s.theta])
+    p0 = np.array([[s.px, s.py]])
+    off = []
+    for u in ([[65.0 * math.cos(s.theta + math.pi / 2), 65.0 * math.sin(s.theta + math.pi / 2)]],  # across
+              [[-30.0, 12.0]], [[1.5, -0.4]]):
+        ua = np.array(u)
+        v0, w0 = unicycle.inputs(ua, th, l_m)  # the node's command
+        v, w = agent.twist(wire.Cmd(1, 3, float(v0[0]), float(w0[0])))
+        p1 = unicycle.step_vw(p0, th, np.array([v]), np.array([w]), l_m, dt)[0]
+        assert np.abs(p1 - (p0 + ua * dt)).max() < 1e-9
+        held = unicycle.step_vw(p0, th, v0, w0, l_m, dt)[0]
+        print(f"|u| {np.hypot(*ua[0]):.1f} m/s: the twist sent ends {np.hypot(*(p1 - p0 - ua * dt)[0]):.1e} m from "
+              f"p + u dt, M(θ)⁻¹ u held {np.hypot(*(held - p0 - ua * dt)[0]):.3f} m")
+        off.append(float(np.hypot(*(held - p0 - ua * dt)[0])))
+    assert off[0] > 2.0 and off[1] > 0.5 and off[2] < 0.01  # (slow: the same to first order)
+    assert agent.twist(wire.Cmd(1, 4, 1.0, 2.0)) == (1.0, 2.0)  # no odometry of tick 4 kept: never sent (`command`)
