@@ -27,8 +27,6 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
 from reconswarm.net import ros2, wire
 from reconswarm.net.node import Invalid
 from reconswarm.net.ros2_node import Ros2Node
@@ -58,7 +56,6 @@ class AgentRos2:
         self.node.subscription(ros2.odom_topic(agent_id), ros2.ODOMETRY, callback)
         self.counted = 0
         self.published_ns: dict[int, int] = {}  # tick -> when the plant published its odometry (its attachment)
-        self.theta: dict[int, float] = {}  # tick -> the robot's heading in its odometry
         self.stale = 0  # commands not sent: planned from an odometry older than `ros2_plan_age_periods`
         self.stops = 0  # stops sent instead, once the plant's hold was over
         self.sent_ns: int | None = None  # when the last cmd_vel went out (a plan or a stop)
@@ -80,14 +77,12 @@ class AgentRos2:
         return Odometry(wire.State(self.id, k, o.t_s, o.x_m, o.y_m, o.theta_rad, px, py), self.node.sent.take(payload))
 
     def keep(self, o: Odometry) -> None:
-        """An admitted odometry (the plant's): its tick's heading and publication time, what a command of that
-        tick is turned into a twist with and judged by (`command`)."""
-        self.theta[o.state.k] = o.state.theta
+        """An admitted odometry (the plant's): when its tick was published, what a command of that tick is judged
+        by (`command`)."""
         if o.sent_ns is not None:
             self.published_ns[o.state.k] = o.sent_ns
-        for kept in (self.theta, self.published_ns):
-            while len(kept) > KEEP_TICKS:
-                del kept[min(kept)]
+            if len(self.published_ns) > KEEP_TICKS:
+                del self.published_ns[min(self.published_ns)]
 
     def command(self, c: wire.Cmd, period_s: float, now_ns: int | None = None) -> bool:
         """The node's command as the Twist a robot base holds (`twist`), stamped `now_ns` (None: the wall clock's
@@ -117,16 +112,10 @@ class AgentRos2:
         return False
 
     def twist(self, c: wire.Cmd) -> tuple[float, float]:
-        """The twist a robot base holds for the command of tick c.k: the (v, ω) whose arc over a step moves the
-        head point by exactly u dt, u = M(θ_k) [v, ω] the law's (unicycle.arc_inputs; the continuous inverse the
-        node sent, held as a twist, spins the robot in place once |u| passes 2 l / dt)."""
-        theta = self.theta.get(c.k)
-        if theta is None:  # (no admitted odometry of its tick: not sent anyway, `command`)
-            return c.v_mps, c.omega_radps
-        th, l_m = np.array([theta]), np.array([self.l])
-        u = unicycle.head_velocity(np.array([c.v_mps]), np.array([c.omega_radps]), th, l_m)
-        v, w = unicycle.arc_inputs(u, th, l_m, self.dt)
-        return float(v[0]), float(w[0])
+        """The twist a robot base holds for the node's command (v, ω) = M(θ)⁻¹ u: the one whose arc over a step
+        moves the head point by exactly u dt (unicycle.arc_twist: held as a twist, the node's own spins the robot
+        in place once |u| passes 2 l / dt)."""
+        return unicycle.arc_twist(c.v_mps, c.omega_radps, self.l, self.dt)
 
     def _send(self, v_mps: float, omega_radps: float, now_ns: int) -> None:
         self.cmd_vel.put(ros2.twist_to_ros(v_mps, omega_radps), now_ns)

@@ -185,12 +185,12 @@ class Admission:
 
     # -- helpers -------------------------------------------------------------------------------------
 
-    def _arc_speed(self, v_mps: float, omega_radps: float, head_offset_m: float) -> float:
+    @staticmethod
+    def _arc_speed(v_mps: float, omega_radps: float, head_offset_m: float, dt_s: float) -> float:
         """The head point's speed over a step under a twist held (unicycle.arc_head_speed); not finite: inf."""
         if not (math.isfinite(v_mps) and math.isfinite(omega_radps)):
             return math.inf
-        return float(arc_head_speed(np.array([v_mps]), np.array([omega_radps]), np.array([head_offset_m]),
-                                    self.s.meta.dt_s)[0])
+        return arc_head_speed(v_mps, omega_radps, head_offset_m, dt_s)
 
     def reach_m(self, dt_s: float) -> float:
         """How far a head point can move in dt_s of simulated time (|ṗ| = |u| for the unicycle's head)."""
@@ -241,7 +241,7 @@ class Admission:
         if ticked:  # the project's command: u = M(θ) [v, ω], held over the step
             u = math.hypot(c.v_mps, l_m * c.omega_radps)
         else:  # a robot base holds the twist itself: the head point's speed over the step's arc (agent/ros2_io.py)
-            u = self._arc_speed(c.v_mps, c.omega_radps, l_m)
+            u = self._arc_speed(c.v_mps, c.omega_radps, l_m, self.s.meta.dt_s)
             if not abs(c.omega_radps) * self.s.meta.dt_s <= math.pi * (1.0 + COMMAND_TOL):
                 return Intrusion(IntrusionKind.COMMAND, source, key, f"ω = {c.omega_radps:.6g} rad/s turns more than "
                                  f"half a turn in a step")

@@ -10,6 +10,8 @@ substeps on exact arcs and the head point no longer follows u: that lag is part 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -115,32 +117,42 @@ def step_vw(p: Array, theta: Array, v: Array, w: Array, l: Array, dt: float, max
     return head_point(s, th, l), th, v, w
 
 
-def arc_inputs(u: Array, theta: Array, l: Array, dt: float) -> tuple[Array, Array]:
-    """The [v, ω] whose exact arc over dt (a robot base holding its twist: `step_vw`) moves the head point by
-    exactly u·dt: (N, 2), (N,), (N,) -> v (N,), ω (N,). The continuous inverse (`inputs`) held over a step moves
-    it elsewhere once ‖u‖ dt / l is not small: at ‖u‖ > 2 l / dt heading toward u is unstable and the robot spins
-    in place instead of going where the law sent it (the repulsion's ‖u‖ reaches 65 m/s; 2 l / dt is 20 m/s at
-    l = 0.5 m, dt = 0.05 s).
 
-    In the body frame the head point must move by D = (X, Y) = R(-θ) u dt. A body that turns by a = ω dt on an
-    arc moves its head point by ρ (sin a, 1 - cos a) + l (cos a - 1, sin a), ρ = v / ω; eliminating ρ leaves
-    sin(a/2) ((X + 2l) sin(a/2) - Y cos(a/2)) = 0, so a = 2 atan(Y / (X + 2l)) (the root with |a| <= π; Y = 0
-    gives a straight line), and v dt is the body centre's chord, D - l (cos a - 1, sin a), over sinc(a/2).
-    For small ‖u‖ dt / l it tends to `inputs`."""
-    c, s = np.cos(theta), np.sin(theta)
-    x = (u[:, 0] * c + u[:, 1] * s) * dt  # (N,) D in the body frame
-    y = (-u[:, 0] * s + u[:, 1] * c) * dt
-    half = np.arctan2(y, x + 2.0 * l)  # a / 2, then the root within [-π/2, π/2]
-    half = np.where(half > np.pi / 2, half - np.pi, np.where(half < -np.pi / 2, half + np.pi, half))
+def arc_twist(v_mps: float, omega_radps: float, l_m: float, dt: float) -> tuple[float, float]:
+    """The twist whose exact arc over dt (a robot base holding it: `step_vw`) moves the head point as far as the
+    continuous (v, ω) = M(θ)⁻¹ u (`inputs`) moves it at once over dt: by exactly u dt. Scalars (one command).
+
+    Held as a twist, the continuous (v, ω) turns the robot by ω dt = |u⊥| dt / l in a step and moves the head
+    point elsewhere once that is not small: past |u| = 2 l / dt (20 m/s at l = 0.5 m, dt = 0.05 s; the
+    repulsion's |u| reaches 65 m/s) heading toward u is unstable and the robot spins in place instead of going
+    where the law sent it.
+
+    In the robot's frame u dt is D = (X, Y) = (v dt, l ω dt) (M(θ) = R(θ) diag(1, l)): no heading needed. A body
+    turning by a = ω' dt on an arc moves its head point by ρ (sin a, 1 - cos a) + l (cos a - 1, sin a),
+    ρ = v' / ω'; eliminating ρ leaves sin(a/2) ((X + 2l) sin(a/2) - Y cos(a/2)) = 0, so a = 2 atan(Y / (X + 2l))
+    (the root with |a| <= π; Y = 0: a straight line), and v' dt is the body centre's chord, D - l (cos a - 1,
+    sin a), over sinc(a/2). For |u| dt << l it tends to (v, ω)."""
+    x, y = v_mps * dt, l_m * omega_radps * dt
+    half = math.atan2(y, x + 2.0 * l_m)  # a / 2, then the root within [-π/2, π/2]
+    if half > math.pi / 2:
+        half -= math.pi
+    elif half < -math.pi / 2:
+        half += math.pi
     a = 2.0 * half
-    cx, cy = x + l * (1.0 - np.cos(a)), y - l * np.sin(a)  # the body centre's chord
-    chord = cx * np.cos(half) + cy * np.sin(half)
-    return chord / (dt * np.sinc(half / np.pi)), a / dt
+    chord = (x + l_m * (1.0 - math.cos(a))) * math.cos(half) + (y - l_m * math.sin(a)) * math.sin(half)
+    return chord / (dt * _sinc(half)), a / dt
 
 
-def arc_head_speed(v: Array, w: Array, l: Array, dt: float) -> Array:
-    """How fast the head point goes over a step of dt under (v, ω) held (`step_vw`, no limits): its displacement
-    over dt, which the heading does not change. (N,) x 3 -> (N,)."""
-    z = np.zeros_like(v)
-    p, _th, _v, _w = step_vw(np.stack([l, z], axis=1), z, v, w, l, dt)  # (the body centre at the origin, θ = 0)
-    return norm2(p - np.stack([l, z], axis=1)) / dt
+def arc_head_speed(v_mps: float, omega_radps: float, l_m: float, dt: float) -> float:
+    """How fast the head point goes over a step of dt under a twist held (`step_vw`, no limits): its displacement
+    over dt (which the heading does not change) over dt. Scalars."""
+    half = omega_radps * dt / 2.0
+    chord = v_mps * dt * _sinc(half)
+    a = 2.0 * half
+    dx, dy = chord * math.cos(half) + l_m * (math.cos(a) - 1.0), chord * math.sin(half) + l_m * math.sin(a)
+    return math.hypot(dx, dy) / dt
+
+
+def _sinc(x: float) -> float:
+    """sin(x) / x (1 at 0)."""
+    return math.sin(x) / x if x != 0.0 else 1.0

@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-import numpy as np
 import pytest
 
 from reconswarm.net import admission, wire
@@ -149,18 +148,16 @@ def test_the_turn_rate_counts_in_u_through_the_head_offset() -> None:
 
 def test_a_ros2_twist_is_bounded_by_where_it_moves_the_head_point_over_the_step() -> None:
     """A robot base holds its cmd_vel over the step: what counts is the head point's speed along that arc (the
-    agent sends the twist that moves it by exactly u dt, unicycle.arc_inputs), and at most half a turn a step. A
+    agent sends the twist that moves it by exactly u dt, unicycle.arc_twist), and at most half a turn a step. A
     twist for |u| just under the bound is admitted although hypot(v, h ω) is up to π/2 times |u|."""
     adm = started()
     h, dt = float(PAPER_S.head_offsets[PAPER_S.agent_index(2)]), PAPER_S.meta.dt_s
-    key, th, hh = KEYS.cmd(2), np.array([0.0]), np.array([h])
-    back = np.array([[-2.0 * h / dt, 1e-3]])  # straight back by 2 h with a hair aside: half a turn in place
-    v, w = (float(x[0]) for x in unicycle.arc_inputs(back, th, hh, dt))
-    assert math.hypot(v, h * w) > 1.5 * math.hypot(*back[0])
+    key = KEYS.cmd(2)
+    v, w = unicycle.arc_twist(-2.0 * h / dt, 1e-3 / h, h, dt)  # straight back by 2 h, a hair aside: a half-turn
+    assert math.hypot(v, h * w) > 1.5 * math.hypot(-2.0 * h / dt, 1e-3)
     assert adm.check_cmd(wire.Cmd(2, 0, v, w), A2, key, now=0.0, world_k=0, ticked=False) is None
     for scale, ok in ((0.99, True), (1.01, False)):
-        u = np.array([[0.0, scale * adm.u_max]])
-        v, w = (float(x[0]) for x in unicycle.arc_inputs(u, th, hh, dt))
+        v, w = unicycle.arc_twist(0.0, scale * adm.u_max / h, h, dt)  # |u| = scale u_max, across
         got = adm.check_cmd(wire.Cmd(2, 0, v, w), A2, key, now=0.0, world_k=0, ticked=False)
         assert got is None if ok else refused(got, K.COMMAND, A2, key, "above the bound")
     spin = 2.0 * math.pi / dt  # a whole turn in a step: back where it was, its arc never checked
