@@ -117,7 +117,6 @@ def step_vw(p: Array, theta: Array, v: Array, w: Array, l: Array, dt: float, max
     return head_point(s, th, l), th, v, w
 
 
-
 def arc_twist(v_mps: float, omega_radps: float, l_m: float, dt: float) -> tuple[float, float]:
     """The twist whose exact arc over dt (a robot base holding it: `step_vw`) moves the head point as far as the
     continuous (v, ω) = M(θ)⁻¹ u (`inputs`) moves it at once over dt: by exactly u dt. Scalars (one command).
