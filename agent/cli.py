@@ -18,7 +18,7 @@ help_style.install()
 
 def agent_cmd(
     scenario: Annotated[Path, typer.Option("--scenario", help="Scenario TOML file.")],
-    agent_id: Annotated[list[int] | None, typer.Option("--id",
+    agent_id: Annotated[list[str] | None, typer.Option("--id", metavar="I",
         help="This agent's id (from the scenario); repeatable: those agents in this process.")] = None,
     ids: Annotated[str | None, typer.Option("--ids", metavar="1-5,9",
         help="Host these agents in this process (one zenoh session; each keeps its own keys and token).")] = None,

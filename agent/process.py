@@ -25,10 +25,10 @@ from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions, serving
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.scenario.model import load
+from reconswarm.scenario.wire_limits import MAX_AGENT_ID, MAX_IDS, agent_id_from_text
 
 __all__ = ["AgentConfig", "AgentLink", "parse_ids", "run"]
 log = logging.getLogger("reconswarm.agent")
-MAX_ID = 2**31 - 1
 
 
 @dataclass(frozen=True)
@@ -41,17 +41,26 @@ class AgentConfig:
     ros2_domain_id: int | None = None  # ROS 2 mode: odom in, cmd_vel out (agent/ros2_io.py) in this domain
 
 
-def parse_ids(ids: list[int] | None, spec: str | None) -> tuple[int, ...]:
-    """`--id I` (repeatable) and `--ids 1-5,9` as one ordered tuple of distinct ids; bad input: BadInput."""
-    out = list(ids or [])
+def parse_ids(ids: list[str] | None, spec: str | None) -> tuple[int, ...]:
+    """`--id I` (repeatable) and `--ids 1-5,9` as one ordered tuple of distinct ids (at most MAX_IDS, as many as a
+    scenario holds, counted before any list is built); bad input: BadInput."""
+    spans = []
+    for text in ids or []:
+        a = agent_id_from_text(text.strip())
+        if a is None:
+            raise BadInput(f"--id: expected an agent id (0..{MAX_AGENT_ID}), got {text!r}")
+        spans.append(range(a, a + 1))
     for part in (spec or "").split(",") if spec is not None else []:
         lo, dash, hi = part.strip().partition("-")
-        if not lo.isdigit() or (dash and not hi.isdigit()):
-            raise BadInput(f"--ids: expected ids and ranges such as 1-5,9, got {spec!r}")
-        a, b = int(lo), int(hi) if dash else int(lo)
-        if b < a or b > MAX_ID:
+        a, b = agent_id_from_text(lo), agent_id_from_text(hi) if dash else agent_id_from_text(lo)
+        if a is None or b is None:
+            raise BadInput(f"--ids: expected ids (0..{MAX_AGENT_ID}) and ranges such as 1-5,9, got {spec!r}")
+        if b < a:
             raise BadInput(f"--ids: bad range {part.strip()!r} in {spec!r}")
-        out += range(a, b + 1)
+        spans.append(range(a, b + 1))
+    if sum(len(r) for r in spans) > MAX_IDS:
+        raise BadInput(f"--id/--ids: more than {MAX_IDS} agents (a scenario's most) in {spec!r}")
+    out = [a for r in spans for a in r]
     if not out:
         raise BadInput("--id or --ids: which agent(s)? e.g. --id 3 or --ids 1-5,9")
     return tuple(dict.fromkeys(out))

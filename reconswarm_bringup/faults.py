@@ -22,12 +22,13 @@ import re
 from dataclasses import dataclass
 
 from reconswarm.errors import BadInput
+from reconswarm.scenario.wire_limits import MAX_AGENT_ID, agent_id_from_text
 
 ACTIONS = {"kill", "freeze", "restart", "flood", "partition"}
 _PROCESS_ACTIONS = {"monitor": ("kill", "restart", "freeze"), "router": ("kill", "restart", "freeze"),
                     "simworld": ("kill", "freeze")}  # what may be done to the one process of each role
 _SPEC = re.compile(r"^(?P<action>[a-z]+)(?::(?P<target>[a-z]+|\d+))?(?::(?P<id>\d+))?@(?P<t>\d+(?:\.\d+)?)"
-                   r"(?:\+(?P<dur>\d+(?:\.\d+)?))?$")
+                   r"(?:\+(?P<dur>\d+(?:\.\d+)?))?$", re.ASCII)  # (ASCII: \d takes any Unicode digit otherwise)
 
 
 @dataclass(frozen=True)
@@ -60,7 +61,9 @@ def parse(spec: str) -> Fault:
     if target == "agent":
         if aid is None:
             raise BadInput(f"--fault {spec!r}: which agent? e.g. {action}:agent:3@{t:g}")
-        agent_id: int | None = int(aid)
+        agent_id = agent_id_from_text(aid)
+        if agent_id is None:
+            raise BadInput(f"--fault {spec!r}: agent ids are 0..{MAX_AGENT_ID}, written without leading zeros")
     elif action in _PROCESS_ACTIONS.get(target, ()):
         agent_id = None
     else:

@@ -33,7 +33,7 @@ def parse(value: str) -> int | str:
     v = value.strip().lower()
     if v == AUTO:
         return AUTO
-    if not v.isdigit() or int(v) < 1:
+    if not (v.isascii() and v.isdigit()) or int(v) < 1:  # ("²".isdigit(), but int() refuses it)
         raise BadInput(f"{OPTION}: expected a positive integer or auto, got {value!r}")
     return int(v)
 

@@ -54,7 +54,8 @@ def _scheduler(address: str) -> tuple[str, int]:
         scheme, rest = "tcp", address
     host, colon, port = rest.rpartition(":")
     host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
-    if scheme != "tcp" or not colon or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+    digits = port.isascii() and port.isdigit()
+    if scheme != "tcp" or not colon or not host or not digits or not 1 <= int(port) <= 65535:
         raise BadInput(f"--dask: expected a scheduler address tcp://HOST:PORT, got {address!r}")
     return host, int(port)
 

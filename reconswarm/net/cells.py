@@ -18,8 +18,10 @@ from dataclasses import dataclass
 
 from reconswarm.paper.link import HYSTERESIS_M
 from reconswarm.scenario.model import Scenario
+from reconswarm.scenario.wire_limits import int_from_text
 
 Cell = tuple[int, int]
+MAX_CELL = 999_999_999  # a cell coordinate's bound in a key (9 digits)
 
 
 def speed_bound_mps(s: Scenario) -> float:
@@ -95,13 +97,10 @@ def cell_chunk(c: Cell) -> str:
 
 
 def chunk_cell(chunk: str) -> Cell:
-    """Inverse of cell_chunk; ValueError for anything else."""
+    """Inverse of cell_chunk (canonical integers alone: `01_0` is another key than cell (1, 0)'s); ValueError for
+    anything else."""
     a, sep, b = chunk.partition("_")
-    if not sep or not _is_int(a) or not _is_int(b):
+    cx, cy = int_from_text(a, -MAX_CELL, MAX_CELL), int_from_text(b, -MAX_CELL, MAX_CELL)
+    if not sep or cx is None or cy is None:
         raise ValueError(f"bad cell {chunk!r}")
-    return int(a), int(b)
-
-
-def _is_int(t: str) -> bool:
-    body = t[1:] if t.startswith("-") else t
-    return body.isdigit() and len(body) <= 9
+    return cx, cy

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from reconswarm.net.cells import Cell, cell_chunk, chunk_cell
+from reconswarm.scenario.wire_limits import agent_id_from_text
 
 CELL_LEAVES = ("beacon", "obstacles")  # what is published under a cell of the sender's position
 
@@ -123,17 +124,21 @@ class Keys:
             return "agent", _key_id(parts[3], key), parts[4]
         if len(parts) == 3 and parts[:2] == ["alive", "agent"]:
             return "alive", _key_id(parts[2], key), "agent"
-        if len(parts) == 2 and parts[0] == "report" and (parts[1] == "simworld" or (
-                parts[1].startswith("agent-") and parts[1][6:].isdigit() and len(parts[1]) <= 16)):
-            return "report", int(parts[1][6:]) if parts[1] != "simworld" else None, parts[1]
+        if len(parts) == 2 and parts[0] == "report" and parts[1] == "simworld":
+            return "report", None, parts[1]
+        if len(parts) == 2 and parts[0] == "report" and parts[1].startswith("agent-"):
+            return "report", _key_id(parts[1][6:], key), parts[1]
         if len(parts) == 2 and parts[0] == "alive" and parts[1] in ("simworld", "monitor"):
             return "alive", None, parts[1]
         raise WireError(f"unexpected key {key!r}")
 
 
 def _key_id(text: str, key: str) -> int:
-    if not text.isdigit() or len(text) > 10:
+    """An agent id in a key: its canonical decimal alone (`03` or `٣` is another key than agent 3's, and no
+    key of it)."""
+    aid = agent_id_from_text(text)
+    if aid is None:
         raise WireError(f"bad agent id in key {key!r}")
-    return int(text)
+    return aid
 
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 from reconswarm.net.keys import WireError
 from reconswarm.net.wire import _int, _num, _pack, _str, _unpack
+from reconswarm.scenario.wire_limits import agent_id_from_text
 
 MAX_ROWS = 300
 Row = tuple[str, str, int, float]  # kind, source, count, first_t
@@ -32,8 +33,14 @@ class Report:
 
     @property
     def agent_id(self) -> int | None:
-        """Whose report: an agent's id, None for the world's (the key's parse checked the name)."""
-        return None if self.process == "simworld" else int(self.process.removeprefix("agent-"))
+        """Whose report: an agent's id, None for the world's; WireError for another name (the key's parse, which
+        the name matches, refuses it first)."""
+        if self.process == "simworld":
+            return None
+        aid = agent_id_from_text(self.process[6:]) if self.process.startswith("agent-") else None
+        if aid is None:
+            raise WireError(f"field 'process': {self.process!r} is no process of a run")
+        return aid
 
 
 def report_to_wire(m: Report) -> bytes:

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from reconswarm.errors import BadInput
+from reconswarm.scenario.wire_limits import agent_id_from_text, int_from_text
 
 ODOMETRY = "nav_msgs/msg/Odometry"
 TWIST = "geometry_msgs/msg/Twist"
@@ -115,22 +116,24 @@ class TopicKey:
 
 def parse_topic_key(key: str) -> TopicKey:
     parts = key.split("/")
-    if len(parts) < 4 or not all(parts) or not parts[0].isdigit():
+    domain = int_from_text(parts[0], 0, MAX_DOMAIN_ID) if len(parts) >= 4 and all(parts) else None
+    if domain is None:
         raise Ros2Error(f"not a ROS 2 topic key: {key!r}")
     if not parts[-1].startswith("RIHS01_") or "::dds_::" not in parts[-2]:
         raise Ros2Error(f"no DDS type and RIHS01 hash at the end of {key!r}")
-    return TopicKey(int(parts[0]), "/" + "/".join(parts[1:-2]), parts[-2], parts[-1])
+    return TopicKey(domain, "/" + "/".join(parts[1:-2]), parts[-2], parts[-1])
 
 
-_ROBOT_TOPIC = re.compile(r"/robot_(0|[1-9][0-9]{0,8})/(odom|cmd_vel)")
+_ROBOT_TOPIC = re.compile(r"/robot_([^/]*)/(odom|cmd_vel)")
 
 
 def agent_of_topic(topic: str) -> int:
-    """`/robot_7/odom` or `/robot_7/cmd_vel` -> 7."""
+    """`/robot_7/odom` or `/robot_7/cmd_vel` -> 7 (the id's canonical decimal alone)."""
     m = _ROBOT_TOPIC.fullmatch(topic)
-    if m is None:
+    aid = None if m is None else agent_id_from_text(m.group(1))
+    if aid is None:
         raise Ros2Error(f"not a robot topic: {topic!r}")
-    return int(m.group(1))
+    return aid
 
 
 def check_domain_id(domain_id: int) -> int:

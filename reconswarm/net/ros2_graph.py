@@ -69,7 +69,7 @@ class QoS:
         subs = [p.split(",") for p in parts]
         if len(parts) != 6 or [len(s) for s in subs[2:]] != [2, 2, 2, 3]:
             raise Ros2Error(f"QoS {text!r} is not <rel>:<dur>:<hist>,<depth>:<dl>:<ls>:<lv>")
-        if not all(x == "" or x.isdigit() for s in subs for x in s):
+        if not all(x == "" or (x.isascii() and x.isdigit()) for s in subs for x in s):
             raise Ros2Error(f"QoS {text!r} has a non-numeric component")
         d = cls()
         try:
@@ -157,7 +157,7 @@ def parse_token(key: str) -> Entity:
         kind = EntityKind(parts[5])
     except ValueError as exc:
         raise Ros2Error(f"token {key!r}: unknown entity kind {parts[5]!r}") from exc
-    if not (parts[1].isdigit() and parts[3].isdigit() and parts[4].isdigit()) or not _HEX.fullmatch(parts[2]):
+    if not all(p.isascii() and p.isdigit() for p in (parts[1], parts[3], parts[4])) or not _HEX.fullmatch(parts[2]):
         raise Ros2Error(f"token {key!r}: domain, node and entity ids must be numbers, the session id hex")
     want = 9 if kind is EntityKind.NODE else 13
     if len(parts) != want:

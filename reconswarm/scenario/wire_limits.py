@@ -1,8 +1,18 @@
 """The wire's limits, in one place below everything that needs them: reconswarm.net.wire's decoders
 enforce them, and the scenario loader (reconswarm/scenario/limits.py) refuses a scenario whose own messages
-would exceed them. (Here rather than in reconswarm.net so that the scenario layer may import them.)"""
+would exceed them. (Here rather than in reconswarm.net so that the scenario layer may import them.)
+
+Also the one reader of an agent id (or a cell coordinate) written as text, in a key expression
+(`agent/<id>/...`, `alive/agent/<id>`, `report/agent-<id>`, `cell/<cx>_<cy>/...`), a ROS 2 topic
+(`/robot_<id>/...`) or on the command line (`--ids`): `int_from_text`. Only the canonical decimal of a number
+in range is read: ASCII digits, no sign but a minus on a negative, no leading zero (but "0" itself). Anything
+else is no id: `²` (`str.isdigit`, but `int()` refuses it), `٣` (`int()` reads it as 3), `03` and `+3` (another
+key than agent 3's, which would speak for it), `-0`, and more digits than the range has.
+"""
 
 from __future__ import annotations
+
+import re
 
 MAX_PAYLOAD_BYTES = 1 << 20  # 1 MiB: larger payloads are rejected before decoding
 MAX_POINTS = 50_000  # contour points in a scan
@@ -10,10 +20,26 @@ MAX_OBSTACLES = 4_096  # obstacle ids in one obstacle set
 MAX_VERTICES = 4_096  # vertices of one shared hull
 MAX_IDS = 100_000  # agent ids in a clock's alive list (and a truth message)
 MAX_STR = 128  # characters of a string (obstacle ids, stats keys, event kinds)
-MAX_AGENT_ID = 2**31  # agent ids are 0..MAX_AGENT_ID (at most 10 digits in a key)
+MAX_AGENT_ID = 2**31 - 1  # agent ids are 0..MAX_AGENT_ID (a signed 32-bit integer; at most 10 digits in a key)
 MAX_REASON = 256  # characters of a clock's end reason
 MAX_STATS = 64  # entries of a clock's statistics
 # What msgpack itself is allowed to unpack (any array, map, string in bytes).
 MAX_ARRAY_LEN = MAX_POINTS * 3
 MAX_MAP_LEN = MAX_OBSTACLES + 16
 MAX_STR_BYTES = MAX_STR * 4
+
+_CANONICAL = re.compile(r"-?(?:0|[1-9][0-9]*)")  # ([0-9]: ASCII only, where \d would take any Unicode digit)
+
+
+def int_from_text(text: str, lo: int, hi: int) -> int | None:
+    """The integer whose canonical decimal `text` is, if it lies in lo..hi; None for any other text (never
+    raises: a key from the wire is any string)."""
+    if len(text) > max(len(str(lo)), len(str(hi))) or _CANONICAL.fullmatch(text) is None or text == "-0":
+        return None
+    v = int(text)
+    return v if lo <= v <= hi else None
+
+
+def agent_id_from_text(text: str) -> int | None:
+    """An agent id (0..MAX_AGENT_ID) written canonically (see `int_from_text`); None for anything else."""
+    return int_from_text(text, 0, MAX_AGENT_ID)

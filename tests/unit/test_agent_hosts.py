@@ -16,6 +16,7 @@ from reconswarm.net import wire
 from reconswarm.net.admission import Admission, IntrusionKind
 from reconswarm.net.keys import Keys
 from reconswarm.scenario.model import load
+from reconswarm.scenario.wire_limits import MAX_AGENT_ID, MAX_IDS
 from reconswarm_bringup import packing, secure
 from tests.support import PAPER
 
@@ -25,17 +26,35 @@ KEYS = Keys("paper-0a1b2c")
 
 def test_ids_and_ranges() -> None:
     assert parse_ids(None, "1-5,9") == (1, 2, 3, 4, 5, 9)
-    assert parse_ids([3], None) == (3,)  # --id I alone: as always
-    assert parse_ids([3, 1, 3], None) == (3, 1)  # repeatable, in order, once each
-    assert parse_ids([7], "2-3, 7") == (7, 2, 3)
+    assert parse_ids(["3"], None) == (3,)  # --id I alone: as always
+    assert parse_ids(["3", "1", "3"], None) == (3, 1)  # repeatable, in order, once each
+    assert parse_ids(["7"], "2-3, 7") == (7, 2, 3)
     assert parse_ids(None, "4-4") == (4,)
+    assert parse_ids(None, f"0,{MAX_AGENT_ID}") == (0, MAX_AGENT_ID)  # the scenario loader's range, whole
 
 
-@pytest.mark.parametrize("spec", ["", "1-", "-3", "a", "5-1", "1,,2", "1-2-3", "1.5"])
+@pytest.mark.parametrize("spec", ["", "1-", "-3", "a", "5-1", "1,,2", "1-2-3", "1.5", "²", "1-²", "٣", "03", "+3",
+                                  "0-03", f"{MAX_AGENT_ID + 1}", f"1-{MAX_AGENT_ID + 1}", "1" * 5000])
 def test_bad_ids_are_one_line_naming_the_option(spec: str) -> None:
     with pytest.raises(BadInput, match=r"^--ids: ") as e:
         parse_ids(None, spec)
     assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("one", ["²", "٣", "03", "-1", "", f"{MAX_AGENT_ID + 1}"])
+def test_bad_id_is_one_line_naming_the_option(one: str) -> None:
+    with pytest.raises(BadInput, match=r"^--id: ") as e:
+        parse_ids([one], None)
+    assert "\n" not in str(e.value)
+
+
+def test_too_many_ids_are_refused_before_a_list_is_built() -> None:
+    """2^31 ids would be a list of 17 GB: counted first, refused in one line."""
+    with pytest.raises(BadInput, match=rf"^--id/--ids: more than {MAX_IDS} agents"):
+        parse_ids(None, f"0-{MAX_AGENT_ID}")
+    with pytest.raises(BadInput, match=r"^--id/--ids: more than"):
+        parse_ids(["7"], f"0-{MAX_IDS - 1}")
+    assert len(parse_ids(None, f"0-{MAX_IDS - 1}")) == MAX_IDS
 
 
 def test_no_agent_at_all_is_refused() -> None:

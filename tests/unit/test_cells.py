@@ -57,7 +57,8 @@ def test_chunk_round_trip(c):
     assert chunk_cell(cell_chunk(c)) == c
 
 
-@pytest.mark.parametrize("bad", ["", "3", "3_", "_4", "a_b", "3_4_5", "--3_4", "1e3_2", "9999999999_1"])
+@pytest.mark.parametrize("bad", ["", "3", "3_", "_4", "a_b", "3_4_5", "--3_4", "1e3_2", "9999999999_1",
+                                 "01_0", "0_-01", "-0_1", "+1_0", "²_1", "1_٣", " 1_2", "1_2\n"])
 def test_bad_chunks_are_refused(bad):
     with pytest.raises(ValueError):
         chunk_cell(bad)

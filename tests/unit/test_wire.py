@@ -12,10 +12,10 @@ from hypothesis import strategies as st
 from reconswarm.net import wire
 from reconswarm.net.keys import Keys, WireError
 from reconswarm.paper.events import Event, EventKind
-from reconswarm.scenario.wire_limits import MAX_PAYLOAD_BYTES
+from reconswarm.scenario.wire_limits import MAX_AGENT_ID, MAX_PAYLOAD_BYTES
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
-ids = st.integers(min_value=0, max_value=2**31)
+ids = st.integers(min_value=0, max_value=MAX_AGENT_ID)
 ticks = st.integers(min_value=0, max_value=2**40)
 names = st.text(alphabet="abcdefghijklmnopqrstuvwxyz0123456789-_", min_size=1, max_size=20)
 

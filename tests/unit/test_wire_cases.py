@@ -66,7 +66,7 @@ def test_a_clocks_optional_fields_are_taken_when_given() -> None:
 @pytest.mark.parametrize("fields, why", [
     ({"alive": 5}, r"^field 'alive'"), ({"alive": "12"}, r"^field 'alive'"),
     ({"alive": [0] * (MAX_IDS + 1)}, r"^field 'alive'"),
-    ({"alive": [1, MAX_AGENT_ID + 1]}, r"^field 'id': 2147483649 out of range"),
+    ({"alive": [1, MAX_AGENT_ID + 1]}, r"^field 'id': 2147483648 out of range"),
     ({"mode": "warp"}, r"^field 'mode': unknown clock mode 'warp'"),
     ({"end": 1}, r"^field 'end': expected a boolean"), ({"end": None}, r"^field 'end'"),
     ({"reason": 5}, r"^field 'reason': expected a short string"), ({"reason": None}, r"^field 'reason'"),
