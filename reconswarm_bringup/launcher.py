@@ -195,6 +195,10 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
                                         "in %.1f s (%d of %d)", p.name, rc, watch.t, delay, router_restarts,
                                         ROUTER_RESTARTS)
                             timers.append((now + delay, lambda p=p: fleet.restart(p)))
+                    elif p.role == "agent" and rc == 2 and watch.k < 0:
+                        # Refused its input before the mission began: it will not come, and the world would wait
+                        # its whole start timeout for it.
+                        fatal = f"{p.name} could not start (exit 2: {outcome.last_line(p.log_path)})"
                     elif rc != 0 and watch.end is None:
                         crashed.append(f"{p.name} exited {rc}")
                         log.warning("%s exited with %s", p.name, rc)
