@@ -23,7 +23,7 @@ from typing import Any
 
 import msgpack
 
-from reconswarm.net.cells import Cell, CellGrid
+from reconswarm.net.cells import Cell, CellGrid, chunk_cell
 from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions, open_session
 from reconswarm.scenario.model import load
@@ -65,12 +65,14 @@ def _cells_now(session: Any, k: Keys, ids: list[int], start: dict[int, Cell]) ->
     heard: dict[int, Cell] = {}
 
     def got(sample: Any) -> None:
-        parts = str(sample.key_expr).split("/")
-        try:
-            a, (cx, cy) = int(parts[-2]), (int(c) for c in parts[-4].split("_"))
+        key = str(sample.key_expr)
+        try:  # (WireError is a ValueError)
+            _, a, _ = k.parse(key)
+            cell = chunk_cell(key.split("/")[-4])
         except ValueError:
             return
-        heard[a] = (cx, cy)
+        if a is not None:
+            heard[a] = cell
 
     sub = session.declare_subscriber(k.cell_agents(None, "beacon"), got)
     deadline = time.monotonic() + 2.0

@@ -220,7 +220,7 @@ def _decode(data: bytes | memoryview, type_name: str) -> Any:
         raise Ros2Error(f"{type_name}: undecodable CDR ({exc})") from exc
 
 
-_BASE_FRAME = re.compile(r"robot_(0|[1-9][0-9]{0,8})/base_link")
+_BASE_FRAME = re.compile(r"robot_([^/]*)/base_link")
 _PLANAR_TOL = 1e-6  # a planar robot's orientation has no roll or pitch; |q| = 1 within this
 
 
@@ -230,9 +230,9 @@ def odom_from_ros(data: bytes | memoryview, agent_id: int | None = None) -> Odom
     if msg.header.frame_id != ODOM_FRAME:
         raise Ros2Error(f"odometry: frame_id {msg.header.frame_id!r}, expected {ODOM_FRAME!r}")
     m = _BASE_FRAME.fullmatch(msg.child_frame_id)
-    if m is None:
+    frame_agent = None if m is None else agent_id_from_text(m.group(1))
+    if frame_agent is None:
         raise Ros2Error(f"odometry: child_frame_id {msg.child_frame_id!r} is not robot_<i>/base_link")
-    frame_agent = int(m.group(1))
     if agent_id is not None and frame_agent != agent_id:
         raise Ros2Error(f"odometry: child frame of agent {frame_agent} on the topic of agent {agent_id}")
     stamp = msg.header.stamp

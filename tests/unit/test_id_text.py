@@ -72,6 +72,8 @@ def test_robot_topics_read_ids_canonically() -> None:
     for bad in ("/robot_03/odom", "/robot_²/odom", "/robot_٣/cmd_vel", f"/robot_{MAX_AGENT_ID + 1}/odom"):
         with pytest.raises(ros2.Ros2Error):
             ros2.agent_of_topic(bad)
+    top = ros2.Odom(MAX_AGENT_ID, 1.0, 0.0, 0.0, 0.0)
+    assert ros2.odom_from_ros(ros2.odom_to_ros(top), MAX_AGENT_ID) == top  # (its frame robot_2147483647/base_link)
     with pytest.raises(ros2.Ros2Error):
         ros2.parse_topic_key("²/robot_1/odom/nav_msgs::msg::dds_::Odometry_/RIHS01_00")
 

@@ -251,6 +251,9 @@ def test_messages_made_by_rosbags_decode():
     (_rosbags_odometry(frame="map"), 2),
     (_rosbags_odometry(child="base_link"), 2),
     (_rosbags_odometry(), 3),  # robot_2's frame on robot_3's topic
+    (_rosbags_odometry(child="robot_02/base_link"), 2),  # (agent ids are read in their canonical form alone)
+    (_rosbags_odometry(child="robot_٢/base_link"), 2),
+    (_rosbags_odometry(child="robot_²/base_link"), 2),
     (_rosbags_odometry(q=(0.1, 0.0, 0.0, 0.995)), 2),  # rolled: not a planar pose
     (_rosbags_odometry(q=(0.0, 0.0, 0.0, 2.0)), 2),  # not a unit quaternion
     (_rosbags_odometry(x=math.nan), 2),
