@@ -69,7 +69,7 @@ def test_ids_spec_round_trips() -> None:
     assert packing.agent_args((4,)) == ["--id", "4"] and packing.agent_args((4, 5)) == ["--ids", "4-5"]
 
 
-@pytest.mark.parametrize("value", ["0", "-1", "x", "1.5", "", "auto5"])
+@pytest.mark.parametrize("value", ["0", "-1", "x", "1.5", "", "auto5", "²"])
 def test_agents_per_process_takes_a_positive_integer_or_auto(value: str) -> None:
     with pytest.raises(BadInput, match=r"^--agents-per-process: expected a positive integer or auto, got "):
         packing.parse(value)

@@ -84,3 +84,11 @@ def test_fault_agent_ids_are_canonical(spec: str) -> None:
     with pytest.raises(BadInput, match=r"^--fault "):
         faults.parse(spec)
     assert faults.parse("kill:agent:3@60").agent_id == 3
+
+
+@pytest.mark.parametrize("address", ["tcp://127.0.0.1:²", "127.0.0.1:٨٧٨٦"])
+def test_a_scheduler_port_in_other_digits_is_one_line(address: str) -> None:
+    from reconswarm_bringup.sweep_exec import _scheduler
+
+    with pytest.raises(BadInput, match=r"^--dask: "):
+        _scheduler(address)
