@@ -37,7 +37,7 @@ def _live_launch_pid(out: Path) -> int | None:
     marker = str((out / "scenario.toml").resolve()).encode()
     for line in lines:
         parts = line.split("\t")
-        if len(parts) != 3 or not parts[2].isdigit():
+        if len(parts) != 3 or not (parts[2].isascii() and parts[2].isdigit()):
             continue
         try:
             cmdline = Path(f"/proc/{parts[2]}/cmdline").read_bytes()
