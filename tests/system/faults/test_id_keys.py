@@ -111,6 +111,8 @@ def test_keys_with_unicode_digits_or_aliased_ids_kill_nobody_and_lose_no_agent(t
     assert not [n for n, text in logs.items() if "Traceback" in text], {n: t[-1500:] for n, t in logs.items()
                                                                        if "Traceback" in t}
     s = json.loads(stdout)
+    print("summary:", {k: s.get(k) for k in ("duration_s", "end_reason", "agents_lost", "collisions",
+                                             "messages_rejected", "messages_rejected_by_process")})
     assert s["end_reason"] in ("duration", "converged") and s["agents_lost"] == [] and s["collisions"] == 0, s
     assert s["messages_rejected"] > 0, s  # the bad keys were counted as malformed
     assert not [ln for text in logs.values() for ln in text.splitlines() if "agent 3 is gone" in ln]
