@@ -73,24 +73,37 @@ def parse_planners(text: str | None) -> tuple[str, ...] | None:
     return kinds
 
 
+def record_names(paths: Sequence[Path]) -> list[str]:
+    """Each file's directory under runs/, all distinct: its stem, for the first file of that stem; a later file
+    of a stem already taken gets `<stem>-2`, `-3`, ..., skipping every name another file has as its own stem
+    (a/x.toml, b/x.toml, c/x-2.toml -> x, x-3, x-2)."""
+    own = {p.stem for p in paths}
+    taken: set[str] = set()
+    names = []
+    for p in paths:
+        name, n = p.stem, 1
+        while name in taken:  # (a suffixed name is never a file's own stem: that file's first one stays free)
+            n += 1
+            name = f"{p.stem}-{n}"
+            if name in own:
+                name = p.stem
+        taken.add(name)
+        names.append(name)
+    return names
+
+
 class JobPlan:
     """The jobs of a sweep, generated lazily (a sweep of 10^8 seeds holds one job at a time, not 10^8):
-    scenario-major, then planner, then seed. Records go to out_dir/runs/<file stem>/<planner>/seed<S> (a
-    stem repeated across directories gets a suffix). Each file is loaded (and checked) once, up front."""
+    scenario-major, then planner, then seed. Records go to out_dir/runs/<name>/<planner>/seed<S>, <name> being
+    the file's stem (`record_names`). Each file is loaded (and checked) once, up front."""
 
     def __init__(self, paths: Sequence[Path], seeds: range | None, planners: Sequence[str] | None,
                  out_dir: Path) -> None:
         self.out_dir = out_dir
         self.seeds = seeds
-        self.files: list[tuple[str, str, Scenario]] = []  # (label, stem, scenario)
-        stems: dict[str, int] = {}
-        for path in paths:
-            base = load(path)  # BadInput naming the file and field
-            stem = path.stem
-            stems[stem] = stems.get(stem, 0) + 1
-            if stems[stem] > 1:
-                stem = f"{stem}-{stems[stem]}"
-            self.files.append((str(path), stem, base))
+        self.files: list[tuple[str, str, Scenario]] = []  # (label, record name, scenario)
+        for path, name in zip(paths, record_names(paths), strict=True):
+            self.files.append((str(path), name, load(path)))  # BadInput naming the file and field
         self.planners = planners
 
     def __len__(self) -> int:

@@ -168,3 +168,23 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, args, field):
     lines = r.output.strip().splitlines()
     assert len(lines) == 1 and field in lines[0] and "Traceback" not in r.output
     assert not (tmp_path / "out" / "results.csv").exists()
+
+
+def test_clashing_stems_keep_every_record(tmp_path):
+    """a/x.toml, b/x.toml, c/x-2.toml: six runs, six rows, six records, no two runs in one directory."""
+    paths = []
+    for n, sub in enumerate(("a", "b", "c")):
+        s = generate(3, 1, n + 1)
+        s = replace(s, meta=replace(s.meta, duration_s=20.0, seed=0))  # one seed: one record name in each
+        (tmp_path / sub).mkdir()
+        paths.append(tmp_path / sub / ("x-2.toml" if sub == "c" else "x.toml"))
+        paths[-1].write_text(to_toml(s))
+    out = tmp_path / "out"
+    r = reconswarm("sweep", *map(str, paths), "--planner", ",".join(PLANNERS), "--jobs", "2", "-o", str(out),
+                   timeout=300)
+    assert r.returncode == 0, r.stderr
+    _, rows = read_rows(out)
+    assert len(rows) == 6
+    records = sorted((out / "runs").glob("*/*/seed*/run.db"))
+    assert len(records) == 6
+    assert {p.relative_to(out / "runs").parts[0] for p in records} == {"x", "x-2", "x-3"}

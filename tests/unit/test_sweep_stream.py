@@ -97,3 +97,18 @@ def test_stats_accumulated_equal_stats_of_the_rows() -> None:
     assert acc.result() == sw.planner_stats(rows)
     assert acc.result()["a"]["converged"] == 6 and acc.result()["a"]["contacts"] == 2
     assert acc.result()["a"]["convergence_median_s"] == 3.5  # median of 0, 1, 3, 4, 5, 6
+
+
+def test_clashing_stems_never_share_a_record_directory(tmp_path: Path) -> None:
+    """a/x.toml and b/x.toml share a stem; c/x-2.toml's own stem is what b's suffix would be."""
+    paths = []
+    for sub in ("a", "b", "c"):
+        (tmp_path / sub).mkdir()
+        paths.append(tmp_path / sub / ("x-2.toml" if sub == "c" else "x.toml"))
+        paths[-1].write_text(to_toml(generate(3, 1, 1)))
+    jobs = sw.make_jobs(paths, range(0, 1), ("reconfigurable", "virtual-leader"), tmp_path / "out")
+    assert len(jobs) == 6 and len({j.out_dir for j in jobs}) == 6
+    runs = tmp_path / "out" / "runs"
+    by_file = {j.label: Path(j.out_dir).relative_to(runs).parts[0] for j in jobs}
+    assert by_file[str(paths[0])] == "x" and by_file[str(paths[2])] == "x-2"  # a file's own stem kept
+    assert by_file[str(paths[1])] not in ("x", "x-2")
