@@ -93,10 +93,10 @@ def sweep_cmd(
     problem: BaseException | None = None
     with _sigterm_as_interrupt() as signals:
         try:
-            with where as (executor, slots):
+            with where as (executor, slots, check):
                 results = sw.ResultsFile(out / "results.csv")  # truncated now: no stale rows of another sweep
                 with bar:
-                    for i, _job, row in sw.stream(plan, executor, 2 * slots):
+                    for i, _job, row in sw.stream(plan, executor, 2 * slots, check):
                         results.add(i, row)
                         stats.add(row)
                         if as_json:
@@ -109,15 +109,21 @@ def sweep_cmd(
         interrupted = isinstance(problem, KeyboardInterrupt)
         if results is not None:
             results.close()
+        stopped = None
         if results is not None and (interrupted or results.rows):
-            typer.echo(f"sweep: stopped after {results.rows} of {total} runs; {out / 'results.csv'} holds "
-                       f"their {results.rows} rows", err=True)
+            stopped = (f"stopped after {results.rows} of {total} runs; {out / 'results.csv'} holds "
+                       f"their {results.rows} rows")
         if interrupted:
+            if stopped:
+                typer.echo(f"sweep: {stopped}", err=True)
             raise typer.Exit(128 + (signals[0] if signals else signal.SIGINT))
         if isinstance(problem, BrokenProcessPool):
             problem = ProcessFailure(f"sweep: a worker process died ({problem})")
         elif not isinstance(problem, ReconswarmError | OSError):
             problem = ProcessFailure(f"sweep: a run failed ({type(problem).__name__}: {problem})")
+        if stopped:  # one line: what ended the sweep, and what it leaves
+            problem = (type(problem) if isinstance(problem, ReconswarmError) else ReconswarmError)(
+                f"{problem}; {stopped}")
         fail(problem)
         return
     assert results is not None

@@ -134,10 +134,12 @@ def run_one(job: Job) -> Row:
     return row
 
 
-def stream(jobs: Iterable[Job], executor: Executor, window: int) -> Iterator[tuple[int, Job, Row]]:
+def stream(jobs: Iterable[Job], executor: Executor, window: int, check: Callable[[], None] | None = None,
+           every_s: float = 1.0) -> Iterator[tuple[int, Job, Row]]:
     """Submit the jobs with at most `window` in flight; yield (job index, job, row) as each run finishes.
-    A failed run raises its exception here; on any exception (KeyboardInterrupt included) the runs not
-    started are cancelled."""
+    A failed run raises its exception here; so does `check()`, called every `every_s` while runs are under
+    way (an executor that can lose its workers says so there); on any exception (KeyboardInterrupt included)
+    the runs not started are cancelled."""
     todo = enumerate(jobs)
     pending: dict[Future[Row], tuple[int, Job]] = {}
     try:
@@ -149,7 +151,9 @@ def stream(jobs: Iterable[Job], executor: Executor, window: int) -> Iterator[tup
                 pending[executor.submit(run_one, nxt[1])] = nxt
             if not pending:
                 return
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            done, _ = wait(pending, timeout=None if check is None else every_s, return_when=FIRST_COMPLETED)
+            if check is not None:
+                check()
             for fut in done:
                 i, job = pending.pop(fut)
                 yield i, job, fut.result()
