@@ -179,35 +179,65 @@ def percentile(values: Sequence[float], q: float) -> float | None:
     return float(np.percentile(np.asarray(values, dtype=np.float64), q)) if values else None
 
 
-class Stats:
-    """The per-planner table, accumulated as rows come (the rows themselves need not be kept): runs,
-    converged, median and p90 of the convergence time over the converged runs, contacts (collision
-    episodes summed over the runs); planners in order of first appearance."""
+SAME = tuple(c for c in COLUMNS if c not in ("seed", "wall_time_s"))  # what a seed could change in a row
+
+
+class _Group:
+    """One scenario x planner's runs so far: [runs, converged, contacts], the convergence times, and whether
+    every run's row equals the first's but for seed and wall time."""
 
     def __init__(self) -> None:
-        self._by: dict[str, tuple[list[int], array[float]]] = {}  # planner -> ([runs, converged, contacts], times)
+        self.counts = [0, 0, 0]
+        self.times: array[float] = array("d")
+        self.first: tuple[Any, ...] | None = None
+        self.identical = True
+
+
+class Stats:
+    """The table, one line per scenario x planner (a scenario's runs are never pooled with another's),
+    accumulated as rows come (the rows themselves need not be kept): runs, converged, median and p90 of the
+    convergence time over the converged runs, contacts (collision episodes summed over the runs); in order of
+    first appearance. Also which scenarios' seeds changed nothing (`seed_without_effect`)."""
+
+    def __init__(self) -> None:
+        self._by: dict[tuple[str, str], _Group] = {}  # (scenario, planner) -> its runs
 
     def add(self, row: Row) -> None:
-        counts, times = self._by.setdefault(row["planner"], ([0, 0, 0], array("d")))
-        counts[0] += 1
-        counts[2] += int(row["collisions"])
+        g = self._by.setdefault((row["scenario"], row["planner"]), _Group())
+        g.counts[0] += 1
+        g.counts[2] += int(row["collisions"])
         if row["converged"]:
-            counts[1] += 1
-            times.append(float(row["convergence_time_s"]))
+            g.counts[1] += 1
+            g.times.append(float(row["convergence_time_s"]))
+        sig = tuple(row[c] for c in SAME)
+        if g.first is None:
+            g.first = sig
+        elif sig != g.first:
+            g.identical = False
 
-    def result(self) -> dict[str, dict[str, Any]]:
-        out: dict[str, dict[str, Any]] = {}
-        for kind, (counts, times) in self._by.items():
-            med, p90 = percentile(times, 50), percentile(times, 90)
-            out[kind] = {"runs": counts[0], "converged": counts[1],
-                         "convergence_median_s": None if med is None else round(med, 3),
-                         "convergence_p90_s": None if p90 is None else round(p90, 3),
-                         "contacts": counts[2]}
+    def result(self) -> list[dict[str, Any]]:
+        out: list[dict[str, Any]] = []
+        for (scenario, kind), g in self._by.items():
+            med, p90 = percentile(g.times, 50), percentile(g.times, 90)
+            out.append({"scenario": scenario, "planner": kind, "runs": g.counts[0], "converged": g.counts[1],
+                        "convergence_median_s": None if med is None else round(med, 3),
+                        "convergence_p90_s": None if p90 is None else round(p90, 3),
+                        "contacts": g.counts[2]})
+        return out
+
+    def seed_without_effect(self) -> dict[str, list[tuple[str, int]]]:
+        """scenario -> (planner, runs) for each of its planners whose runs (two seeds or more) all gave the same
+        row but for seed and wall time: the seed drives only the deadlock perturbation, so where no agent
+        stalls it changes nothing, and those runs are one sample, not several."""
+        out: dict[str, list[tuple[str, int]]] = {}
+        for (scenario, kind), g in self._by.items():
+            if g.counts[0] > 1 and g.identical:
+                out.setdefault(scenario, []).append((kind, g.counts[0]))
         return out
 
 
-def planner_stats(rows: Iterable[Row]) -> dict[str, dict[str, Any]]:
-    """Stats over the rows (see Stats)."""
+def planner_stats(rows: Iterable[Row]) -> list[dict[str, Any]]:
+    """Stats over the rows (see Stats): one entry per scenario x planner."""
     st = Stats()
     for r in rows:
         st.add(r)
@@ -279,16 +309,28 @@ def _sec(v: float | None) -> str:
     return "-" if v is None else f"{v:.2f}"
 
 
-def render_stats(stats: dict[str, dict[str, Any]]) -> Any:
-    """A rich Table: one line per planner."""
+def render_stats(stats: list[dict[str, Any]]) -> Any:
+    """A rich Table: one line per scenario x planner."""
     from rich.table import Table
 
     table = Table(title="reconswarm sweep", show_header=True)
-    for name, justify in (("planner", "left"), ("runs", "right"), ("converged", "right"),
-                          ("median (s)", "right"), ("p90 (s)", "right"), ("contacts", "right")):
-        table.add_column(name, justify=justify)  # type: ignore[arg-type]
-    for kind, st in stats.items():
+    table.add_column("scenario", overflow="fold")  # (a long path wraps in its cell, whole)
+    table.add_column("planner", no_wrap=True, min_width=max(map(len, PLANNERS)))
+    for name in ("runs", "converged", "median (s)", "p90 (s)", "contacts"):
+        table.add_column(name, justify="right", no_wrap=True)
+    for st in stats:
         rate = 100.0 * st["converged"] / st["runs"]
-        table.add_row(kind, str(st["runs"]), f"{st['converged']} ({rate:.0f} %)", _sec(st["convergence_median_s"]),
-                      _sec(st["convergence_p90_s"]), str(st["contacts"]))
+        table.add_row(st["scenario"], st["planner"], str(st["runs"]), f"{st['converged']} ({rate:.0f} %)",
+                      _sec(st["convergence_median_s"]), _sec(st["convergence_p90_s"]), str(st["contacts"]))
     return table
+
+
+def seed_notes(stats: Stats) -> list[str]:
+    """One line per scenario whose seeds changed nothing (Stats.seed_without_effect)."""
+    notes = []
+    for scenario, groups in stats.seed_without_effect().items():
+        n = max(runs for _, runs in groups)
+        notes.append(f"sweep: {scenario}: its {n} seeds gave one and the same row "
+                     f"({', '.join(kind for kind, _ in groups)}): the seed drives only the deadlock perturbation "
+                     f"(the side a stalled agent escapes by), so these are one sample, not {n}")
+    return notes
