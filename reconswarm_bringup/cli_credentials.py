@@ -10,15 +10,16 @@ from typing import Annotated
 import typer
 
 from reconswarm.cli.console import fail
-from reconswarm.cli.outputs import writable_dir
 from reconswarm.errors import BadInput, ReconswarmError
 
 
 def credentials_cmd(
     deployment_file: Annotated[Path, typer.Argument(metavar="DEPLOYMENT.toml",
                                                     help="Hosts, their routers and agents (docs/security.md).")],
-    out: Annotated[Path, typer.Option("-o", "--out", metavar="DIR",
-                                      help="Where to write: one directory per host, DIR/<host>/ (0700, files 0600).")],
+    out: Annotated[Path, typer.Option(
+        "-o", "--out", metavar="DIR",
+        help="Where to write: one directory per host, DIR/<host>/ (0700, files 0600). DIR is new, empty, or a "
+             "previous output of the same deployment holding nothing else.")],
     install_dir: Annotated[Path | None, typer.Option(
         "--install-dir", metavar="PATH",
         help="Where each host's directory will be on that host (the paths its configurations name; default: "
@@ -30,7 +31,6 @@ def credentials_cmd(
 
     try:
         dep = deployment.load(deployment_file)
-        writable_dir("-o", out)
         if install_dir is not None and not install_dir.is_absolute():
             raise BadInput(f"--install-dir {install_dir}: must be an absolute path")
         sec = secure.write(out, dep, split=True, install_dir=install_dir)

@@ -47,16 +47,20 @@ def sweep_cmd(
     scenarios: Annotated[list[Path], typer.Argument(metavar="SCENARIO...", help="Scenario TOML files.")],
     out: Annotated[Path, typer.Option("-o", "--out", metavar="DIR", help="Output directory (results.csv, runs/).")],
     seeds: Annotated[str | None, typer.Option("--seeds", metavar="A:B",
-        help="Seeds A..B-1 (default: each file's seed).")] = None,
+        help="Seeds A..B-1 (default: each file's seed). The seed drives only the deadlock perturbation (the "
+             "side a stalled agent escapes by): where no agent stalls, every seed gives the same run, and the "
+             "sweep says so.")] = None,
     planner: Annotated[str | None, typer.Option("--planner", metavar="P[,P...]",
         help="reconfigurable, virtual-leader (default: each file's planner).")] = None,
     jobs: Annotated[int | None, typer.Option("--jobs", "-j", metavar="J",
         help="Parallel processes (default: cores).")] = None,
     dask_address: Annotated[str | None, typer.Option("--dask", metavar="ADDRESS",
         help="Run on the Dask cluster whose scheduler is at ADDRESS (tcp://host:port) instead.")] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print rows and per-planner stats as JSON.")] = False,
+    as_json: Annotated[bool, typer.Option("--json",
+        help="Print the rows and the table (per scenario x planner) as JSON.")] = False,
 ) -> None:
-    """Every scenario x seed x planner with the in-process engine, in parallel; results.csv and a table."""
+    """Every scenario x seed x planner with the in-process engine, in parallel; results.csv and a table per
+    scenario x planner."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -93,10 +97,10 @@ def sweep_cmd(
     problem: BaseException | None = None
     with _sigterm_as_interrupt() as signals:
         try:
-            with where as (executor, slots):
+            with where as (executor, slots, check):
                 results = sw.ResultsFile(out / "results.csv")  # truncated now: no stale rows of another sweep
                 with bar:
-                    for i, _job, row in sw.stream(plan, executor, 2 * slots):
+                    for i, _job, row in sw.stream(plan, executor, 2 * slots, check):
                         results.add(i, row)
                         stats.add(row)
                         if as_json:
@@ -109,24 +113,32 @@ def sweep_cmd(
         interrupted = isinstance(problem, KeyboardInterrupt)
         if results is not None:
             results.close()
+        stopped = None
         if results is not None and (interrupted or results.rows):
-            typer.echo(f"sweep: stopped after {results.rows} of {total} runs; {out / 'results.csv'} holds "
-                       f"their {results.rows} rows", err=True)
+            stopped = (f"stopped after {results.rows} of {total} runs; {out / 'results.csv'} holds "
+                       f"their {results.rows} rows")
         if interrupted:
+            if stopped:
+                typer.echo(f"sweep: {stopped}", err=True)
             raise typer.Exit(128 + (signals[0] if signals else signal.SIGINT))
         if isinstance(problem, BrokenProcessPool):
             problem = ProcessFailure(f"sweep: a worker process died ({problem})")
         elif not isinstance(problem, ReconswarmError | OSError):
             problem = ProcessFailure(f"sweep: a run failed ({type(problem).__name__}: {problem})")
+        if stopped:  # one line: what ended the sweep, and what it leaves
+            problem = (type(problem) if isinstance(problem, ReconswarmError) else ReconswarmError)(
+                f"{problem}; {stopped}")
         fail(problem)
         return
     assert results is not None
     results.finish()
     if as_json:
-        print_json({"rows": [r for _, r in sorted(kept, key=lambda p: p[0])], "planners": stats.result()})
+        print_json({"rows": [r for _, r in sorted(kept, key=lambda p: p[0])], "table": stats.result()})
     else:
         Console().print(sw.render_stats(stats.result()))
         typer.echo(f"results: {out / 'results.csv'} ({results.rows} runs, {where_txt})")
+    for note in sw.seed_notes(stats):
+        typer.echo(note, err=True)
 
 
 def register(app: typer.Typer) -> None:

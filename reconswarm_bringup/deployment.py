@@ -30,11 +30,14 @@ from typing import Any
 from reconswarm.errors import BadInput
 from reconswarm.net.ros2 import MAX_DOMAIN_ID
 from reconswarm.scenario.toml_reader import TableReader, kind_of
+from reconswarm.scenario.wire_limits import MAX_AGENT_ID
 from reconswarm_bringup import packing
 from reconswarm_bringup.validate import endpoint as check_endpoint
 
-_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,62}$")  # a host name in file names and certificate names
-_RUN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")  # one key chunk: no '/', '*', '$', '?', '#'
+# (matched whole with fullmatch: '$' would also match before a trailing newline)
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,62}")  # a host name in file names and certificate names
+_RUN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,127}")  # one key chunk: no '/', '*', '$', '?', '#'
+_LOOPBACK = ("localhost", "127.0.0.1", "::1")  # one socket, whichever name a file gives it
 
 
 @dataclass(frozen=True)
@@ -87,6 +90,12 @@ def tls_endpoint(endpoint: str) -> str:
     return f"tls/{addr}"
 
 
+def same_socket(host: str, port: int) -> tuple[str, int]:
+    """A router's (host, port) as a socket: host names without case, every name of the loopback as one."""
+    h = host.strip("[]").lower()
+    return ("localhost" if h in _LOOPBACK else h), port
+
+
 def local(run: str, hosts: list[tuple[str, str, tuple[int, ...]]], per_process: int,
           ros2_domain: int | None = None, live_view: bool = False) -> Deployment:
     """The local launcher's deployment: (name, router endpoint, agents) per host; world and monitor on the first."""
@@ -113,7 +122,7 @@ def parse(data: dict[str, Any], src: str = "<deployment>") -> Deployment:
     r = TableReader(src)
     r.keys(data, "", {"run", "world", "monitor", "host"}, {"agents_per_process", "ros2_domain", "live_view"})
     run = r.string(data, "", "run")
-    if not _RUN.match(run):
+    if not _RUN.fullmatch(run):
         raise r.fail("run", f"one key chunk of letters, digits, '_', '.', '-' expected, got {run!r}")
     k = r.integer(data, "", "agents_per_process", 1, lo=1)
     domain = None
@@ -129,19 +138,19 @@ def parse(data: dict[str, Any], src: str = "<deployment>") -> Deployment:
         raise r.fail("host", "expected one [[host]] table or more")
     hosts: list[Host] = []
     seen_agents: dict[int, str] = {}
-    seen_routers: dict[str, str] = {}
+    seen_routers: dict[tuple[str, int], str] = {}
     for n, h in enumerate(raw):
         where = f"host[{n}]"
         h = r.table(h, where)
         r.keys(h, where, {"name", "router", "agents"}, set())
         name = r.string(h, where, "name")
-        if not _NAME.match(name):
+        if not _NAME.fullmatch(name):
             raise r.fail(f"{where}.name", f"letters, digits, '_', '.', '-' expected, got {name!r}")
         if any(x.name == name for x in hosts):
             raise r.fail(f"{where}.name", f"host {name!r} is named twice")
         ep = r.string(h, where, "router")
         try:
-            proto, addr, _ = check_endpoint(f"{where}.router", ep)
+            proto, addr, port = check_endpoint(f"{where}.router", ep)
         except BadInput as exc:
             raise BadInput(f"{src}: {exc}") from None
         if proto not in ("tls", "tcp") or "?" in ep or "#" in ep:
@@ -150,16 +159,18 @@ def parse(data: dict[str, Any], src: str = "<deployment>") -> Deployment:
             raise r.fail(f"{where}.router", f"zenoh's TLS link cannot check a router's name at an IPv6 address "
                                             f"({ep!r}): give an IPv4 address or a host name")
         ep = tls_endpoint(ep)
-        if ep in seen_routers:
-            raise r.fail(f"{where}.router", f"{ep} is also host {seen_routers[ep]!r}'s router")
-        seen_routers[ep] = name
+        sock = same_socket(addr, port)
+        if sock in seen_routers:
+            raise r.fail(f"{where}.router", f"{ep} is also host {seen_routers[sock]!r}'s router")
+        seen_routers[sock] = name
         agents = h["agents"]
         if not isinstance(agents, list):
             raise r.fail(f"{where}.agents", f"expected a list of agent ids, got {kind_of(agents)}")
         ids: list[int] = []
         for j, a in enumerate(agents):
-            if isinstance(a, bool) or not isinstance(a, int) or a < 0:
-                raise r.fail(f"{where}.agents[{j}]", f"expected an agent id (an integer >= 0), got {a!r}")
+            if isinstance(a, bool) or not isinstance(a, int) or not 0 <= a <= MAX_AGENT_ID:
+                raise r.fail(f"{where}.agents[{j}]",
+                             f"expected an agent id (an integer in [0, {MAX_AGENT_ID}], the wire's), got {a!r}")
             if a in seen_agents:
                 raise r.fail(f"{where}.agents[{j}]", f"agent {a} is also on host {seen_agents[a]!r}")
             seen_agents[a] = name

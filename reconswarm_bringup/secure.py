@@ -32,7 +32,7 @@ from typing import Any
 from reconswarm.errors import BadInput
 from reconswarm.net.session import LEASE_MS, ZenohOptions
 from reconswarm.scenario.model import Scenario
-from reconswarm_bringup import acl
+from reconswarm_bringup import acl, creddir
 from reconswarm_bringup.deployment import Deployment, Host, tls_endpoint
 from reconswarm_bringup.packing import ids_spec
 
@@ -139,12 +139,12 @@ def write(out: Path, dep: Deployment, *, split: bool = False, install_dir: Path 
     split: one directory per host; install_dir: where each host's files will be on that host (the paths the
     configurations name; default: where they are written); intruder: also a certificate the rules grant nothing."""
     out = Path(out).resolve()
-    _private_dir(out)
     sec = Secrets(out, dep, split)
-    for h in dep.hosts:
-        d = sec.host_dir(h.name)
-        _private_dir(d)
-        for old in d.iterdir():  # credentials of an earlier run (another CA, other agents)
+    if split:  # the command's DIR: only what it made itself is touched (creddir.py)
+        creddir.prepare(out, dep.run, {h.name: host_files(dep, h, intruder) for h in dep.hosts})
+    else:  # the launcher's OUTDIR/secrets
+        _private_dir(out)
+        for old in out.iterdir():  # credentials of an earlier run (another CA, other agents)
             if old.is_file() and old.suffix in (".pem", ".json5"):
                 old.unlink()
     ca_key, ca_cert = _make_ca(dep.run)
@@ -154,11 +154,22 @@ def write(out: Path, dep: Deployment, *, split: bool = False, install_dir: Path 
         _write(d / "ca.pem", _cert_pem(ca_cert))
         _issue(d, h.router_name, ca_key, ca_cert, server_names=_server_names(_host_of(h.router)))
         _write(d / f"router-{h.name}.json5", _dump(router_config(dep, h, ref)))
-        names = acl.processes(dep, h) + (["intruder"] if intruder and h.name == dep.world_host else [])
-        for name in names:
+        for name in _process_names(dep, h, intruder):
             _issue(d, name, ca_key, ca_cert)
             _write(d / f"{name}.json5", _dump(client_config(h, name, ref)))
     return sec
+
+
+def _process_names(dep: Deployment, h: Host, intruder: bool) -> list[str]:
+    return acl.processes(dep, h) + (["intruder"] if intruder and h.name == dep.world_host else [])
+
+
+def host_files(dep: Deployment, h: Host, intruder: bool = False) -> list[str]:
+    """The names of the files write() puts in a host's directory."""
+    names = ["ca.pem"]
+    for cn in (h.router_name, *_process_names(dep, h, intruder)):
+        names += [f"{cn}-cert.pem", f"{cn}-key.pem"]
+    return [*names, *(f"{n}.json5" for n in (h.router_name, *_process_names(dep, h, intruder)))]
 
 
 # --- configurations ------------------------------------------------------------------------------------
@@ -222,8 +233,9 @@ def _private_dir(path: Path) -> None:
 
 
 def _write(path: Path, data: bytes) -> None:
-    """Write a file readable by its owner only (0600), whatever mode an earlier file had."""
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    """Write a file readable by its owner only (0600), whatever mode an earlier file had; never through a
+    symbolic link."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o600)
     try:
         os.fchmod(fd, 0o600)
         os.write(fd, data)

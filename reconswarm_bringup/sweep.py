@@ -73,24 +73,37 @@ def parse_planners(text: str | None) -> tuple[str, ...] | None:
     return kinds
 
 
+def record_names(paths: Sequence[Path]) -> list[str]:
+    """Each file's directory under runs/, all distinct: its stem, for the first file of that stem; a later file
+    of a stem already taken gets `<stem>-2`, `-3`, ..., skipping every name another file has as its own stem
+    (a/x.toml, b/x.toml, c/x-2.toml -> x, x-3, x-2)."""
+    own = {p.stem for p in paths}
+    taken: set[str] = set()
+    names = []
+    for p in paths:
+        name, n = p.stem, 1
+        while name in taken:  # (a suffixed name is never a file's own stem: that file's first one stays free)
+            n += 1
+            name = f"{p.stem}-{n}"
+            if name in own:
+                name = p.stem
+        taken.add(name)
+        names.append(name)
+    return names
+
+
 class JobPlan:
     """The jobs of a sweep, generated lazily (a sweep of 10^8 seeds holds one job at a time, not 10^8):
-    scenario-major, then planner, then seed. Records go to out_dir/runs/<file stem>/<planner>/seed<S> (a
-    stem repeated across directories gets a suffix). Each file is loaded (and checked) once, up front."""
+    scenario-major, then planner, then seed. Records go to out_dir/runs/<name>/<planner>/seed<S>, <name> being
+    the file's stem (`record_names`). Each file is loaded (and checked) once, up front."""
 
     def __init__(self, paths: Sequence[Path], seeds: range | None, planners: Sequence[str] | None,
                  out_dir: Path) -> None:
         self.out_dir = out_dir
         self.seeds = seeds
-        self.files: list[tuple[str, str, Scenario]] = []  # (label, stem, scenario)
-        stems: dict[str, int] = {}
-        for path in paths:
-            base = load(path)  # BadInput naming the file and field
-            stem = path.stem
-            stems[stem] = stems.get(stem, 0) + 1
-            if stems[stem] > 1:
-                stem = f"{stem}-{stems[stem]}"
-            self.files.append((str(path), stem, base))
+        self.files: list[tuple[str, str, Scenario]] = []  # (label, record name, scenario)
+        for path, name in zip(paths, record_names(paths), strict=True):
+            self.files.append((str(path), name, load(path)))  # BadInput naming the file and field
         self.planners = planners
 
     def __len__(self) -> int:
@@ -121,10 +134,12 @@ def run_one(job: Job) -> Row:
     return row
 
 
-def stream(jobs: Iterable[Job], executor: Executor, window: int) -> Iterator[tuple[int, Job, Row]]:
+def stream(jobs: Iterable[Job], executor: Executor, window: int, check: Callable[[], None] | None = None,
+           every_s: float = 1.0) -> Iterator[tuple[int, Job, Row]]:
     """Submit the jobs with at most `window` in flight; yield (job index, job, row) as each run finishes.
-    A failed run raises its exception here; on any exception (KeyboardInterrupt included) the runs not
-    started are cancelled."""
+    A failed run raises its exception here; so does `check()`, called every `every_s` while runs are under
+    way (an executor that can lose its workers says so there); on any exception (KeyboardInterrupt included)
+    the runs not started are cancelled."""
     todo = enumerate(jobs)
     pending: dict[Future[Row], tuple[int, Job]] = {}
     try:
@@ -136,7 +151,9 @@ def stream(jobs: Iterable[Job], executor: Executor, window: int) -> Iterator[tup
                 pending[executor.submit(run_one, nxt[1])] = nxt
             if not pending:
                 return
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            done, _ = wait(pending, timeout=None if check is None else every_s, return_when=FIRST_COMPLETED)
+            if check is not None:
+                check()
             for fut in done:
                 i, job = pending.pop(fut)
                 yield i, job, fut.result()
@@ -162,35 +179,65 @@ def percentile(values: Sequence[float], q: float) -> float | None:
     return float(np.percentile(np.asarray(values, dtype=np.float64), q)) if values else None
 
 
-class Stats:
-    """The per-planner table, accumulated as rows come (the rows themselves need not be kept): runs,
-    converged, median and p90 of the convergence time over the converged runs, contacts (collision
-    episodes summed over the runs); planners in order of first appearance."""
+SAME = tuple(c for c in COLUMNS if c not in ("seed", "wall_time_s"))  # what a seed could change in a row
+
+
+class _Group:
+    """One scenario x planner's runs so far: [runs, converged, contacts], the convergence times, and whether
+    every run's row equals the first's but for seed and wall time."""
 
     def __init__(self) -> None:
-        self._by: dict[str, tuple[list[int], array[float]]] = {}  # planner -> ([runs, converged, contacts], times)
+        self.counts = [0, 0, 0]
+        self.times: array[float] = array("d")
+        self.first: tuple[Any, ...] | None = None
+        self.identical = True
+
+
+class Stats:
+    """The table, one line per scenario x planner (a scenario's runs are never pooled with another's),
+    accumulated as rows come (the rows themselves need not be kept): runs, converged, median and p90 of the
+    convergence time over the converged runs, contacts (collision episodes summed over the runs); in order of
+    first appearance. Also which scenarios' seeds changed nothing (`seed_without_effect`)."""
+
+    def __init__(self) -> None:
+        self._by: dict[tuple[str, str], _Group] = {}  # (scenario, planner) -> its runs
 
     def add(self, row: Row) -> None:
-        counts, times = self._by.setdefault(row["planner"], ([0, 0, 0], array("d")))
-        counts[0] += 1
-        counts[2] += int(row["collisions"])
+        g = self._by.setdefault((row["scenario"], row["planner"]), _Group())
+        g.counts[0] += 1
+        g.counts[2] += int(row["collisions"])
         if row["converged"]:
-            counts[1] += 1
-            times.append(float(row["convergence_time_s"]))
+            g.counts[1] += 1
+            g.times.append(float(row["convergence_time_s"]))
+        sig = tuple(row[c] for c in SAME)
+        if g.first is None:
+            g.first = sig
+        elif sig != g.first:
+            g.identical = False
 
-    def result(self) -> dict[str, dict[str, Any]]:
-        out: dict[str, dict[str, Any]] = {}
-        for kind, (counts, times) in self._by.items():
-            med, p90 = percentile(times, 50), percentile(times, 90)
-            out[kind] = {"runs": counts[0], "converged": counts[1],
-                         "convergence_median_s": None if med is None else round(med, 3),
-                         "convergence_p90_s": None if p90 is None else round(p90, 3),
-                         "contacts": counts[2]}
+    def result(self) -> list[dict[str, Any]]:
+        out: list[dict[str, Any]] = []
+        for (scenario, kind), g in self._by.items():
+            med, p90 = percentile(g.times, 50), percentile(g.times, 90)
+            out.append({"scenario": scenario, "planner": kind, "runs": g.counts[0], "converged": g.counts[1],
+                        "convergence_median_s": None if med is None else round(med, 3),
+                        "convergence_p90_s": None if p90 is None else round(p90, 3),
+                        "contacts": g.counts[2]})
+        return out
+
+    def seed_without_effect(self) -> dict[str, list[tuple[str, int]]]:
+        """scenario -> (planner, runs) for each of its planners whose runs (two seeds or more) all gave the same
+        row but for seed and wall time: the seed drives only the deadlock perturbation, so where no agent
+        stalls it changes nothing, and those runs are one sample, not several."""
+        out: dict[str, list[tuple[str, int]]] = {}
+        for (scenario, kind), g in self._by.items():
+            if g.counts[0] > 1 and g.identical:
+                out.setdefault(scenario, []).append((kind, g.counts[0]))
         return out
 
 
-def planner_stats(rows: Iterable[Row]) -> dict[str, dict[str, Any]]:
-    """Stats over the rows (see Stats)."""
+def planner_stats(rows: Iterable[Row]) -> list[dict[str, Any]]:
+    """Stats over the rows (see Stats): one entry per scenario x planner."""
     st = Stats()
     for r in rows:
         st.add(r)
@@ -262,16 +309,28 @@ def _sec(v: float | None) -> str:
     return "-" if v is None else f"{v:.2f}"
 
 
-def render_stats(stats: dict[str, dict[str, Any]]) -> Any:
-    """A rich Table: one line per planner."""
+def render_stats(stats: list[dict[str, Any]]) -> Any:
+    """A rich Table: one line per scenario x planner."""
     from rich.table import Table
 
     table = Table(title="reconswarm sweep", show_header=True)
-    for name, justify in (("planner", "left"), ("runs", "right"), ("converged", "right"),
-                          ("median (s)", "right"), ("p90 (s)", "right"), ("contacts", "right")):
-        table.add_column(name, justify=justify)  # type: ignore[arg-type]
-    for kind, st in stats.items():
+    table.add_column("scenario", overflow="fold")  # (a long path wraps in its cell, whole)
+    table.add_column("planner", no_wrap=True, min_width=max(map(len, PLANNERS)))
+    for name in ("runs", "converged", "median (s)", "p90 (s)", "contacts"):
+        table.add_column(name, justify="right", no_wrap=True)
+    for st in stats:
         rate = 100.0 * st["converged"] / st["runs"]
-        table.add_row(kind, str(st["runs"]), f"{st['converged']} ({rate:.0f} %)", _sec(st["convergence_median_s"]),
-                      _sec(st["convergence_p90_s"]), str(st["contacts"]))
+        table.add_row(st["scenario"], st["planner"], str(st["runs"]), f"{st['converged']} ({rate:.0f} %)",
+                      _sec(st["convergence_median_s"]), _sec(st["convergence_p90_s"]), str(st["contacts"]))
     return table
+
+
+def seed_notes(stats: Stats) -> list[str]:
+    """One line per scenario whose seeds changed nothing (Stats.seed_without_effect)."""
+    notes = []
+    for scenario, groups in stats.seed_without_effect().items():
+        n = max(runs for _, runs in groups)
+        notes.append(f"sweep: {scenario}: its {n} seeds gave one and the same row "
+                     f"({', '.join(kind for kind, _ in groups)}): the seed drives only the deadlock perturbation "
+                     f"(the side a stalled agent escapes by), so these are one sample, not {n}")
+    return notes

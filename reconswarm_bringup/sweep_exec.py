@@ -1,23 +1,30 @@
 """Where a sweep's runs execute: worker processes on this machine, or a Dask cluster (`--dask ADDRESS`).
 
-Each is a context manager yielding (executor, slots): a `concurrent.futures.Executor` for
-`sweep.stream` and how many runs it executes at once (the sweep keeps twice that many in flight, so a
-worker never waits for the next job and a sweep of 10^8 seeds never holds more than that).
+Each is a context manager yielding (executor, slots, check): a `concurrent.futures.Executor` for
+`sweep.stream`, how many runs it executes at once (the sweep keeps twice that many in flight, so a
+worker never waits for the next job and a sweep of 10^8 seeds never holds more than that), and the check
+`sweep.stream` calls while it waits (None: nothing to watch). A Dask cluster's losses end the sweep with
+one line (ProcessFailure, exit 3): the scheduler lost at once, no worker left after DASK_NO_WORKERS_S (one
+may come back); `distributed`'s own logging is silenced meanwhile (its tracebacks say the same at length).
 """
 
 from __future__ import annotations
 
 import contextlib
+import logging
 import signal
 import socket
 import sys
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, ProcessPoolExecutor
 from multiprocessing import get_context
+from typing import Any
 
-from reconswarm.errors import BadInput
+from reconswarm.errors import BadInput, ProcessFailure
 
 DASK_CONNECT_TIMEOUT_S = 5.0
+DASK_NO_WORKERS_S = 20.0  # how long a sweep waits for a worker when the cluster has none left
 
 
 def _worker_init() -> None:
@@ -34,12 +41,15 @@ class _Pool(ProcessPoolExecutor):
                 proc.terminate()
 
 
+Where = Iterator[tuple[Executor, int, Callable[[], None] | None]]
+
+
 @contextlib.contextmanager
-def local(workers: int) -> Iterator[tuple[Executor, int]]:
+def local(workers: int) -> Where:
     """`workers` processes, spawned clean (no inherited threads or sessions)."""
     pool = _Pool(workers, mp_context=get_context("spawn"), initializer=_worker_init)
     try:
-        yield pool, workers
+        yield pool, workers, None
     except BaseException:
         pool.terminate()
         pool.shutdown(wait=True, cancel_futures=True)
@@ -61,7 +71,7 @@ def _scheduler(address: str) -> tuple[str, int]:
 
 
 @contextlib.contextmanager
-def dask(address: str, timeout_s: float = DASK_CONNECT_TIMEOUT_S) -> Iterator[tuple[Executor, int]]:
+def dask(address: str, timeout_s: float = DASK_CONNECT_TIMEOUT_S) -> Where:
     """The Dask cluster whose scheduler is at `address` (tcp://host:port); BadInput if the `distributed`
     package is missing or no scheduler answers there within timeout_s."""
     host, port = _scheduler(address)
@@ -87,6 +97,58 @@ def dask(address: str, timeout_s: float = DASK_CONNECT_TIMEOUT_S) -> Iterator[tu
             except (TimeoutError, OSError):
                 raise BadInput(f"--dask {address}: the scheduler has no workers") from None
         slots = sum(client.nthreads().values())
-        yield client.get_executor(pure=False), slots
-    finally:
+    except BaseException:
         client.close()
+        raise
+    watch = _Watch(client, address)
+    with _quiet("distributed", "tornado", "asyncio"):  # (closing a client that lost its scheduler logs too)
+        try:
+            yield client.get_executor(pure=False), slots, watch.check
+        except (KeyboardInterrupt, ProcessFailure):
+            raise
+        except BaseException as exc:  # the runs the scheduler took with it are cancelled
+            if client.status != "running":
+                raise watch.lost() from None
+            raise exc
+        finally:
+            client.close()
+
+
+class _Watch:
+    """A Dask cluster's health, as seen from its client (checked about once a second by sweep.stream)."""
+
+    def __init__(self, client: Any, address: str, grace_s: float = DASK_NO_WORKERS_S) -> None:
+        self.client, self.address, self.grace_s = client, address, grace_s
+        self._none_since: float | None = None
+
+    def lost(self) -> ProcessFailure:
+        return ProcessFailure(f"sweep: lost the Dask scheduler at {self.address} (its runs under way are lost)")
+
+    def check(self) -> None:
+        if self.client.status != "running":
+            raise self.lost()
+        workers = self.client.scheduler_info(n_workers=0).get("n_workers")
+        if workers or workers is None:
+            self._none_since = None
+            return
+        now = time.monotonic()
+        if self._none_since is None:
+            self._none_since = now
+        elif now - self._none_since >= self.grace_s:
+            raise ProcessFailure(f"sweep: the Dask cluster at {self.address} has had no workers for "
+                                 f"{self.grace_s:.0f} s (they died or left)")
+
+
+@contextlib.contextmanager
+def _quiet(*loggers: str) -> Iterator[None]:
+    """These loggers (and theirs) say nothing while the sweep runs; their levels are restored after."""
+    saved = {name: logging.getLogger(name).level for name in logging.root.manager.loggerDict
+             if any(name == n or name.startswith(n + ".") for n in loggers)}
+    saved.update({n: logging.getLogger(n).level for n in loggers})
+    for name in saved:
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        for name, level in saved.items():
+            logging.getLogger(name).setLevel(level)

@@ -56,8 +56,10 @@ def swept(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[Path], Path, s
     d = tmp_path_factory.mktemp("sweep")
     paths = tiny(d)
     out = d / "out"
-    r = reconswarm("sweep", *map(str, paths), "--seeds", "0:2", "--planner", ",".join(PLANNERS), "--jobs", "2",
-                   "-o", str(out), timeout=600)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("COLUMNS", "250")  # (the table's width: each path on one line)
+        r = reconswarm("sweep", *map(str, paths), "--seeds", "0:2", "--planner", ",".join(PLANNERS), "--jobs", "2",
+                       "-o", str(out), timeout=600)
     return paths, out, r
 
 
@@ -103,18 +105,38 @@ def test_a_row_equals_the_engine_run_directly(swept, tmp_path, which):
     assert float(row["wall_time_s"]) > 0
 
 
-def test_table_per_planner(swept):
-    _, out, r = swept
+def test_table_per_scenario_and_planner(swept):
+    paths, out, r = swept
     _, rows = read_rows(out)
-    for kind in PLANNERS:
-        mine = [x for x in rows if x["planner"] == kind]
-        times = [float(x["convergence_time_s"]) for x in mine if x["converged"] == "True"]
-        contacts = sum(int(x["collisions"]) for x in mine)
-        (line,) = [ln for ln in r.stdout.splitlines() if f" {kind} " in ln]
-        cells = [c.strip() for c in re.split(r"[│┃|]", line) if c.strip()]
-        want = [kind, str(len(mine)), f"{len(times)} ({100.0 * len(times) / len(mine):.0f} %)",
-                f"{statistics.median(times):.2f}", f"{p90(times):.2f}", str(contacts)]
-        assert cells == want
+    table = [[c.strip() for c in re.split(r"[│┃|]", ln) if c.strip()] for ln in r.stdout.splitlines()
+             if any(f" {kind} " in ln for kind in PLANNERS)]
+    want = []
+    for path in paths:
+        for kind in PLANNERS:
+            mine = [x for x in rows if x["planner"] == kind and x["scenario"] == str(path)]
+            times = [float(x["convergence_time_s"]) for x in mine if x["converged"] == "True"]
+            contacts = sum(int(x["collisions"]) for x in mine)
+            want.append([str(path), kind, str(len(mine)), f"{len(times)} ({100.0 * len(times) / len(mine):.0f} %)",
+                         f"{statistics.median(times):.2f}" if times else "-", f"{p90(times):.2f}" if times else "-",
+                         str(contacts)])
+    assert table == want
+
+
+def test_seeds_that_changed_nothing_are_said_in_one_line_per_scenario(swept):
+    """Where a scenario's seeds all gave the same row (no agent stalled), the sweep says so, not more."""
+    paths, out, r = swept
+    _, rows = read_rows(out)
+    same = {}
+    for path in paths:
+        kinds = [k for k in PLANNERS if len({tuple(v for c, v in x.items() if c not in ("seed", "wall_time_s"))
+                                             for x in rows if x["scenario"] == str(path) and x["planner"] == k}) == 1]
+        if kinds:
+            same[str(path)] = kinds
+    assert same, "the tiny sweep is meant to have seeds that change nothing"
+    notes = [ln for ln in r.stderr.splitlines() if "the seed drives only the deadlock perturbation" in ln]
+    assert [n.split(": ")[1] for n in notes] == list(same)
+    for note, kinds in zip(notes, same.values(), strict=True):
+        assert f"gave one and the same row ({', '.join(kinds)})" in note
 
 
 def test_json_prints_rows_and_stats(tmp_path):
@@ -128,9 +150,10 @@ def test_json_prints_rows_and_stats(tmp_path):
     assert row["seed"] == load(path).meta.seed  # default: the file's own seed
     _, csv_rows = read_rows(out)
     assert csv_rows[0]["convergence_time_s"] == str(row["convergence_time_s"])
-    assert doc["planners"] == {"reconfigurable": {
-        "runs": 1, "converged": 1, "convergence_median_s": row["convergence_time_s"],
-        "convergence_p90_s": row["convergence_time_s"], "contacts": row["collisions"]}}
+    assert doc["table"] == [{
+        "scenario": str(path), "planner": "reconfigurable", "runs": 1, "converged": 1,
+        "convergence_median_s": row["convergence_time_s"], "convergence_p90_s": row["convergence_time_s"],
+        "contacts": row["collisions"]}]
 
 
 def test_run_sweep_takes_any_executor(swept, tmp_path):
@@ -168,3 +191,23 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, args, field):
     lines = r.output.strip().splitlines()
     assert len(lines) == 1 and field in lines[0] and "Traceback" not in r.output
     assert not (tmp_path / "out" / "results.csv").exists()
+
+
+def test_clashing_stems_keep_every_record(tmp_path):
+    """a/x.toml, b/x.toml, c/x-2.toml: six runs, six rows, six records, no two runs in one directory."""
+    paths = []
+    for n, sub in enumerate(("a", "b", "c")):
+        s = generate(3, 1, n + 1)
+        s = replace(s, meta=replace(s.meta, duration_s=20.0, seed=0))  # one seed: one record name in each
+        (tmp_path / sub).mkdir()
+        paths.append(tmp_path / sub / ("x-2.toml" if sub == "c" else "x.toml"))
+        paths[-1].write_text(to_toml(s))
+    out = tmp_path / "out"
+    r = reconswarm("sweep", *map(str, paths), "--planner", ",".join(PLANNERS), "--jobs", "2", "-o", str(out),
+                   timeout=300)
+    assert r.returncode == 0, r.stderr
+    _, rows = read_rows(out)
+    assert len(rows) == 6
+    records = sorted((out / "runs").glob("*/*/seed*/run.db"))
+    assert len(records) == 6
+    assert {p.relative_to(out / "runs").parts[0] for p in records} == {"x", "x-2", "x-3"}

@@ -38,7 +38,15 @@ def _stop(p: subprocess.Popen[bytes]) -> None:
 
 @contextlib.contextmanager
 def cluster(tmp: Path) -> Iterator[str]:
-    """A scheduler and a worker with two processes of one thread each, on 127.0.0.1."""
+    """A scheduler and a worker with two processes of one thread each, on 127.0.0.1: its address."""
+    with cluster_processes(tmp) as (address, _sched, _worker):
+        yield address
+
+
+@contextlib.contextmanager
+def cluster_processes(tmp: Path) -> Iterator[tuple[str, subprocess.Popen[bytes], subprocess.Popen[bytes]]]:
+    """As cluster(), with the scheduler's and the worker's processes (the worker in a process group of its own,
+    its worker processes with it)."""
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     logs = (tmp / "scheduler.log").open("wb"), (tmp / "worker.log").open("wb")
@@ -46,7 +54,7 @@ def cluster(tmp: Path) -> Iterator[str]:
                              cwd=ROOT, stdout=logs[0], stderr=subprocess.STDOUT)
     worker = subprocess.Popen([DASK, "worker", address, "--host", "127.0.0.1", "--nworkers", "2", "--nthreads", "1",
                                "--no-dashboard", "--memory-limit", "0", "--local-directory", str(tmp / "dask")],
-                              cwd=ROOT, stdout=logs[1], stderr=subprocess.STDOUT)
+                              cwd=ROOT, stdout=logs[1], stderr=subprocess.STDOUT, start_new_session=True)
     try:
         from distributed import Client
 
@@ -59,7 +67,7 @@ def cluster(tmp: Path) -> Iterator[str]:
             except OSError:
                 assert sched.poll() is None and time.monotonic() < deadline, (tmp / "scheduler.log").read_text()
                 time.sleep(0.3)
-        yield address
+        yield address, sched, worker
     finally:
         _stop(worker)
         _stop(sched)

@@ -13,6 +13,7 @@ from typing import Any
 import pytest
 
 from reconswarm.errors import BadInput
+from reconswarm.scenario.wire_limits import MAX_AGENT_ID
 from reconswarm_bringup import acl, deployment, secure
 
 GOOD = """
@@ -68,6 +69,7 @@ def test_a_good_file() -> None:
     ({"live_view": "yes"}, r"^dep\.toml: live_view: expected true or false"),
     ({"colour": 1}, r"^dep\.toml: colour: unknown key$"),
     ({"host": []}, r"^dep\.toml: host: expected one \[\[host\]\] table or more$"),
+    ({"run": "paper\n"}, r"^dep\.toml: run: one key chunk"),  # ('$' would match before the newline)
 ])
 def test_a_bad_field_is_one_line_naming_it(change: dict[str, Any], message: str) -> None:
     with pytest.raises(BadInput, match=message):
@@ -83,13 +85,28 @@ def test_a_bad_field_is_one_line_naming_it(change: dict[str, Any], message: str)
     ({"agents": [4, "5"]}, r"^dep\.toml: host\[1\]\.agents\[1\]: expected an agent id"),
     ({"name": "A"}, r"^dep\.toml: host\[1\]\.name: host 'A' is named twice$"),
     ({"name": "../x"}, r"^dep\.toml: host\[1\]\.name: letters, digits"),
+    ({"name": "B\n"}, r"^dep\.toml: host\[1\]\.name: letters, digits"),
+    # the same socket as A's router under another name of the loopback: a duplicate
+    ({"router": "tls/localhost:7450"}, r"^dep\.toml: host\[1\]\.router: tls/localhost:7450 is also host 'A'"),
+    ({"router": "tls/LocalHost:7450"}, r"^dep\.toml: host\[1\]\.router: tls/LocalHost:7450 is also host 'A'"),
+    ({"agents": [4, 2**62]}, r"^dep\.toml: host\[1\]\.agents\[1\]: expected an agent id \(an integer in "
+                            r"\[0, \d+\], the wire's\), got 4611686018427387904$"),
+    ({"agents": [MAX_AGENT_ID + 1]}, r"^dep\.toml: host\[1\]\.agents\[0\]: expected an agent id"),
     ({"cpu": 4}, r"^dep\.toml: host\[1\]\.cpu: unknown key$"),
 ])
 def test_a_bad_host_is_one_line_naming_it(host_b: dict[str, Any], message: str) -> None:
     data = tomllib.loads(GOOD)
+    if "localhost" in host_b.get("router", "").lower():  # A's router on the loopback, for the duplicates above
+        data["host"][0]["router"] = "tls/127.0.0.1:7450"
     data["host"][1].update(host_b)
     with pytest.raises(BadInput, match=message):
         deployment.parse(data, "dep.toml")
+
+
+def test_the_largest_agent_id_the_wire_carries_is_accepted() -> None:
+    data = tomllib.loads(GOOD)
+    data["host"][1]["agents"] = [4, MAX_AGENT_ID]
+    assert deployment.parse(data, "dep.toml").hosts[1].agents == (4, MAX_AGENT_ID)
 
 
 def test_a_missing_or_broken_file(tmp_path: Path) -> None:

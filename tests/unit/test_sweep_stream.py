@@ -95,5 +95,43 @@ def test_stats_accumulated_equal_stats_of_the_rows() -> None:
     for r in rows:
         acc.add(r)
     assert acc.result() == sw.planner_stats(rows)
-    assert acc.result()["a"]["converged"] == 6 and acc.result()["a"]["contacts"] == 2
-    assert acc.result()["a"]["convergence_median_s"] == 3.5  # median of 0, 1, 3, 4, 5, 6
+    a = acc.result()[0]
+    assert (a["scenario"], a["planner"]) == ("g.toml", "a")
+    assert a["converged"] == 6 and a["contacts"] == 2
+    assert a["convergence_median_s"] == 3.5  # median of 0, 1, 3, 4, 5, 6
+
+
+def test_the_table_has_a_line_per_scenario_and_planner_never_pooling_scenarios() -> None:
+    rows = [_row("a", s) for s in range(3)] + [{**_row("a", s), "scenario": "h.toml", "convergence_time_s": 10.0 + s}
+                                               for s in range(3)]
+    table = sw.planner_stats(rows)
+    assert [(t["scenario"], t["planner"]) for t in table] == [("g.toml", "a"), ("h.toml", "a")]
+    assert [t["convergence_median_s"] for t in table] == [1.0, 11.0]  # (pooled, the median would be 6.0)
+
+
+def test_seeds_that_changed_nothing_are_said_once_per_scenario() -> None:
+    same = [{**_row(k, s), "convergence_time_s": 5.0, "wall_time_s": 0.1 * s} for k in ("a", "b") for s in range(3)]
+    differ = [{**_row("a", s), "scenario": "h.toml"} for s in range(3)]  # convergence time = seed
+    one = [{**_row("a", 0), "scenario": "k.toml"}]  # a single seed: nothing to say
+    st = sw.Stats()
+    for r in same + differ + one:
+        st.add(r)
+    assert st.seed_without_effect() == {"g.toml": [("a", 3), ("b", 3)]}
+    (note,) = sw.seed_notes(st)
+    assert note.startswith("sweep: g.toml: its 3 seeds gave one and the same row (a, b)") and "\n" not in note
+    assert "deadlock perturbation" in note
+
+
+def test_clashing_stems_never_share_a_record_directory(tmp_path: Path) -> None:
+    """a/x.toml and b/x.toml share a stem; c/x-2.toml's own stem is what b's suffix would be."""
+    paths = []
+    for sub in ("a", "b", "c"):
+        (tmp_path / sub).mkdir()
+        paths.append(tmp_path / sub / ("x-2.toml" if sub == "c" else "x.toml"))
+        paths[-1].write_text(to_toml(generate(3, 1, 1)))
+    jobs = sw.make_jobs(paths, range(0, 1), ("reconfigurable", "virtual-leader"), tmp_path / "out")
+    assert len(jobs) == 6 and len({j.out_dir for j in jobs}) == 6
+    runs = tmp_path / "out" / "runs"
+    by_file = {j.label: Path(j.out_dir).relative_to(runs).parts[0] for j in jobs}
+    assert by_file[str(paths[0])] == "x" and by_file[str(paths[2])] == "x-2"  # a file's own stem kept
+    assert by_file[str(paths[1])] not in ("x", "x-2")
