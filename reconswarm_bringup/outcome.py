@@ -15,7 +15,7 @@ from pathlib import Path
 
 from rich.console import Console
 
-from reconswarm.cli.console import mission_exit_code
+from reconswarm.cli.console import mission_exit_code, unconverged_reason
 from reconswarm.record.store import RunRecord, note_stop
 from reconswarm.record.summary import render, summarize
 from reconswarm_bringup.config import LaunchConfig
@@ -65,9 +65,11 @@ def last_line(path: Path) -> str:
     return lines[-1].split(" ", 2)[-1] if lines and lines[-1][:2].isdigit() else (lines[-1] if lines else "")
 
 
-def report(cfg: LaunchConfig, crashed: list[str], fatal: str | None = None, halt: str | None = None) -> int:
+def report(cfg: LaunchConfig, crashed: list[str], fatal: str | None = None, halt: str | None = None,
+           warns: list[str] | None = None) -> int:
     """Print the summary and where the record is; the exit code. `halt`: the launcher ended the run early
-    ("stopped" by a signal, "timeout"), which the record is made to say (the world only knows it was stopped)."""
+    ("stopped" by a signal, "timeout"), which the record is made to say (the world only knows it was stopped).
+    `warns`: the scenario's warnings, named as the likely reason when the run ends without converging."""
     db = cfg.out / "run.db"
     try:
         if halt is not None:
@@ -87,6 +89,9 @@ def report(cfg: LaunchConfig, crashed: list[str], fatal: str | None = None, halt
         Console().print(render(summary))
         print(f"record: {db}\nlogs:   {cfg.out / 'logs'}")
     sys.stdout.flush()
+    if halt is None and fatal is None:
+        for line in unconverged_reason(summary, warns or []):
+            log.warning("%s", line)
     if fatal is not None:
         log.error("%s", fatal)
         return 3

@@ -1,0 +1,60 @@
+"""Issue 52 (a newcomer's first hour), the pure parts: each launch without -o gets its own directory and
+runs/latest links to the newest; an output directory is checked without being made; the end of an unconverged
+run names the scenario's warnings."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from reconswarm.cli.console import unconverged_reason
+from reconswarm.cli.outputs import creatable_dir
+from reconswarm.errors import BadInput
+from reconswarm_bringup.outdir import link_latest, new_run_dir
+
+
+def test_each_run_gets_its_own_directory_and_latest_follows(tmp_path: Path) -> None:
+    runs = tmp_path / "runs"
+    first = new_run_dir(runs, now=0.0)
+    first.mkdir(parents=True)
+    (first / "run.db").write_text("first")
+    second = new_run_dir(runs, now=0.0)  # the same second: a suffix, never the same directory
+    assert second != first and second.name == f"{first.name}-2"
+    second.mkdir()
+    link_latest(first)
+    assert (runs / "latest").resolve() == first.resolve()
+    link_latest(second)
+    assert (runs / "latest").resolve() == second.resolve()
+    assert (first / "run.db").read_text() == "first"
+
+
+def test_a_real_latest_directory_is_kept_aside(tmp_path: Path) -> None:
+    runs = tmp_path / "runs"
+    (runs / "latest").mkdir(parents=True)
+    (runs / "latest" / "run.db").write_text("old")
+    new = new_run_dir(runs)
+    new.mkdir()
+    link_latest(new)
+    kept = [p for p in runs.iterdir() if p.name.startswith("latest-")]
+    assert len(kept) == 1 and (kept[0] / "run.db").read_text() == "old"
+    assert (runs / "latest").is_symlink() and (runs / "latest").resolve() == new.resolve()
+
+
+def test_creatable_dir_makes_nothing(tmp_path: Path) -> None:
+    creatable_dir("-o", tmp_path / "a" / "b")
+    assert list(tmp_path.iterdir()) == []
+    (tmp_path / "f").write_text("")
+    with pytest.raises(BadInput, match=r"-o .*f/x: cannot write there \(a file stands"):
+        creatable_dir("-o", tmp_path / "f" / "x")
+
+
+def test_unconverged_reason() -> None:
+    warns = ["s.toml: agents: offsets of agents 2 and 5 are 9.60 m apart, below d_max,ij = 18.04 m"]
+    ended = {"converged": False, "finished": True, "duration_s": 20.0}
+    assert unconverged_reason(ended, warns) == [
+        "not converged in 20.0 s; the likely reason is the scenario's warning (reconswarm scenario check):",
+        f"  {warns[0]}"]
+    assert unconverged_reason({**ended, "converged": True}, warns) == []
+    assert unconverged_reason({**ended, "finished": False}, warns) == []  # stopped early: that is the reason
+    assert unconverged_reason(ended, []) == []
