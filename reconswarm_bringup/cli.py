@@ -16,7 +16,7 @@ from typing import Annotated
 import typer
 
 from reconswarm.cli import help_style, outputs
-from reconswarm.cli.console import fail, mission_exit_code, print_json, run_app, set_debug, unconverged_reason
+from reconswarm.cli.console import fail, mission_exit_code, plural, print_json, run_app, set_debug, unconverged_reason
 from reconswarm.errors import BadInput, ReconswarmError
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -120,7 +120,8 @@ def scenario_check(file: Annotated[Path, typer.Argument(help="Scenario TOML file
         return
     for w in warns:
         typer.echo(f"warning: {w}", err=True)
-    typer.echo(f"{file}: ok ({len(s.agents)} agents, {len(s.obstacles)} obstacles, planner {s.planner.kind.value})")
+    typer.echo(f"{file}: ok ({plural(len(s.agents), 'agent')}, {plural(len(s.obstacles), 'obstacle')}, "
+               f"planner {s.planner.kind.value})")
 
 
 def _register() -> None:

@@ -37,6 +37,11 @@ def print_json(obj: Any) -> None:
     sys.stdout.write(json.dumps(obj, indent=2) + "\n")
 
 
+def plural(n: int, word: str) -> str:
+    """`1 agent`, `2 agents`, `0 obstacles`."""
+    return f"{n} {word}" + ("" if n == 1 else "s")
+
+
 def mission_exit_code(summary: dict[str, Any]) -> int:
     return 0 if summary.get("converged") and not summary.get("collisions") else 1
 

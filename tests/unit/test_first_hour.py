@@ -58,3 +58,44 @@ def test_unconverged_reason() -> None:
     assert unconverged_reason({**ended, "converged": True}, warns) == []
     assert unconverged_reason({**ended, "finished": False}, warns) == []  # stopped early: that is the reason
     assert unconverged_reason(ended, []) == []
+
+
+def test_an_unknown_scenario_key_suggests_the_near_one(tmp_path: Path) -> None:
+    from reconswarm.scenario.model import load
+    from tests.support import PAPER
+
+    f = tmp_path / "k.toml"
+    f.write_text(PAPER.read_text().replace("k_att =", "k_attr =", 1))
+    with pytest.raises(BadInput, match=r"k\.toml: planner\.k_attr: unknown key \(did you mean k_att\?\)$"):
+        load(f)
+    f.write_text(PAPER.read_text().replace("k_att =", "zzz = 1\nk_att =", 1))
+    with pytest.raises(BadInput, match=r"planner\.zzz: unknown key$"):
+        load(f)
+
+
+def test_scenario_check_counts_in_words(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from reconswarm.scenario.generate import generate
+    from reconswarm.scenario.model import to_toml
+    from reconswarm_bringup.cli import app
+
+    f = tmp_path / "one.toml"
+    f.write_text(to_toml(generate(1, 1, 0)))
+    r = CliRunner().invoke(app, ["scenario", "check", str(f)])
+    assert r.exit_code == 0 and "ok (1 agent, 1 obstacle, planner" in r.stdout, r.stdout
+
+
+def test_launch_help_at_80_columns_says_the_default_out_whole() -> None:
+    import os
+    import subprocess
+    import sys
+
+    from tests.support import ROOT
+
+    r = subprocess.run([sys.executable, "-m", "reconswarm_bringup.cli", "launch", "--help"], cwd=ROOT,
+                       capture_output=True, text=True, timeout=60, env=dict(os.environ, COLUMNS="80"))
+    assert r.returncode == 0, r.stderr
+    text = " ".join(" ".join(r.stdout.replace("│", " ").split()).split())
+    assert "(default: a new runs/YYYYMMDD-HHMMSS in the project; runs/latest links to the newest)" in text, r.stdout
+    assert "…" not in r.stdout
