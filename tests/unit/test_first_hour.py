@@ -99,3 +99,33 @@ def test_launch_help_at_80_columns_says_the_default_out_whole() -> None:
     text = " ".join(" ".join(r.stdout.replace("│", " ").split()).split())
     assert "(default: a new runs/YYYYMMDD-HHMMSS in the project; runs/latest links to the newest)" in text, r.stdout
     assert "…" not in r.stdout
+
+
+def test_csv_export_in_bulk_writes_each_known_cell_as_repr(tmp_path: Path) -> None:
+    import dataclasses
+    import io
+
+    import numpy as np
+
+    from monitor.csv_export import CHUNK_TICKS, export_csv
+    from reconswarm.record.store import RunRecord
+    from reconswarm.scenario.generate import generate
+    from reconswarm_bringup import engine
+
+    s = generate(3, 1, 2)
+    engine.run(engine.SimConfig(s, tmp_path, progress=False))
+    with RunRecord(tmp_path / "run.db") as rec:
+        tk = rec.ticks()
+        assert tk.t.size > CHUNK_TICKS  # more than one chunk
+        px = tk.px.copy()
+        px[7, 1] = np.nan  # an agent unknown at a tick: no row there
+        tk = dataclasses.replace(tk, px=px)
+        got = io.StringIO()
+        n = export_csv(rec, got, None, tk)
+        want = ["t_s,agent,px_m,py_m,theta_rad"]
+        for row in range(tk.t.size):
+            for col, aid in enumerate(rec.ids):
+                if np.isfinite(tk.px[row, col]):
+                    want.append(f"{tk.t[row]:.6f},{int(aid)},{float(tk.px[row, col])!r},{float(tk.py[row, col])!r},"
+                                 f"{float(tk.theta[row, col])!r}")
+    assert got.getvalue().splitlines() == want and n == len(want) - 1
