@@ -129,3 +129,38 @@ def test_csv_export_in_bulk_writes_each_known_cell_as_repr(tmp_path: Path) -> No
                     want.append(f"{tk.t[row]:.6f},{int(aid)},{float(tk.px[row, col])!r},{float(tk.py[row, col])!r},"
                                  f"{float(tk.theta[row, col])!r}")
     assert got.getvalue().splitlines() == want and n == len(want) - 1
+
+
+def _system_python_without_zenoh() -> str:
+    import subprocess
+
+    for exe in ("/usr/bin/python3", "/usr/local/bin/python3"):
+        if Path(exe).exists() and subprocess.run([exe, "-c", "import zenoh"], capture_output=True).returncode != 0:
+            return exe
+    pytest.skip("no Python without zenoh on this machine")
+
+
+def test_ros2_echo_from_another_python_runs_in_the_project_venv() -> None:
+    import subprocess
+
+    from tests.support import ROOT
+
+    exe = _system_python_without_zenoh()
+    r = subprocess.run([exe, str(ROOT / "deploy" / "ros2_echo.py"), "--help"], cwd="/", capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 0 and r.stdout.startswith("usage: ros2_echo.py"), r.stderr
+
+
+def test_ros2_echo_without_any_environment_says_how_in_one_line(tmp_path: Path) -> None:
+    import shutil
+    import subprocess
+
+    from tests.support import ROOT
+
+    exe = _system_python_without_zenoh()
+    (tmp_path / "deploy").mkdir()
+    copy = shutil.copy(ROOT / "deploy" / "ros2_echo.py", tmp_path / "deploy")  # (no .venv beside it)
+    r = subprocess.run([exe, str(copy), "--help"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2, r.stderr
+    (line,) = r.stderr.strip().splitlines()
+    assert line.startswith("ros2_echo.py: error: needs the Python packages eclipse-zenoh and rosbags"), line
