@@ -65,12 +65,35 @@ def last_line(path: Path) -> str:
     return lines[-1].split(" ", 2)[-1] if lines and lines[-1][:2].isdigit() else (lines[-1] if lines else "")
 
 
+def _has_ticks(db: Path) -> bool:
+    """Whether the record at db holds a tick (False: no record, or one the mission never wrote to)."""
+    import sqlite3
+
+    if not db.exists():
+        return False
+    try:
+        con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+        try:
+            return con.execute("SELECT 1 FROM ticks LIMIT 1").fetchone() is not None
+        finally:
+            con.close()
+    except sqlite3.Error:
+        return True  # a record there, unreadable: say that
+
+
 def report(cfg: LaunchConfig, crashed: list[str], fatal: str | None = None, halt: str | None = None,
            warns: list[str] | None = None) -> int:
     """Print the summary and where the record is; the exit code. `halt`: the launcher ended the run early
     ("stopped" by a signal, "timeout"), which the record is made to say (the world only knows it was stopped).
     `warns`: the scenario's warnings, named as the likely reason when the run ends without converging."""
     db = cfg.out / "run.db"
+    if (halt is not None or fatal is not None) and not _has_ticks(db):
+        # ended before the mission's first tick: there is nothing to summarize, and that is what to say
+        how = {"stopped": "stopped", "timeout": "timed out"}.get(halt or "", "ended")
+        log.error("%s during start-up: no record yet (logs: %s)", how, cfg.out / "logs")
+        if fatal is not None:
+            log.error("%s", fatal)
+        return 3
     try:
         if halt is not None:
             note_stop(db, halt)

@@ -121,3 +121,31 @@ def test_launch_names_the_warnings_when_it_ends_unconverged(tmp_path: Path) -> N
     assert not any(ln.startswith("run_local:") for ln in lines), lines
     at = next(i for i, ln in enumerate(lines) if "not converged in 5.0 s; the likely reason" in ln)
     assert warn in lines[at + 1], lines
+
+
+def test_ctrl_c_during_start_up_is_quiet(tmp_path: Path) -> None:
+    import signal
+    import time
+
+    from tests.support import assert_all_gone, launcher_cmd, tick_count
+
+    out = tmp_path / "o"
+    # A terminal's Ctrl-C: SIGINT to the whole foreground process group (the launcher leads its own here).
+    proc = subprocess.Popen(launcher_cmd(out, "-n", "3"), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=_env(), start_new_session=True)
+    deadline = time.monotonic() + 120
+    tsv = out / "processes.tsv"
+    while not (tsv.exists() and "simworld" in tsv.read_text()):  # every process started, most still importing
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.02)
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert_all_gone(out)
+    for log in (out / "logs").glob("*.log"):
+        text = log.read_text()
+        assert "Traceback" not in text and "KeyboardInterrupt" not in text, f"{log.name}:\n{text}"
+    assert "Traceback" not in err, err
+    if tick_count(out / "run.db") == 0:
+        assert "stopped during start-up: no record yet" in err, err
+        assert "cannot be read" not in err, err

@@ -164,3 +164,22 @@ def test_ros2_echo_without_any_environment_says_how_in_one_line(tmp_path: Path) 
     assert r.returncode == 2, r.stderr
     (line,) = r.stderr.strip().splitlines()
     assert line.startswith("ros2_echo.py: error: needs the Python packages eclipse-zenoh and rosbags"), line
+
+
+def test_the_security_example_finds_agent_3_in_an_agent_hosts_file(tmp_path: Path) -> None:
+    from tests.support import ROOT
+
+    doc = (ROOT / "docs" / "security.md").read_text()
+    block = next(b.split("```", 1)[0] for b in doc.split("```python\n")[1:] if "observer.json5" in b)
+    head = block.split("# the clock and the events")[0]  # up to the sessions: the file names, no network
+    (tmp_path / "secrets").mkdir()
+    (tmp_path / "run_id").write_text("paper-abc123\n")
+    for name in ("observer", "monitor", "agents-1-5", "agents-6-9,11"):
+        (tmp_path / "secrets" / f"{name}.json5").write_text("{}")
+    scope: dict[str, object] = {}
+    exec(compile(head.replace("runs/latest", str(tmp_path)), "docs/security.md", "exec"), scope)
+    agent_role = scope["agent_role"]
+    assert agent_role(3).name == "agents-1-5.json5"  # type: ignore[operator]
+    assert agent_role(11).name == "agents-6-9,11.json5"  # type: ignore[operator]
+    with pytest.raises(SystemExit, match="no credentials for agent 10"):
+        agent_role(10)  # type: ignore[operator]
