@@ -1,7 +1,7 @@
-"""The project's environment for a benchmark script started by another Python (`bench/x.py`, by its shebang, or
-`python3 bench/x.py`): imported first, it re-runs the script with the project's .venv/bin/python when this
-Python lacks the project or its dependencies, and says in one line how to get that environment when there is
-none (exit 2)."""
+"""The project's environment for a benchmark script started by another Python (`bench/bench_paper.py` by its
+shebang, or `python3 bench/bench_paper.py`): imported first, it re-runs the script with the project's
+.venv/bin/python when this Python lacks the project or its dependencies, and says in one line how to get that
+environment when there is none (exit 2)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Every benchmark script runs as docs/benchmarks.md says (issue 52, friction 7): `bench/x.py` by itself (a
+"""Every benchmark script runs as docs/benchmarks.md says (issue 52, friction 7): `bench/bench_paper.py` by itself (a
 shebang, the executable bit in git, the project's .venv found even from another Python) and `--help` lists its
 options. bench/'s helper modules (imported by the scripts, no main) are not scripts."""
 
