@@ -87,13 +87,7 @@ def report(cfg: LaunchConfig, crashed: list[str], fatal: str | None = None, halt
     ("stopped" by a signal, "timeout"), which the record is made to say (the world only knows it was stopped).
     `warns`: the scenario's warnings, named as the likely reason when the run ends without converging."""
     db = cfg.out / "run.db"
-    if (halt is not None or fatal is not None) and not _has_ticks(db):
-        # ended before the mission's first tick: there is nothing to summarize, and that is what to say
-        how = {"stopped": "stopped", "timeout": "timed out"}.get(halt or "", "ended")
-        log.error("%s during start-up: no record yet (logs: %s)", how, cfg.out / "logs")
-        if fatal is not None:
-            log.error("%s", fatal)
-        return 3
+    early = {"stopped": "stopped", "timeout": "timed out"}.get(halt or "", "ended")  # (before the first tick)
     try:
         if halt is not None:
             note_stop(db, halt)
@@ -102,7 +96,10 @@ def report(cfg: LaunchConfig, crashed: list[str], fatal: str | None = None, halt
     except Exception as exc:  # the record itself may be what failed (disk full): say so, do not hide the cause
         if fatal is None and halt is None:
             raise
-        log.error("no summary: the record cannot be read (%s)", exc)
+        if _has_ticks(db):
+            log.error("no summary: the record cannot be read (%s)", exc)
+        else:  # ended before the mission's first tick: nothing to summarize, and that is what to say
+            log.error("%s during start-up: no record yet (logs: %s)", early, cfg.out / "logs")
         if fatal is not None:
             log.error("%s", fatal)
         return 3
@@ -112,6 +109,8 @@ def report(cfg: LaunchConfig, crashed: list[str], fatal: str | None = None, halt
         Console().print(render(summary))
         print(f"record: {db}\nlogs:   {cfg.out / 'logs'}")
     sys.stdout.flush()
+    if (halt is not None or fatal is not None) and not summary.get("ticks"):
+        log.warning("%s during start-up: no tick recorded yet (the summary above is empty)", early)
     if halt is None and fatal is None:
         for line in unconverged_reason(summary, warns or []):
             log.warning("%s", line)

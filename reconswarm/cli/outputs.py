@@ -41,8 +41,12 @@ def creatable_dir(option: str, path: Path) -> None:
         probe = probe.parent
     if not probe.is_dir():
         raise BadInput(f"{option} {path}: cannot write there (a file stands where a directory should be)")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise BadInput(f"{option} {path}: cannot write there (Permission denied)")
+    try:  # (a file made and removed in the nearest directory there is: what the kernel says, e.g. a read-only mount)
+        fd, name = tempfile.mkstemp(prefix=".write-probe-", dir=probe)
+        os.close(fd)
+        os.unlink(name)
+    except OSError as exc:
+        raise BadInput(f"{option} {path}: cannot write there ({_why(exc)})") from None
 
 
 def writable_file(option: str, path: Path) -> None:
