@@ -80,7 +80,8 @@ def _check_refused(rc: int, err: str, port: int, winner: Path, loser: Path) -> N
     assert len(lines) == 1, lines
     assert f"tcp/127.0.0.1:{port}" in lines[0] and read_run_id(winner) in lines[0], lines[0]
     assert pids(loser) == []  # refused before it started anything
-    assert not loser.exists()  # and it leaves nothing behind (issue 52): no run_id, scenario.toml or lock
+    # and it leaves nothing behind in its directory (issue 52; _launch made it): no run_id, scenario.toml or lock
+    assert sorted(p.name for p in loser.iterdir()) == []
 
 
 def test_two_launches_at_the_same_moment_one_is_refused(tmp_path: Path, small: tuple[Path, float]) -> None:
