@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """A plain numpy implementation of the paper's law (docs/paper.md, eqs. 7-11): the yardstick the engine's speed
 is measured against (bench/bench_engine.py). Written from the equations, independent of reconswarm.
 
@@ -12,12 +13,17 @@ the full duration of the scenario (300 s, 6000 ticks for the paper). Reads the s
 
 from __future__ import annotations
 
-import sys
+import _venv  # noqa: F401  (first: the project's .venv, re-run there if this Python lacks it)
+
+# isort: split
+import argparse
 import time
 import tomllib
 from pathlib import Path
 
 import numpy as np
+
+PAPER = Path(__file__).resolve().parent.parent / "deploy" / "scenarios" / "paper.toml"
 
 
 def load(path: Path) -> dict:
@@ -93,7 +99,12 @@ def run(doc: dict) -> tuple[int, float, np.ndarray]:
 
 
 def main() -> int:
-    path = Path(sys.argv[1] if len(sys.argv) > 1 else "deploy/scenarios/paper.toml")
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("scenario", nargs="?", type=Path, default=PAPER,
+                    help="scenario TOML (default: deploy/scenarios/paper.toml)")
+    path = ap.parse_args().scenario
+    if not path.is_file():
+        ap.error(f"{path}: file not found")
     t0 = time.perf_counter()
     ticks, err, _ = run(load(path))
     wall = time.perf_counter() - t0

@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """The distributed deployment, measured with real processes through deploy/run_local.sh's launcher:
 
 1. lockstep on a sparse grid (bench/grid.py: about 8 neighbours per agent whatever N is) for N = 16, 36,
@@ -34,6 +35,9 @@ too), side by side; an agent host's CPU, messages and wake-ups count a K-th to e
 
 from __future__ import annotations
 
+import _venv  # noqa: F401  (first: the project's .venv, re-run there if this Python lacks it)
+
+# isort: split
 import argparse
 import ast
 import json

@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """The engine against a plain numpy implementation of the same law (bench/baseline_numpy.py), paired.
 
 Each repeat runs, one after the other and alternating which goes first, a fresh
@@ -18,6 +19,9 @@ put first on PYTHONPATH), in the same rotation: before and after figures measure
 
 from __future__ import annotations
 
+import _venv  # noqa: F401  (first: the project's .venv, re-run there if this Python lacks it)
+
+# isort: split
 import argparse
 import json
 import os

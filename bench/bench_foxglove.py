@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """What the live view costs: the paper mission (lockstep, deploy/run_local.sh's launcher) with and without
 `--foxglove`, alternating, with a WebSocket client subscribed to every channel for the whole of each
 `--foxglove` run (tests/system/test_foxglove_live.watch: the subprotocol spoken by hand). Prints the
@@ -9,6 +10,9 @@ CPU seconds (its exit line), and what the client received.
 
 from __future__ import annotations
 
+import _venv  # noqa: F401  (first: the project's .venv, re-run there if this Python lacks it)
+
+# isort: split
 import argparse
 import asyncio
 import contextlib

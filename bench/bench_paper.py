@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """The paper scenario (Section V): mission wall time of `reconswarm sim` for both planners, convergence
 times, and the benchmark-to-reconfigurable convergence ratio (paper: 241 s / 200 s ≈ 1.2).
 
@@ -12,6 +13,9 @@ what wall time cannot.
 
 from __future__ import annotations
 
+import _venv  # noqa: F401  (first: the project's .venv, re-run there if this Python lacks it)
+
+# isort: split
 import argparse
 import json
 import resource

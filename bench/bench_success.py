@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """Success rate over generated scenarios with obstacles: a run succeeds when it converges (every
 |e_i| <= tol) with zero collisions. Prints, per suite and size, the success rate, the convergence time
 (median and p90 over the converged runs), the contact count (collision episodes, and safety-band
@@ -18,6 +19,9 @@ the in-process engine, through the sweep runner (`reconswarm_bringup.sweep.run_s
 
 from __future__ import annotations
 
+import _venv  # noqa: F401  (first: the project's .venv, re-run there if this Python lacks it)
+
+# isort: split
 import argparse
 import sys
 import tempfile

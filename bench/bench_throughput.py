@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """In-process engine throughput: agent-steps per second (N * ticks / wall) at N = 100, 500, 1000 agents,
 10 obstacles, generated scenarios (`reconswarm scenario generate --agents N --obstacles 10 --seed S`),
 each run for a fixed number of steps so the benchmark is bounded in time. Wall is the summary's
@@ -10,6 +11,9 @@ wall_time_s (the mission loop with run.db recording); the figure is the median o
 
 from __future__ import annotations
 
+import _venv  # noqa: F401  (first: the project's .venv, re-run there if this Python lacks it)
+
+# isort: split
 import argparse
 import sys
 import tempfile

@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """The floor of the distributed lockstep tick: its message pattern with nothing of ours behind it.
 
 A router, one world process and N agents in processes of K (`--per-process`, as `--agents-per-process`: one
@@ -27,6 +28,9 @@ first and last tick; the router's CPU is read from
 
 from __future__ import annotations
 
+import _venv  # noqa: F401  (first: the project's .venv, re-run there if this Python lacks it)
+
+# isort: split
 import argparse
 import json
 import os

@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """Mutation testing of the core modules with mutmut 3 (`pip install -e '.[mutation]'`): each module is mutated
 alone, in a copy of the work tree (the tree itself is never touched), against the unit tests that cover it;
 prints per module how many mutants the tests killed and how many survived, and the survivors' names (with
@@ -15,6 +16,9 @@ equivalent change (the same behaviour, e.g. `<` for `<=` where equality cannot h
 
 from __future__ import annotations
 
+import _venv  # noqa: F401  (first: the project's .venv, re-run there if this Python lacks it)
+
+# isort: split
 import argparse
 import json
 import os

@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """Where a lockstep tick's wall time goes: the serial path of one run, segment by segment.
 
 Each tick the world puts its clock and every robot's state; a state reaches its agent's process (its host); the
@@ -17,6 +18,9 @@ after the next tick. ROS 2 mode is not marked (its odometry and cmd_vel travel o
 
 from __future__ import annotations
 
+import _venv  # noqa: F401  (first: the project's .venv, re-run there if this Python lacks it)
+
+# isort: split
 import argparse
 import os
 import statistics

@@ -25,8 +25,28 @@ import sys
 import time
 from typing import Any
 
-import zenoh
-from rosbags.typesys import Stores, get_typestore
+
+def _project_python() -> None:
+    """zenoh and rosbags missing from this Python: re-run in the project's .venv (deploy/setup_env.sh makes it), or
+    say in one line how to get them (exit 2)."""
+    import os
+    from pathlib import Path
+
+    venv = Path(__file__).resolve().parent.parent / ".venv"
+    if (venv / "bin" / "python").exists() and Path(sys.prefix).resolve() != venv.resolve():
+        os.execv(str(venv / "bin" / "python"), [str(venv / "bin" / "python"), __file__, *sys.argv[1:]])
+    sys.stderr.write(f"ros2_echo.py: error: needs the Python packages eclipse-zenoh and rosbags, not in "
+                     f"{sys.executable}: run deploy/setup_env.sh (or deploy/run_local.sh once) and then "
+                     f"{venv}/bin/python deploy/ros2_echo.py, or pip install eclipse-zenoh rosbags\n")
+    raise SystemExit(2)
+
+
+try:
+    import zenoh
+    from rosbags.typesys import Stores, get_typestore
+except ModuleNotFoundError:
+    _project_python()
+    raise
 
 ODOMETRY = "nav_msgs/msg/Odometry"
 ATTACHMENT = struct.Struct("<qqB16s")  # rmw_zenoh docs/design.md: seq, source timestamp, gid length, gid

@@ -4,7 +4,10 @@
 #                       [--planner P] [--router EP] [--secure] [--fault SPEC]... [--json] [--timeout S]
 # Sets itself up on a fresh machine (a virtual environment in .venv with the project installed), then
 # hands over to the launcher (reconswarm_bringup/launcher.py). Ctrl-C or SIGTERM stops every process it started.
+# Paths (-s, -o, RECONSWARM_PROFILE) are relative to the directory it is run from; without -o each run writes
+# its own runs/YYYYMMDD-HHMMSS/ in the project, and runs/latest links to the newest.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/setup_env.sh"
-cd "$root"
-exec "$venv/bin/python" -m reconswarm_bringup.cli_launch "$@"
+# This checkout's code, whatever the directory (-P: not the caller's directory on the module path).
+export PYTHONPATH="$root${PYTHONPATH:+:$PYTHONPATH}"
+exec "$venv/bin/python" -P -m reconswarm_bringup.cli_launch "$@"

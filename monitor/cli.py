@@ -232,6 +232,7 @@ def record_cmd(
     membership changes and the topology events (it does not hear the agents' beacons)."""
     try:
         from monitor.process import MonitorConfig, run
+        from reconswarm.cli.options import profiled
         from reconswarm.net.lifecycle import bind_to_parent, setup_logging
         from reconswarm.net.session import ZenohOptions
 
@@ -241,8 +242,9 @@ def record_cmd(
         if foxglove is not None and not 0 <= foxglove <= 65535:
             raise BadInput(f"--foxglove: port must be in 0..65535, got {foxglove}")
         outputs.writable_file("--db", db)
-        code = run(MonitorConfig(scenario, db, ZenohOptions.build(connect, listen, mode, zenoh_config), run_id,
-                                 live if live is not None else sys.stderr.isatty(), foxglove))
+        with profiled("monitor.cli"):
+            code = run(MonitorConfig(scenario, db, ZenohOptions.build(connect, listen, mode, zenoh_config), run_id,
+                                     live if live is not None else sys.stderr.isatty(), foxglove))
     except ReconswarmError as exc:
         fail(exc)
         return

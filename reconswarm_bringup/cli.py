@@ -16,7 +16,7 @@ from typing import Annotated
 import typer
 
 from reconswarm.cli import help_style, outputs
-from reconswarm.cli.console import fail, mission_exit_code, print_json, run_app, set_debug
+from reconswarm.cli.console import fail, mission_exit_code, plural, print_json, run_app, set_debug, unconverged_reason
 from reconswarm.errors import BadInput, ReconswarmError
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -55,7 +55,8 @@ def sim(
             if seed < 0:
                 raise BadInput(f"--seed: must be >= 0, got {seed}")
             s = s.with_seed(seed)
-        for w in warnings(s):
+        warns = warnings(s)
+        for w in warns:
             typer.echo(f"warning: {w}", err=True)
         if out is None:  # one directory per scenario and planner: the quick start's two runs keep both records
             name = f"{scenario.stem}-{s.planner.kind.value}" + ("" if seed is None else f"-seed{seed}")
@@ -74,6 +75,8 @@ def sim(
 
         Console().print(render(summary))
         typer.echo(f"record: {out / 'run.db'}")
+    for line in unconverged_reason(summary, warns):
+        typer.echo(line, err=True)
     raise typer.Exit(mission_exit_code(summary))
 
 
@@ -117,7 +120,8 @@ def scenario_check(file: Annotated[Path, typer.Argument(help="Scenario TOML file
         return
     for w in warns:
         typer.echo(f"warning: {w}", err=True)
-    typer.echo(f"{file}: ok ({len(s.agents)} agents, {len(s.obstacles)} obstacles, planner {s.planner.kind.value})")
+    typer.echo(f"{file}: ok ({plural(len(s.agents), 'agent')}, {plural(len(s.obstacles), 'obstacle')}, "
+               f"planner {s.planner.kind.value})")
 
 
 def _register() -> None:

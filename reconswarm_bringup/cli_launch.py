@@ -10,14 +10,16 @@ from typing import Annotated
 
 import typer
 
-from reconswarm.cli import help_style
+from reconswarm.cli import help_style, outputs
 from reconswarm.cli.console import fail, set_debug
+from reconswarm.cli.options import PROFILE_ENV
 from reconswarm.errors import BadInput, ReconswarmError
+from reconswarm_bringup import outdir
 from reconswarm_bringup.fleet import ROOT
 
 help_style.install()
 
-PROG = "run_local"
+PROG = {"name": "reconswarm launch"}  # the error lines' prefix: the command the user ran (`run_local` from the script)
 FOXGLOVE_PORT = 8765  # `--foxglove` without a value
 REALTIME_SPEED = 1.0  # --clock realtime (and --ros2) by default: real time, as a robot base runs
 
@@ -51,7 +53,9 @@ def launch_cmd(
         help="Generate a scenario with N agents (instead of -s).")] = None,
     scenario: Annotated[Path | None, typer.Option("-s", "--scenario",
         help="Scenario TOML (default: the paper's).")] = None,
-    out: Annotated[Path, typer.Option("-o", "--out", help="Output directory.")] = ROOT / "runs" / "latest",
+    out: Annotated[Path | None, typer.Option("-o", "--out", metavar="DIR",
+        help="Output directory (default: a new runs/YYYYMMDD-HHMMSS in the project; runs/latest links to the "
+             "newest).")] = None,
     clock: Annotated[str | None, typer.Option("--clock", help="lockstep (default) | realtime")] = None,
     speed: Annotated[float | None, typer.Option("--speed",
         help="Realtime: simulated seconds per wall second (default 1, real time).")] = None,
@@ -77,8 +81,8 @@ def launch_cmd(
         help="Agents per process (one zenoh session each; default 1); auto: one process for up to 48 agents, "
              "then one per CPU.")] = "1",
     no_pin_cpus: Annotated[bool, typer.Option("--no-pin-cpus",
-        help="Leave the agent hosts to the scheduler (by default each runs on one CPU, the CPUs in turn), e.g. "
-             "while other work shares the machine.")] = False,
+        help="Do not pin: the scheduler may run any agent process on any CPU (by default each agent process is "
+             "held to one CPU, the CPUs in turn); e.g. while other work shares the machine.")] = False,
     zenoh_mode: Annotated[str, typer.Option("--zenoh-mode", metavar="auto|client|peer",
         help="The processes' zenoh mode: client (every sample through the router), peer (samples straight from "
              "process to process; the router for discovery and outside tools); auto (default): peer for agent "
@@ -96,9 +100,15 @@ def launch_cmd(
     from reconswarm_bringup.config import LaunchConfig
     from reconswarm_bringup.launcher import run
 
+    prog = PROG["name"]
     set_debug(debug)
-    logging.basicConfig(level=logging.DEBUG if debug else logging.INFO, format=f"{PROG}: %(message)s")
+    logging.basicConfig(level=logging.DEBUG if debug else logging.INFO, format=f"{prog}: %(message)s")
     try:
+        latest = out is None
+        if out is None:
+            out = outdir.new_run_dir(ROOT / "runs")
+        out = out.resolve()  # (relative to the directory the command was run from)
+        profile_dir()
         speed = speed if speed is not None else REALTIME_SPEED
         if ros2 and clock == "lockstep":
             raise BadInput("--ros2: runs on the realtime clock only (ROS 2 topics carry no tick), not --clock lockstep")
@@ -116,10 +126,10 @@ def launch_cmd(
         if hosts not in (1, 2):
             raise BadInput(f"--hosts: expected 1 or 2, got {hosts}")
         check_zenoh_mode(zenoh_mode, secure=secure, hosts=hosts)
-        validate.launch(agents=agents, scenario=scenario, out=out.resolve(), timeout_s=timeout, speed=speed,
+        validate.launch(agents=agents, scenario=scenario, out=out, timeout_s=timeout, speed=speed,
                         router=router, hosts=hosts, available_mb=validate.available_memory_mb(),
                         per_process=per_process)
-        cfg = LaunchConfig(out=out.resolve(), scenario=scenario, agents=agents, clock=clock, speed=speed,
+        cfg = LaunchConfig(out=out, latest=latest, scenario=scenario, agents=agents, clock=clock, speed=speed,
                            planner=planner, router=router, secure=secure,
                            faults=tuple(faults_mod.parse(f) for f in fault or []), timeout_s=timeout,
                            progress=not no_progress, as_json=as_json, hosts=hosts,
@@ -127,9 +137,25 @@ def launch_cmd(
                            pin_cpus=not no_pin_cpus, zenoh_mode=zenoh_mode)
         code = run(cfg)
     except ReconswarmError as exc:
-        fail(exc, PROG)
+        fail(exc, prog)
         return
     raise typer.Exit(code)
+
+
+def profile_dir() -> None:
+    """RECONSWARM_PROFILE=DIR (every process of the run dumps its cProfile stats there): DIR relative to the
+    directory the command was run from, made if missing, checked before the run starts."""
+    raw = os.environ.get(PROFILE_ENV)
+    if not raw:
+        return
+    where = Path(raw).resolve()
+    try:
+        where.mkdir(parents=True, exist_ok=True)
+        outputs.writable_dir(PROFILE_ENV, where)
+    except OSError as exc:
+        raise BadInput(f"{PROFILE_ENV}={raw}: cannot write profiles there ({exc.strerror or exc})") from None
+    os.environ[PROFILE_ENV] = str(where)  # (the processes run from the project's directory)
+    logging.getLogger("reconswarm.launch").info("profiles: %s/MODULE-PID.prof, one per process", where)
 
 
 def register(app: typer.Typer) -> None:
@@ -138,6 +164,7 @@ def register(app: typer.Typer) -> None:
 
 def main() -> None:
     """`python -m reconswarm_bringup.cli_launch ARGS` = `reconswarm launch ARGS` (deploy/run_local.sh)."""
+    PROG["name"] = "run_local"
     app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
     app.command()(launch_cmd)
     try:
@@ -146,7 +173,7 @@ def main() -> None:
         if not (hasattr(exc, "format_message") and hasattr(exc, "exit_code")):
             raise
         # A usage error (a value typer cannot parse, an unknown option): one line, not the usage and a box.
-        print(f"{PROG}: error: {exc.format_message()}", file=sys.stderr)
+        print(f"{PROG['name']}: error: {exc.format_message()}", file=sys.stderr)
         sys.exit(exc.exit_code)
     sys.exit(code if isinstance(code, int) else 0)
 

@@ -28,4 +28,5 @@ class LaunchConfig:
     ros_domain_id: int | None = None  # ROS 2 mode (None: off) in this domain
     agents_per_process: int | str = 1  # K, or "auto" (reconswarm_bringup/packing.py)
     pin_cpus: bool = True  # agent hosts each on one CPU, the CPUs in turn (reconswarm_bringup/fleet.py)
+    latest: bool = False  # out is a run's own directory under runs/: runs/latest is made to link to it
     zenoh_mode: str = "auto"  # the run's processes as zenoh clients of the router, peers (direct samples), or auto

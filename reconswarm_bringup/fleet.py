@@ -70,7 +70,9 @@ class Fleet:
 
     def start(self, role: str, ident: str, args: list[str], prefix: list[str] | None = None,
               members: tuple[str, ...] = ()) -> Proc:
-        """Start a process; processes.tsv gets a line per agent it runs (an agent host's share its pid)."""
+        """Start a process; processes.tsv gets a line per agent it runs (an agent host's share its pid). Each is
+        in a process group of its own: a Ctrl-C at the terminal reaches the launcher alone, which stops them in
+        order (the world first, the monitor closing the record) at any moment, start-up included."""
         logs = self.out / "logs"
         logs.mkdir(parents=True, exist_ok=True)
         name = role if ident == "-" else f"{role}-{ident}"
@@ -79,7 +81,7 @@ class Fleet:
         popen = subprocess.Popen([*(prefix or []), sys.executable, "-m", "reconswarm_bringup.cli", *args], stdout=fh,
                                  stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                  env=self.router_env if role == "router" and self.router_env else self.env,
-                                 cwd=str(ROOT))
+                                 cwd=str(ROOT), process_group=0)
         fh.close()
         if self.batch:  # Popen returns once the child exec'd, before its interpreter starts a thread (they inherit it)
             batch_policy(popen.pid)

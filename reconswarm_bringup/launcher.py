@@ -13,10 +13,12 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -40,7 +42,7 @@ ROUTER_RESTARTS = 5  # a router that dies more often than this (restarted at onc
 ZENOH_RUNTIME = "(" + ", ".join(f"{pool}: (worker_threads: 1)" for pool in ("app", "acc", "tx", "rx", "net")) + ")"
 
 
-def prepare_scenario(cfg: LaunchConfig) -> Scenario:
+def prepare_scenario(cfg: LaunchConfig) -> tuple[Scenario, list[str]]:
     """The scenario of the run, checked against the machine and the faults (nothing written yet)."""
     if cfg.scenario is not None and cfg.agents is not None:
         raise BadInput("-n/--agents and -s/--scenario: give one (-n generates a scenario)")
@@ -55,27 +57,32 @@ def prepare_scenario(cfg: LaunchConfig) -> Scenario:
         per = packing.per_process(cfg.agents_per_process, len(s.agents))
         validate.machine_holds(f"-s {cfg.scenario or PAPER}", len(s.agents), validate.available_memory_mb(),
                                routers=cfg.hosts, per_process=per)
-    for w in warnings(s):
+    warns = warnings(s)
+    for w in warns:
         log.warning("warning: %s", w)
     validate.fault_targets(cfg.faults, {a.id for a in s.agents})
-    return s if cfg.planner is None else s.with_planner(cfg.planner)
+    return (s if cfg.planner is None else s.with_planner(cfg.planner)), warns
 
 
 def run(cfg: LaunchConfig) -> int:
-    outputs.writable_dir("-o", cfg.out)
+    outputs.creatable_dir("-o", cfg.out)  # (nothing is created before every check has passed)
     if cfg.clock not in ("lockstep", "realtime"):
         raise BadInput(f"--clock: expected lockstep or realtime, got {cfg.clock!r}")
     if any(f.action == "partition" for f in cfg.faults) and cfg.hosts != 2:
         raise BadInput("--fault partition@...: needs --hosts 2 (two hosts to cut apart)")
     check_live_port(cfg)
-    s = prepare_scenario(cfg)  # refused before anything of a previous run in OUTDIR is touched
+    s, warns = prepare_scenario(cfg)  # refused before anything of a previous run in OUTDIR is touched
+    made = not cfg.out.exists()
+    had_secrets = (cfg.out / "secrets").exists()
+    outputs.writable_dir("-o", cfg.out)
     # OUTDIR is ours for the run: not while another launch or a `reconswarm sim` writes there (its record would go).
     claim = outdir.RecordClaim(cfg.out, replaces=None, what="a launch (run_local.sh)")
-    claim.acquire()
-    for stale in ("processes.tsv", "faults.tsv", "run.db", "run.db-wal", "run.db-shm", runid.RUN_ID_FILE):
-        (cfg.out / stale).unlink(missing_ok=True)
+    try:
+        claim.acquire()
+    except BaseException:
+        _undo(cfg.out, made, had_secrets)
+        raise
     scen_path = cfg.out / "scenario.toml"  # every process reads the same file
-    scen_path.write_text(to_toml(s))
     router_env = dict(os.environ, RECONSWARM_DIE_WITH_PARENT=str(os.getpid()), PYTHONUNBUFFERED="1")
     env = dict(router_env)
     # One worker thread per zenoh runtime pool in the clients: a process here handles a few hundred messages
@@ -96,14 +103,21 @@ def run(cfg: LaunchConfig) -> int:
     # One launch, one run: the run id names every key of this run (swarm/<run>/...), so two launches never
     # hear each other; it is in OUTDIR/run_id before any process starts.
     run_id = runid.new_run_id(s.meta.name)
-    runid.write_run_id(cfg.out, run_id)
     lock = runid.EndpointLock(cfg.router or DEFAULT_ROUTER)
     net: Net | None = None
     watch: ClockWatch | None = None
     code = 3
+    going = False  # the run goes ahead: OUTDIR's earlier run gives way to this one's files
     try:
         net = plan_network(cfg, s, run_id, lock)
-        log.info("run %s", run_id)
+        _replace_earlier(cfg.out, made)
+        going = True
+        scen_path.write_text(to_toml(s))
+        runid.write_run_id(cfg.out, run_id)
+        if cfg.latest:
+            outdir.link_latest(cfg.out)
+        log.info("run %s: record and logs in %s%s", run_id, cfg.out,
+                 f" ({cfg.out.parent / outdir.LATEST} links to it)" if cfg.latest else "")
         fleet.zopt = net.zopt
         run_arg = ["--run", run_id]
         routers = [fleet.start("router", ident, args, prefix) for ident, args, prefix in net.routers]
@@ -122,7 +136,7 @@ def run(cfg: LaunchConfig) -> int:
                                               "--speed", str(cfg.speed), "--start-timeout", str(cfg.start_timeout_s),
                                               *ros, *run_arg, *zargs], prefix)
         watch = ClockWatch(run_id, net.watch, s)
-        code = _supervise(cfg, s, fleet, world, mon, watch, stop_sig)
+        code = _supervise(cfg, s, fleet, world, mon, watch, stop_sig, warns)
     finally:
         if watch is not None:
             watch.close()
@@ -132,14 +146,38 @@ def run(cfg: LaunchConfig) -> int:
             netns.ACTIVE.clear()
         lock.release()
         claim.release()
+        if not going:
+            _undo(cfg.out, made, had_secrets)
     if stop_sig:
         log.warning("stopped by signal %d", stop_sig[0])
         return 128 + stop_sig[0]
     return code
 
 
+def _replace_earlier(out: Path, made: bool) -> None:
+    """The files of the run OUTDIR held before go; a record among them is named as it goes (runs without -o
+    keep theirs: each has its own directory)."""
+    if not made and (out / "run.db").exists():
+        before = "?"
+        with contextlib.suppress(OSError):
+            before = runid.read_run_id(out)
+        log.warning("-o %s: replacing the record of run %s there (without -o, each run has its own directory "
+                    "under runs/)", out, before)
+    for stale in ("processes.tsv", "faults.tsv", "run.db", "run.db-wal", "run.db-shm", runid.RUN_ID_FILE):
+        (out / stale).unlink(missing_ok=True)
+
+
+def _undo(out: Path, made: bool, had_secrets: bool) -> None:
+    """A launch refused before its run started leaves nothing behind: the directory it made, or what it wrote
+    into one that was there."""
+    if made:
+        shutil.rmtree(out, ignore_errors=True)
+    elif not had_secrets:
+        shutil.rmtree(out / "secrets", ignore_errors=True)
+
+
 def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: Proc, watch: ClockWatch,
-               stop_sig: list[int]) -> int:
+               stop_sig: list[int], warns: list[str]) -> int:
     pending = sorted(cfg.faults, key=lambda f: f.at_s)
     timers: list[tuple[float, Any]] = []  # (wall time, action)
     wall0 = time.monotonic()
@@ -236,7 +274,7 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
                         p.popen.wait(timeout=max(0.1, deadline - time.monotonic()))
     finally:
         bar.close()
-    return outcome.report(cfg, crashed, fatal, halt)
+    return outcome.report(cfg, crashed, fatal, halt, warns)
 
 
 def _wind_down(fleet: Fleet, world: Proc, monitor_wait_s: float = 8.0) -> None:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from rich.console import Console
 
-from reconswarm.cli.console import mission_exit_code
+from reconswarm.cli.console import mission_exit_code, unconverged_reason
 from reconswarm.record.store import RunRecord, note_stop
 from reconswarm.record.summary import render, summarize
 from reconswarm_bringup.config import LaunchConfig
@@ -65,10 +65,29 @@ def last_line(path: Path) -> str:
     return lines[-1].split(" ", 2)[-1] if lines and lines[-1][:2].isdigit() else (lines[-1] if lines else "")
 
 
-def report(cfg: LaunchConfig, crashed: list[str], fatal: str | None = None, halt: str | None = None) -> int:
+def _has_ticks(db: Path) -> bool:
+    """Whether the record at db holds a tick (False: no record, or one the mission never wrote to)."""
+    import sqlite3
+
+    if not db.exists():
+        return False
+    try:
+        con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+        try:
+            return con.execute("SELECT 1 FROM ticks LIMIT 1").fetchone() is not None
+        finally:
+            con.close()
+    except sqlite3.Error:
+        return True  # a record there, unreadable: say that
+
+
+def report(cfg: LaunchConfig, crashed: list[str], fatal: str | None = None, halt: str | None = None,
+           warns: list[str] | None = None) -> int:
     """Print the summary and where the record is; the exit code. `halt`: the launcher ended the run early
-    ("stopped" by a signal, "timeout"), which the record is made to say (the world only knows it was stopped)."""
+    ("stopped" by a signal, "timeout"), which the record is made to say (the world only knows it was stopped).
+    `warns`: the scenario's warnings, named as the likely reason when the run ends without converging."""
     db = cfg.out / "run.db"
+    early = {"stopped": "stopped", "timeout": "timed out"}.get(halt or "", "ended")  # (before the first tick)
     try:
         if halt is not None:
             note_stop(db, halt)
@@ -77,7 +96,10 @@ def report(cfg: LaunchConfig, crashed: list[str], fatal: str | None = None, halt
     except Exception as exc:  # the record itself may be what failed (disk full): say so, do not hide the cause
         if fatal is None and halt is None:
             raise
-        log.error("no summary: the record cannot be read (%s)", exc)
+        if _has_ticks(db):
+            log.error("no summary: the record cannot be read (%s)", exc)
+        else:  # ended before the mission's first tick: nothing to summarize, and that is what to say
+            log.error("%s during start-up: no record yet (logs: %s)", early, cfg.out / "logs")
         if fatal is not None:
             log.error("%s", fatal)
         return 3
@@ -87,6 +109,11 @@ def report(cfg: LaunchConfig, crashed: list[str], fatal: str | None = None, halt
         Console().print(render(summary))
         print(f"record: {db}\nlogs:   {cfg.out / 'logs'}")
     sys.stdout.flush()
+    if (halt is not None or fatal is not None) and not summary.get("ticks"):
+        log.warning("%s during start-up: no tick recorded yet (the summary above is empty)", early)
+    if halt is None and fatal is None:
+        for line in unconverged_reason(summary, warns or []):
+            log.warning("%s", line)
     if fatal is not None:
         log.error("%s", fatal)
         return 3

@@ -1,7 +1,8 @@
 """Output directories and files: a command never destroys what another run is writing, nor what it reads.
 
 - `RecordClaim`: the in-process engine's hold on OUTDIR while it writes OUTDIR/run.db, an exclusive `flock`
-  on OUTDIR/.record.lock (released by the kernel however the process ends). Before it replaces run.db it
+  on OUTDIR/.record.lock (released by the kernel however the process ends; the file is removed as the run
+  ends). Before it replaces run.db it
   refuses (BadInput, exit 2) when
   * another engine holds the claim (a `reconswarm sim` still writing there);
   * a launched run is alive there: a pid of OUTDIR/processes.tsv is alive and is a process of that run (its
@@ -79,7 +80,19 @@ class RecordClaim:
     def acquire(self) -> None:
         out, opt = self.out, self.option
         out.mkdir(parents=True, exist_ok=True)
-        fh = (out / LOCK_FILE).open("a+")
+        path = out / LOCK_FILE
+        while True:
+            fh = path.open("a+")
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                break
+            try:  # the holder before us removes the file as it releases it: then lock the file that is there now
+                if os.stat(path).st_ino == os.fstat(fh.fileno()).st_ino:
+                    break
+            except FileNotFoundError:
+                pass
+            fh.close()
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -104,6 +117,8 @@ class RecordClaim:
                     raise BadInput(f"{opt} {out}: {db.name} there is {what}, which {self.what} does not "
                                    f"replace; choose another directory")
         except BaseException:
+            with contextlib.suppress(OSError):  # (refused: the lock file goes too, removed while still held)
+                path.unlink()
             fh.close()
             raise
         fh.seek(0)
@@ -113,7 +128,10 @@ class RecordClaim:
         self._fh = fh
 
     def release(self) -> None:
+        """Give OUTDIR back: the lock file goes (removed while still held; see acquire)."""
         if self._fh is not None:
+            with contextlib.suppress(OSError):
+                (self.out / LOCK_FILE).unlink()
             self._fh.close()
             self._fh = None
 
@@ -123,3 +141,36 @@ class RecordClaim:
 
     def __exit__(self, *_: object) -> None:
         self.release()
+
+
+LATEST = "latest"  # RUNS/latest: a link to the newest launch's directory
+
+
+def new_run_dir(runs: Path, now: float | None = None) -> Path:
+    """A launch's own directory when no -o is given: RUNS/YYYYMMDD-HHMMSS (-2, -3, ... if taken), not yet made;
+    every run keeps its record."""
+    import time
+
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(now))
+    path, n = runs / stamp, 1
+    while path.exists() or path.is_symlink():
+        n += 1
+        path = runs / f"{stamp}-{n}"
+    return path
+
+
+def link_latest(run_dir: Path) -> Path:
+    """Point RUNS/latest (beside run_dir) at run_dir. A real directory there (a record from before runs had
+    their own directories) is kept under RUNS/latest-<its time>."""
+    import time
+
+    latest = run_dir.parent / LATEST
+    if latest.is_dir() and not latest.is_symlink():
+        stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(latest.stat().st_mtime))
+        kept = latest.with_name(f"{LATEST}-{stamp}")
+        latest.rename(kept if not kept.exists() else kept.with_name(f"{kept.name}-{os.getpid()}"))
+    tmp = latest.with_name(f".{LATEST}-{os.getpid()}")
+    tmp.unlink(missing_ok=True)
+    tmp.symlink_to(run_dir.name)
+    tmp.replace(latest)  # (atomic: a reader sees the old link or the new one)
+    return latest

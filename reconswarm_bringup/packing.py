@@ -98,8 +98,9 @@ def start_agents(fleet: Any, s: Scenario, k: int | str, zopt: Callable[[str, str
     if per == 1:  # (one process per agent: many light processes, which the scheduler balances best)
         fleet.cpus = ()
     elif len(fleet.cpus) > 1:
-        log.info("agent host%s on CPU%s %s in turn (--no-pin-cpus: free)", "" if len(packed) == 1 else "s",
-                 "" if len(packed) == 1 else "s", ", ".join(map(str, fleet.cpus[:len(packed)])))
+        log.info("agent host%s pinned to CPU%s %s in turn, one CPU each (--no-pin-cpus: the scheduler places them)",
+                 "" if len(packed) == 1 else "s", "" if len(packed) == 1 else "s",
+                 ", ".join(map(str, fleet.cpus[:len(packed)])))
     for group in packed:
         prefix, zargs = zopt("agent", str(group[0]))
         fleet.start("agent", ids_spec(group), ["agent", *agent_args(group), *args, *zargs], prefix,

@@ -11,7 +11,7 @@ import re
 from collections.abc import Iterable
 from pathlib import Path
 
-from reconswarm.cli.outputs import writable_dir
+from reconswarm.cli.outputs import creatable_dir
 from reconswarm.errors import BadInput
 from reconswarm_bringup import packing
 from reconswarm_bringup.faults import Fault
@@ -130,4 +130,4 @@ def launch(*, agents: int | None, scenario: Path | None, out: Path, timeout_s: f
                            f"got {router!r}")
         if "?" in router or "#" in router:  # (the router is started on, locked and probed by PROTO/HOST:PORT)
             raise BadInput(f"--router: PROTO/HOST:PORT without ?metadata or #config, got {router!r}")
-    writable_dir("-o", out)
+    creatable_dir("-o", out)

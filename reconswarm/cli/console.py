@@ -37,8 +37,24 @@ def print_json(obj: Any) -> None:
     sys.stdout.write(json.dumps(obj, indent=2) + "\n")
 
 
+def plural(n: int, word: str) -> str:
+    """`1 agent`, `2 agents`, `0 obstacles`."""
+    return f"{n} {word}" + ("" if n == 1 else "s")
+
+
 def mission_exit_code(summary: dict[str, Any]) -> int:
     return 0 if summary.get("converged") and not summary.get("collisions") else 1
+
+
+def unconverged_reason(summary: dict[str, Any], warns: list[str]) -> list[str]:
+    """Lines for the end of a run that ran its whole duration without converging while its scenario carried
+    warnings (`reconswarm scenario check`'s: slots closer than d_max,ij, an obstacle within d_max of a slot, ...):
+    those are the likely reason. None for a converged run, one stopped early, or a scenario without warnings."""
+    if summary.get("converged") or not summary.get("finished") or not warns:
+        return []
+    head = (f"not converged in {summary.get('duration_s')} s; the likely reason is the scenario's "
+            f"warning{'s' if len(warns) > 1 else ''} (reconswarm scenario check):")
+    return [head, *(f"  {w}" for w in warns)]
 
 
 def run_app(app: typer.Typer, args: list[str], prog_name: str | None = None) -> None:

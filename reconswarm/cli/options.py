@@ -5,8 +5,10 @@ one-line errors."""
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Annotated
 
@@ -34,26 +36,44 @@ def ros2_domain(ros2: bool, option: int | None) -> int | None:
     return resolve_domain_id(option, os.environ) if ros2 else None
 
 
+PROFILE_ENV = "RECONSWARM_PROFILE"  # a directory: every node process dumps its cProfile stats there
+
+
+@contextlib.contextmanager
+def profiled(module: str) -> Iterator[None]:
+    """RECONSWARM_PROFILE=DIR: cProfile stats of the body dumped to DIR/MODULE-PID.prof (the directory is made if
+    missing). A dump that fails is one warning line, never the process's exit code: the work is done by then."""
+    prof_dir = os.environ.get(PROFILE_ENV)
+    if not prof_dir:
+        yield
+        return
+    import cProfile
+
+    prof = cProfile.Profile()
+    prof.enable()
+    try:
+        yield
+    finally:
+        prof.disable()
+        path = Path(prof_dir) / f"{module}-{os.getpid()}.prof"
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            prof.dump_stats(str(path))
+        except OSError as exc:
+            logging.getLogger("reconswarm").warning("%s=%s: profile not written (%s)", PROFILE_ENV, prof_dir,
+                                                    exc.strerror or exc)
+
+
 def run_node(fn: Callable[[], int]) -> None:
     """Run a node process's main: logging set up, the process ends with its parent, a ReconswarmError is one
     line and its exit code, else the main's exit code. RECONSWARM_PROFILE=DIR: cProfile stats dumped to
-    DIR/MODULE-PID.prof (MODULE: the command's, e.g. agent.cli)."""
+    DIR/MODULE-PID.prof (MODULE: the command's, e.g. agent.cli; `profiled`)."""
     setup_logging()
     bind_to_parent()
-    prof_dir = os.environ.get("RECONSWARM_PROFILE")  # a directory: dump cProfile stats per process
-    prof = None
-    if prof_dir:
-        import cProfile
-
-        prof = cProfile.Profile()
-        prof.enable()
     try:
-        code = fn()
+        with profiled(fn.__module__):
+            code = fn()
     except ReconswarmError as exc:
         fail(exc)
         return
-    finally:
-        if prof is not None:
-            prof.disable()
-            prof.dump_stats(os.path.join(str(prof_dir), f"{fn.__module__}-{os.getpid()}.prof"))
     raise typer.Exit(code)

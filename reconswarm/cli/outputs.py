@@ -31,6 +31,24 @@ def writable_dir(option: str, path: Path) -> None:
         raise BadInput(f"{option} {path}: cannot write there ({_why(exc)})") from None
 
 
+def creatable_dir(option: str, path: Path) -> None:
+    """The directory exists and is writable, or can be made: checked without creating anything (a refused command
+    leaves no directory behind)."""
+    probe = path.absolute()
+    while not probe.exists():
+        if probe.is_symlink():  # (a dangling link: mkdir would fail on it)
+            raise BadInput(f"{option} {path}: cannot write there ({probe} is a broken symbolic link)")
+        probe = probe.parent
+    if not probe.is_dir():
+        raise BadInput(f"{option} {path}: cannot write there (a file stands where a directory should be)")
+    try:  # (a file made and removed in the nearest directory there is: what the kernel says, e.g. a read-only mount)
+        fd, name = tempfile.mkstemp(prefix=".write-probe-", dir=probe)
+        os.close(fd)
+        os.unlink(name)
+    except OSError as exc:
+        raise BadInput(f"{option} {path}: cannot write there ({_why(exc)})") from None
+
+
 def writable_file(option: str, path: Path) -> None:
     """The file can be created: not a directory, and its directory exists (or can be made) and is writable."""
     if path.is_dir():

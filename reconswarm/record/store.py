@@ -8,6 +8,7 @@ so a run killed midway keeps a readable record that lacks at most that much.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import sqlite3
@@ -172,7 +173,18 @@ class RunWriter:
         self.set_meta(**final_meta)
         if self.db.in_transaction:
             self.db.execute("COMMIT")
+        settle(self.db)
         self.db.close()
+
+
+def settle(db: sqlite3.Connection) -> None:
+    """A finished record is one file: the WAL checkpointed into run.db and the journal back to DELETE mode, so
+    no run.db-wal / run.db-shm stays beside it and a read-only reader creates none. A record another connection
+    still reads stays in WAL mode (busy: tried, not waited for; the next writer sets WAL again anyway)."""
+    with contextlib.suppress(sqlite3.Error):
+        db.execute("PRAGMA busy_timeout = 0")
+        db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        db.execute("PRAGMA journal_mode=DELETE")
 
 
 def note_stop(path: str | Path, reason: str) -> None:
@@ -193,6 +205,7 @@ def note_stop(path: str | Path, reason: str) -> None:
     except (sqlite3.Error, ValueError):
         pass
     finally:
+        settle(db)
         db.close()
 
 

@@ -3,6 +3,7 @@ refused with one `BadInput` naming the source file and the field's path (`agents
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Callable
 from typing import Any
@@ -28,7 +29,8 @@ class TableReader:
     def keys(self, data: dict[str, Any], path: str, required: set[str], optional: set[str]) -> None:
         for key in data:
             if key not in required | optional:
-                raise self.fail(join_path(path, key), "unknown key")
+                near = difflib.get_close_matches(str(key), sorted(required | optional), n=1, cutoff=0.6)
+                raise self.fail(join_path(path, key), "unknown key" + (f" (did you mean {near[0]}?)" if near else ""))
         for key in sorted(required):
             if key not in data:
                 raise self.fail(join_path(path, key), "missing key")
