@@ -28,6 +28,7 @@ from agent.messages import Input, Law, Output, Reconnect
 from agent.neighbours import Neighbourhood
 from agent.sets import PeerSets, own_set, scan_sets
 from reconswarm.net import wire
+from reconswarm.net.membership import Policy, silent
 from reconswarm.net.node import Exit, Invalid, Role, Stop, Token
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.scenario.model import Scenario
@@ -44,6 +45,7 @@ class AgentNode:
         self.nb = Neighbourhood(s, agent_id)  # our cells and whom a tick waits for (agent/neighbours.py)
         self.radius = float(self.brain.r[0])
         self.rejected = 0  # messages dropped so far (in our reports)
+        self.policy = Policy.agent(timing)  # when a peer is alive or silent (reconswarm/net/membership.py)
         self.h = Heard(agent_id)  # the states, scans, clocks, beacons we heard by tick, who is alive (agent/heard.py)
         ps = self.peer_sets = PeerSets()  # peers' sets by revision, and the revisions merged (agent/sets.py)
         self.sets, self.merged, self.merged_union = ps.sets, ps.merged, ps.merged_union
@@ -103,9 +105,9 @@ class AgentNode:
         st = self.h.states.get(k)
         if st is None or k <= self.k:
             return None
-        fresh, clock, silent = self.h.beacons.get(k, {}), self.h.clocks.get(k), self.timing.peer_silent_s
+        fresh, clock, heard = self.h.beacons.get(k, {}), self.h.clocks.get(k), self.h.heard
         waited = self._expected(k, clock)
-        need = sum(1 for a in waited if a not in fresh and now_s - self.h.heard.get(a, now_s) < silent)
+        need = sum(1 for a in waited if a not in fresh and not silent(self.policy, heard.get(a, now_s), now_s))
         if self.mode != "realtime":
             need += self.nb.also_heard(self.h.alive, self.h.beacons.get(k - 1, {}), fresh, waited)
             need += clock is None
@@ -259,12 +261,12 @@ class AgentNode:
             return True
         fresh = self.h.beacons.get(k, {})
         # Peers alive by their tokens that may matter at k whose beacon for k is not in: wait, unless one has
-        # said nothing for peer_silent_s (a token without data: a frozen process before its lease ends, forged).
+        # is silent (`Policy.agent`: peer_silent_s; a token without data: a frozen process before its lease ends).
         missing = sorted(a for a in self._expected(k, clock) if a not in fresh)  # (not `- fresh.keys()`: many)
-        if any(now - self.h.heard.get(a, now) < t.peer_silent_s for a in missing) or (quiet and bool(missing)):
+        if any(not silent(self.policy, self.h.heard.get(a, now), now) for a in missing) or (quiet and bool(missing)):
             return False
         if missing:
-            self._guess = f"agents {missing} alive but silent for {t.peer_silent_s:g} s"
+            self._guess = f"agents {missing} alive but silent for {self.policy.fresh_s:g} s"
         if self._linked[0] != k:
             self._link(k, np.array([st.px, st.py]))
         if self.k < 0 and k > 0:  # joining a mission under way: every peer's cached set (any revision) first
@@ -345,7 +347,7 @@ class AgentNode:
     def _prune(self, k: int) -> None:
         self.h.prune(k)
         self.nb.prune(k)
-        p, stale_k = (self.h.states[k].px, self.h.states[k].py), k - round(self.timing.peer_silent_s / self.s.meta.dt_s)
+        p, stale_k = (self.h.states[k].px, self.h.states[k].py), k - round(self.policy.fresh_s / self.s.meta.dt_s)
         living = self.h.living(self.h.clocks.get(k)) if self.mode == "lockstep" else set()
         self.h.forget_stale(lambda b: self.nb.audible(p, b), living, stale_k)
         self.peer_sets.prune(self.brain.leader is not None)

@@ -36,7 +36,7 @@ import numpy as np
 
 from reconswarm.errors import ProcessFailure
 from reconswarm.net import wire
-from reconswarm.net.membership import Membership
+from reconswarm.net.membership import Membership, Policy
 from reconswarm.net.node import Exit, Invalid, Role, RouterLink, Stop, Token
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.net.wire import ClockMode
@@ -83,9 +83,9 @@ class WorldNode:
         self.s, self.clock, self.speed, self.timing = s, clock, speed, timing
         self.plant = Plant(s, timing.hold_sim_s) if plant is None else plant
         self.ids, self.index = self.plant.ids, self.plant.index
-        # Who is alive (the one place the world decides it): a token AND own commands; a token without commands
-        # does not hold a lockstep tick up beyond a grace longer than an agent's own wait for its peers.
-        self.members = Membership(confirm_s=timing.token_confirm_s, await_grace_s=timing.agent_wait_timeout_s + 1.0)
+        # Who is alive (the one place the world decides it): a token AND own commands (the world's policy: a token
+        # without commands does not hold a lockstep tick up beyond a grace longer than an agent's own wait).
+        self.members = Membership(Policy.world(timing))
         self.alive: set[int] = set()
         self.monitor = False
         self.stopping = False  # a signal came: the mission ends at the next tick

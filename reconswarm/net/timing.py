@@ -1,4 +1,5 @@
-"""Every protocol timing constant of the three roles (agent, simworld, monitor), in one place.
+"""Every protocol timing constant of the three roles (agent, simworld, monitor), in one place (who is alive:
+each role's `Policy` in reconswarm/net/membership.py, built from these).
 
 All of them are wall-clock durations (the processes measure them with `time.monotonic()`), except where
 the name says simulated time (`_sim_s`) or a fraction of the realtime period. The defaults are the values
@@ -46,7 +47,7 @@ class Timing:
     ros2_plan_age_periods: float = 1.0
     # ROS 2 mode: an agent that sends none for that reason sends a stop (a zero Twist) once its robot's hold is
     # over, then this often while it still sends none: its heartbeat for the world, well inside the world's 2 s
-    # of silence after which an agent with a token is not counted alive (admission.Membership); a stop counts as
+    # of silence after which an agent with a token is not counted alive (`member_fresh_s`); a stop counts as
     # its robot's command in the missed-deadline ratio, so it is sent no more often than that.
     ros2_stop_every_s: float = 0.5
     # While not commanding for more than `waiting_log_s`, log what the next tick lacks, this often.
@@ -59,7 +60,7 @@ class Timing:
     # after this long with no later clock from the world (whose next clock says someone else claimed the end).
     end_confirm_s: float = 5.0
     # The agent's report (its counters, for the monitor) at least this often: its heartbeat, well inside the
-    # monitor's 2 s of silence after which an agent with a token is not counted alive (admission.Membership).
+    # monitor's 2 s of silence after which an agent with a token is not counted alive (`member_fresh_s`).
     telemetry_s: float = 0.5
 
     # -------------------------------------------------------------------------------------- simworld
@@ -100,6 +101,17 @@ class Timing:
     world_stall_s: float = 2.0
 
     # --------------------------------------------------------------------------- simworld and monitor
+    # Who is alive (membership.Membership: a token AND own data, commands for the world, reports for the monitor):
+    # an agent whose data has been silent this long of wall time AND this long of simulated time is not alive
+    # (neither a stalled world, during which nobody sends, nor a fast realtime clock makes a live agent look dead).
+    member_fresh_s: float = 2.0
+    member_fresh_sim_s: float = 2.0
+    # ... and one not heard since its token appeared (or since the start, or since our own link came back).
+    member_grace_s: float = 10.0
+    member_grace_sim_s: float = 5.0
+    # Lockstep: the world stops counting a token whose agent has sent nothing since a tick it waits on began this
+    # much after an agent's own wait for its peers (`agent_wait_timeout_s`) would have given up.
+    await_margin_s: float = 1.0
     # An agent's token that goes counts as gone this much later (unless back by then): a dying router takes
     # every token with it a moment before our own session sees its link go (uplink.py).
     token_confirm_s: float = 0.3

@@ -11,7 +11,7 @@ import time
 import pytest
 import zenoh
 
-from reconswarm.net.membership import Membership
+from reconswarm.net.membership import Membership, Policy
 from reconswarm.net.node import RouterLink
 from reconswarm.net.session import ZenohOptions
 from reconswarm.net.uplink import LinkChange, Uplink
@@ -21,7 +21,7 @@ from tests.unit.test_world_node import IDS, S, T, advance, commands, ended, star
 
 
 def _members() -> Membership:
-    m = Membership(fresh_s=2.0, fresh_sim_s=2.0, grace_s=10.0, grace_sim_s=5.0, confirm_s=0.3)
+    m = Membership(Policy.world(T))  # fresh 2 s / 2 s, grace 10 s / 5 s, confirmed 0.3 s later
     for a in (1, 2, 3):
         m.token(a, True, 0.0, 0.0)
     m.start(1.0, 0.0)

@@ -261,7 +261,7 @@ def test_a_token_that_goes_is_gone_once_confirmed_and_commands_alone_do_not_coun
 def test_in_ros2_mode_a_stop_dated_stale_keeps_its_agent_alive_and_moves_nothing() -> None:
     """An agent behind the clock sends no late plan, only a stop every 0.5 s, which the plant dates stale
     (simworld/ros2_io.py `WorldRos2.dated`): the world still counts it alive and its robot stands; an agent that
-    never sends anything is lost once the start's grace is over (10 s: admission.Membership), its robot held."""
+    never sends anything is lost once the start's grace is over (10 s: `member_grace_s`), its robot held."""
     node = Ros2World(S, speed=1.0, timing=T)
     assert node.step([*tokens(), MONITOR], 0.0) == [] and node.started
     stopper, silent = IDS[0], IDS[1]
