@@ -39,13 +39,12 @@ log = logging.getLogger("reconswarm.agent")
 class AgentNode:
     def __init__(self, s: Scenario, agent_id: int, now_s: float, timing: Timing = TIMING,
                  batched: bool = False) -> None:
-        self.s, self.id, self.timing = s, agent_id, timing
+        self.s, self.id, self.timing, self.policy = s, agent_id, timing, Policy.agent(timing)
         self.batched, self.planning = batched, -1  # batched: our plan out, its `Law` from our host (planning: its tick)
         self.brain = AgentBrain(s, agent_id)
         self.nb = Neighbourhood(s, agent_id)  # our cells and whom a tick waits for (agent/neighbours.py)
         self.radius = float(self.brain.r[0])
         self.rejected = 0  # messages dropped so far (in our reports)
-        self.policy = Policy.agent(timing)  # when a peer is alive or silent (reconswarm/net/membership.py)
         self.h = Heard(agent_id)  # the states, scans, clocks, beacons we heard by tick, who is alive (agent/heard.py)
         ps = self.peer_sets = PeerSets()  # peers' sets by revision, and the revisions merged (agent/sets.py)
         self.sets, self.merged, self.merged_union = ps.sets, ps.merged, ps.merged_union
@@ -260,8 +259,7 @@ class AgentNode:
             self._guess = f"gave up waiting {t.agent_wait_timeout_s:g} s for peers' data"
             return True
         fresh = self.h.beacons.get(k, {})
-        # Peers alive by their tokens that may matter at k whose beacon for k is not in: wait, unless one has
-        # is silent (`Policy.agent`: peer_silent_s; a token without data: a frozen process before its lease ends).
+        # Peers alive by their tokens that may matter at k whose beacon for k is not in: wait, unless one is silent.
         missing = sorted(a for a in self._expected(k, clock) if a not in fresh)  # (not `- fresh.keys()`: many)
         if any(not silent(self.policy, self.h.heard.get(a, now), now) for a in missing) or (quiet and bool(missing)):
             return False

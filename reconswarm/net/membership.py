@@ -75,8 +75,8 @@ def living(tokens: AbstractSet[int], gone: AbstractSet[int], counted: frozenset[
 
 
 def silent(policy: Policy, heard_at: float, now: float) -> bool:
-    """A peer last heard (its beacon, or its token's arrival) at wall time `heard_at` is silent at `now`:
-    not waited for."""
+    """A peer last heard (its beacon, or its token's arrival) at wall time `heard_at` is silent at `now`: not
+    waited for (a token without data: a frozen process before its lease ends, or a forged token)."""
     return now - heard_at >= policy.fresh_s
 
 
