@@ -153,7 +153,7 @@ class WorldNode:
             elif m.role is Role.AGENT and m.agent in self.index:
                 self.members.token(m.agent, m.up, now_s, sim)
         elif isinstance(m, RouterLink):
-            self.members.link(m.up, now_s, sim, self.timing.relink_settle_s)
+            self.members.link(m.up, now_s, sim)
             self._link(m.up, now_s)
         elif isinstance(m, Stop):
             self.stopping = True
@@ -228,10 +228,10 @@ class WorldNode:
 
     def _own_stall(self, now_s: float, gap_s: float) -> None:
         """The world itself did not run for gap_s (SIGSTOP, a starved machine): its session may have lapsed, and
-        tokens that go within `peer_silent_s` are kept (they come back as the sessions reconnect). Nobody was
-        late, so no step times out for it: lockstep waits afresh for the agents it waited for and publishes the
-        tick again now; realtime shifts its schedule."""
-        self.members.settle(now_s + self.timing.peer_silent_s)
+        tokens that go within its policy's `stall_settle_s` (peer_silent_s) are kept (they come back as the
+        sessions reconnect). Nobody was late, so no step times out for it: lockstep waits afresh for the agents it
+        waited for and publishes the tick again now; realtime shifts its schedule."""
+        self.members.settle(now_s + self.members.policy.stall_settle_s)
         if not self.started:
             return
         log.warning("simworld itself was stalled for %.1f s at tick %d: waiting afresh", gap_s, self.k)

@@ -35,7 +35,9 @@ class Policy:
     (world, monitor); a peer silent this long of wall time is not waited for (agent). grace_s / grace_sim_s:
     the same for an agent not heard since its token appeared (or since the start). confirm_s: a token that
     goes counts as gone this much later, unless back by then. await_grace_s: a token whose agent keeps a
-    tick waiting with nothing sent stops counting after this long (math.inf: never).
+    tick waiting with nothing sent stops counting after this long (math.inf: never). relink_settle_s: once our
+    own router link is back, tokens that went have this long to come back. stall_settle_s: after the caller
+    itself stalled, tokens that go within this long are kept (0: the role does not settle).
     """
 
     role: Role  # whose policy (the role whose token it would be)
@@ -45,25 +47,28 @@ class Policy:
     grace_sim_s: float
     confirm_s: float
     await_grace_s: float
+    relink_settle_s: float
+    stall_settle_s: float
 
     @classmethod
     def world(cls, t: Timing) -> Policy:
         # A token without commands does not hold a lockstep tick up beyond a grace longer than an agent's own
-        # wait for its peers (`agent_wait_timeout_s`).
+        # wait for its peers (`agent_wait_timeout_s`). After its own stall, the world keeps tokens that go for as
+        # long as an agent waits for a silent peer (they come back as the sessions reconnect).
         return cls(Role.WORLD, t.member_fresh_s, t.member_fresh_sim_s, t.member_grace_s, t.member_grace_sim_s,
-                   t.token_confirm_s, t.agent_wait_timeout_s + t.await_margin_s)
+                   t.token_confirm_s, t.agent_wait_timeout_s + t.await_margin_s, t.relink_settle_s, t.peer_silent_s)
 
     @classmethod
     def monitor(cls, t: Timing) -> Policy:
         return cls(Role.MONITOR, t.member_fresh_s, t.member_fresh_sim_s, t.member_grace_s, t.member_grace_sim_s,
-                   t.token_confirm_s, math.inf)
+                   t.token_confirm_s, math.inf, t.relink_settle_s, 0.0)
 
     @classmethod
     def agent(cls, t: Timing) -> Policy:
         # A peer's token that goes is gone at once (the world's clock, not its token, keeps a flapping peer
         # counted); its silence counts in wall time only (lockstep's simulated time stands while we wait), from
         # its token if it was never heard.
-        return cls(Role.AGENT, t.peer_silent_s, math.inf, t.peer_silent_s, math.inf, 0.0, math.inf)
+        return cls(Role.AGENT, t.peer_silent_s, math.inf, t.peer_silent_s, math.inf, 0.0, math.inf, 0.0, 0.0)
 
 
 def living(tokens: AbstractSet[int], gone: AbstractSet[int], counted: frozenset[int] | None,
@@ -118,14 +123,14 @@ class Membership:
         then, if it has not come back."""
         self.settle_until = until_wall
 
-    def link(self, up: bool, wall: float, sim: float, settle_s: float) -> None:
-        """The caller's own session lost its router (up=False: a router that died or froze takes every token
-        with it, and nobody's data can reach us) or has one again (up=True, also when it is a new router).
-        While it has none nobody is judged; once back, tokens that went have `settle_s` to come back, and
-        everyone's data is awaited afresh (the grace, as after the start)."""
+    def link(self, up: bool, wall: float, sim: float) -> None:
+        """The caller's own session lost its router (up=False: a router that died or froze takes every token with it,
+        and nobody's data can reach us) or has one again (up=True, also when it is a new router). While it
+        has none nobody is judged; once back, tokens that went have `policy.relink_settle_s` to come back,
+        and everyone's data is awaited afresh (the grace, as after the start)."""
         self.unlinked = not up
         if up:
-            self.settle_until = max(self.settle_until, wall + settle_s)
+            self.settle_until = max(self.settle_until, wall + self.policy.relink_settle_s)
             if self.started is not None:
                 self.started = (wall, sim)
                 self.heard.clear()
