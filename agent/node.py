@@ -215,7 +215,7 @@ class AgentNode:
         return live, lost
 
     def _lately(self) -> set[int]:
-        return self.nb.heard_lately(self.h.alive, self.h.heard, self.now, self.period_s)
+        return self.nb.heard_lately(self.h.alive, self.h.heard, self.now, self.period_s, self.policy.lately_s)
 
     def _beacon(self, st: wire.State) -> wire.Beacon:
         return wire.Beacon(self.id, st.k, st.t, st.px, st.py, self.radius, self.brain.rev)

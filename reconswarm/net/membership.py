@@ -37,7 +37,8 @@ class Policy:
     goes counts as gone this much later, unless back by then. await_grace_s: a token whose agent keeps a
     tick waiting with nothing sent stops counting after this long (math.inf: never). relink_settle_s: once our
     own router link is back, tokens that went have this long to come back. stall_settle_s: after the caller
-    itself stalled, tokens that go within this long are kept (0: the role does not settle).
+    itself stalled, tokens that go within this long are kept (0: the role does not settle). lately_s: realtime,
+    a peer unheard this long (or 3 periods) is not planned with (agent; math.inf: no such rule).
     """
 
     role: Role  # whose policy (the role whose token it would be)
@@ -49,6 +50,7 @@ class Policy:
     await_grace_s: float
     relink_settle_s: float
     stall_settle_s: float
+    lately_s: float
 
     @classmethod
     def world(cls, t: Timing) -> Policy:
@@ -56,19 +58,21 @@ class Policy:
         # wait for its peers (`agent_wait_timeout_s`). After its own stall, the world keeps tokens that go for as
         # long as an agent waits for a silent peer (they come back as the sessions reconnect).
         return cls(Role.WORLD, t.member_fresh_s, t.member_fresh_sim_s, t.member_grace_s, t.member_grace_sim_s,
-                   t.token_confirm_s, t.agent_wait_timeout_s + t.await_margin_s, t.relink_settle_s, t.peer_silent_s)
+                   t.token_confirm_s, t.agent_wait_timeout_s + t.await_margin_s, t.relink_settle_s, t.peer_silent_s,
+                   math.inf)
 
     @classmethod
     def monitor(cls, t: Timing) -> Policy:
         return cls(Role.MONITOR, t.member_fresh_s, t.member_fresh_sim_s, t.member_grace_s, t.member_grace_sim_s,
-                   t.token_confirm_s, math.inf, t.relink_settle_s, 0.0)
+                   t.token_confirm_s, math.inf, t.relink_settle_s, 0.0, math.inf)
 
     @classmethod
     def agent(cls, t: Timing) -> Policy:
         # A peer's token that goes is gone at once (the world's clock, not its token, keeps a flapping peer
         # counted); its silence counts in wall time only (lockstep's simulated time stands while we wait), from
         # its token if it was never heard.
-        return cls(Role.AGENT, t.peer_silent_s, math.inf, t.peer_silent_s, math.inf, 0.0, math.inf, 0.0, 0.0)
+        return cls(Role.AGENT, t.peer_silent_s, math.inf, t.peer_silent_s, math.inf, 0.0, math.inf, 0.0, 0.0,
+                   t.realtime_peer_silent_s)
 
 
 def living(tokens: AbstractSet[int], gone: AbstractSet[int], counted: frozenset[int] | None,

@@ -21,6 +21,11 @@ class Timing:
     # A peer whose beacons stopped this long ago (alive by its token, but silent) is not waited for (a guess
     # too); longer than the lease for the same reason.
     peer_silent_s: float = 3.0
+    # Realtime: a live peer silent this long (wall seconds; at least 3 periods) has left the cells we listen to
+    # (or is stuck): its last beacon shows where it was, not where it is, and planned with it is a ghost that can
+    # pin an agent in place (seen: a ROS 2 mission where five ghosts held the last agent still for 180 s). Wall
+    # time, not ticks: in an overloaded run every beacon is ticks old, yet a live neighbour is still heard.
+    realtime_peer_silent_s: float = 1.0
     # Lockstep: the world publishes a tick it waits on again every `republish_s`; nothing from it (a clock, our
     # state) for this long, or its token gone: it stalls (frozen mid-tick, starved), nobody can have a new state
     # to announce, so no wait above is given up, and every wait starts afresh once it speaks again.

@@ -24,19 +24,20 @@ def _clock(k: int, alive: tuple[int, ...]) -> wire.Clock:
 def test_every_threshold_of_the_world_and_the_monitor_comes_from_timing() -> None:
     t = Timing(member_fresh_s=1.5, member_fresh_sim_s=2.5, member_grace_s=7.0, member_grace_sim_s=4.0,
                token_confirm_s=0.2, agent_wait_timeout_s=3.5, await_margin_s=0.5, peer_silent_s=2.75,
-               relink_settle_s=6.0)
-    assert Policy.world(t) == Policy(Role.WORLD, 1.5, 2.5, 7.0, 4.0, 0.2, 4.0, 6.0, 2.75)
-    assert Policy.monitor(t) == Policy(Role.MONITOR, 1.5, 2.5, 7.0, 4.0, 0.2, math.inf, 6.0, 0.0)
-    assert Policy.agent(t) == Policy(Role.AGENT, 2.75, math.inf, 2.75, math.inf, 0.0, math.inf, 0.0, 0.0)
+               relink_settle_s=6.0, realtime_peer_silent_s=0.8)
+    assert Policy.world(t) == Policy(Role.WORLD, 1.5, 2.5, 7.0, 4.0, 0.2, 4.0, 6.0, 2.75, math.inf)
+    assert Policy.monitor(t) == Policy(Role.MONITOR, 1.5, 2.5, 7.0, 4.0, 0.2, math.inf, 6.0, 0.0, math.inf)
+    assert Policy.agent(t) == Policy(Role.AGENT, 2.75, math.inf, 2.75, math.inf, 0.0, math.inf, 0.0, 0.0, 0.8)
 
 
 def test_the_default_thresholds_are_the_ones_every_role_ran_with() -> None:
     """World and monitor: fresh 2 s / 2 s, grace 10 s / 5 s, a token's end confirmed 0.3 s later; the world mutes
     a token that holds a tick up 4 s (an agent's own 3 s wait + 1 s); tokens have 10 s to come back once our
-    router link is back, and 3 s after the world's own stall; an agent waits 3 s for a silent peer."""
-    assert Policy.world(TIMING) == Policy(Role.WORLD, 2.0, 2.0, 10.0, 5.0, 0.3, 4.0, 10.0, 3.0)
-    assert Policy.monitor(TIMING) == Policy(Role.MONITOR, 2.0, 2.0, 10.0, 5.0, 0.3, math.inf, 10.0, 0.0)
-    assert Policy.agent(TIMING).fresh_s == TIMING.peer_silent_s == 3.0
+    router link is back, and 3 s after the world's own stall; an agent waits 3 s for a silent peer and, in
+    realtime, plans with peers heard within 1 s (or 3 periods)."""
+    assert Policy.world(TIMING) == Policy(Role.WORLD, 2.0, 2.0, 10.0, 5.0, 0.3, 4.0, 10.0, 3.0, math.inf)
+    assert Policy.monitor(TIMING) == Policy(Role.MONITOR, 2.0, 2.0, 10.0, 5.0, 0.3, math.inf, 10.0, 0.0, math.inf)
+    assert Policy.agent(TIMING) == Policy(Role.AGENT, 3.0, math.inf, 3.0, math.inf, 0.0, math.inf, 0.0, 0.0, 1.0)
 
 
 def test_the_thresholds_are_ordered_across_roles() -> None:
