@@ -8,7 +8,8 @@ from `Timing` (reconswarm/net/timing.py).
 - an agent judges its peers by `living`: by their tokens until the world's clock says, then by the clock's
   live agents less those whose token it saw go (the world counts only agents whose commands come, so a forged
   token does not fool it); a peer alive so yet silent for `Policy.agent(...).fresh_s` is not waited for
-  (`silent`), and is lost once the world's clock stops counting it.
+  (`silent`), and is lost once the world's clock stops counting it; in realtime one unheard for `lately_s` (or
+  3 periods) is not planned with (agent/neighbours.py `heard_lately`).
 
 The roles' thresholds differ on purpose, and are ordered (tests/unit/test_membership_policy.py checks it): the
 world and the monitor ask "is this agent still there" of data every agent sends at least every 0.5 s (commands or
