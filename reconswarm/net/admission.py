@@ -42,6 +42,7 @@ import numpy as np
 
 from reconswarm.geometry.plane import SAMPLE_SPACING_M, Edges, sample_boundary, signed_distance
 from reconswarm.net import wire
+from reconswarm.net.timing import TIMING
 from reconswarm.paper.planner import max_repulsion_speed
 from reconswarm.plant.unicycle import arc_head_speed
 from reconswarm.scenario.model import Scenario
@@ -103,7 +104,7 @@ def command_bound_mps(s: Scenario) -> float:
 class Pins:
     """Which session speaks for whom: the world (pinned at its first clock) and each agent."""
 
-    repin_after_s: float = 1.0
+    repin_after_s: float = TIMING.repin_after_s
     world: str | None = None
     agents: dict[int, tuple[str, float]] = field(default_factory=dict)  # id -> (source, last heard, wall s)
 

@@ -125,6 +125,9 @@ class Timing:
     relink_settle_s: float = 10.0
 
     # --------------------------------------------------------------------------------------- session
+    # Admission (admission.Pins): another session may speak for an agent once the one pinned to it has been silent
+    # this long (a restarted agent's new session takes over).
+    repin_after_s: float = 1.0
     # A frozen process is declared gone after this (zenoh's default 10 s is too slow for robots).
     lease_ms: int = 2000
     # Opening a session retries until the router answers or this passes (100+ processes starting at once on
