@@ -1,10 +1,11 @@
 """What an agent has heard, by tick (pure: no clock, no I/O): the world's states, scans and clocks for it, the
 peers' beacons and each peer's newest, when each peer was last heard, and who is alive.
 
-"Alive" is decided here once (`living`): by its token; once a clock says, counted by the world's clock and not
-seen going by its token. Not the tokens alone there: the world saw a token whose news to us may come after the
-clock (zenoh-python runs each subscriber's callbacks on a thread of its own, so no order holds between the
-liveliness and the data subscribers), and a forged token does not fool the world's clock.
+"Alive" is decided here once (`living`, by the agent's rule in reconswarm/net/membership.py): by its token; once a
+clock says, counted by the world's clock and not seen going by its token. Not the tokens alone there: the world saw
+a token whose news to us may come after the clock (zenoh-python runs each subscriber's callbacks on a thread of its
+own, so no order holds between the liveliness and the data subscribers), and a forged token does not fool the
+world's clock.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from collections.abc import Set as AbstractSet
 
-from reconswarm.net import wire
+from reconswarm.net import membership, wire
 
 
 class Heard:
@@ -59,9 +60,9 @@ class Heard:
         for a in m.alive_set.difference(self.alive, self.gone) - {self.id}:  # counted before its token came:
             self.heard.setdefault(a, now)  # its silence counts from now
 
-    def living(self, clock: wire.Clock | None) -> set[int] | frozenset[int]:
-        """The one notion of a live peer (see the module's notes); clock: the tick's (None: tokens alone)."""
-        return self.alive if clock is None else clock.alive_set - self.gone if self.gone else clock.alive_set
+    def living(self, clock: wire.Clock | None) -> AbstractSet[int]:
+        """The one notion of a live peer (membership.living); clock: the tick's (None: tokens alone)."""
+        return membership.living(self.alive, self.gone, None if clock is None else clock.alive_set)
 
     def lacks(self, k: int, waited: AbstractSet[int], linked: Mapping[int, int],
               sets: Mapping[int, Mapping[int, object]]) -> str:

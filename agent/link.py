@@ -16,7 +16,7 @@ from typing import Any
 import zenoh
 from zenoh import ext
 
-from agent.messages import Heard, Output
+from agent.messages import Output, Received
 from agent.neighbours import Cells
 from agent.node import AgentNode
 from agent.ros2_io import AgentRos2
@@ -35,7 +35,7 @@ log = logging.getLogger("reconswarm.agent")
 PASSED = (Token, RouterLink, Stop)  # taken as they are
 OWN = (wire.State, wire.Scan)  # for one agent: the others drop it
 PEER_MESSAGES = (wire.Beacon, wire.ObstacleSet)  # a peer's: never in our own name from another session
-Decoded = Heard | None  # what a sample decodes to (None: a key no agent reads)
+Decoded = Received | None  # what a sample decodes to (None: a key no agent reads)
 
 
 def decode_sample(keys: Keys, key: str, payload: bytes, kind: str) -> Decoded:
@@ -114,7 +114,7 @@ class AgentLink(Member):
         self.pub_obs = ext.declare_advanced_publisher(self.z, k.obstacles(c.home, self.id),
                                                       cache=ext.CacheConfig(max_samples=1))
 
-    def decode(self, key: str, payload: bytes, kind: str, source: str, _at_s: float = 0.0) -> Heard | None:
+    def decode(self, key: str, payload: bytes, kind: str, source: str, _at_s: float = 0.0) -> Received | None:
         """A raw sample for this agent alone: the node input (None: not for us, or refused by admission, which
         counts and logs it); a malformed one becomes Invalid (and is counted)."""
         if self.ros2 is not None and self.ros2.owns(key):
@@ -135,7 +135,7 @@ class AgentLink(Member):
         """An obstacle set's size, before it is decoded (refused: counted by our gate)."""
         return self.gate.admit_set_bytes(n_bytes, source, key, time.monotonic())
 
-    def take(self, m: Decoded, key: str, source: str) -> Heard | None:
+    def take(self, m: Decoded, key: str, source: str) -> Received | None:
         """A decoded sample, as this agent takes it: ours to act on, counted as invalid, or refused."""
         if m is None or isinstance(m, PASSED):
             return m

@@ -23,9 +23,10 @@ class Law:
 
 # inputs: the wire messages an agent reads, plus the runtime's (reconswarm/net/node.py): a peer's or the world's
 # token (Token with Role.AGENT and its id, or Role.WORLD), a message dropped as invalid, our router link, a signal
-# (all that a sample or the runtime brings: Heard); in a host of several agents, the law its host computed for our plan
-Heard = wire.State | wire.Scan | wire.Clock | wire.Beacon | wire.ObstacleSet | Token | Invalid | RouterLink | Stop
-Input = Heard | Law
+# (all that a sample or the runtime brings: Received; what the node keeps of it is agent/heard.py's `Heard`); in a
+# host of several agents, the law its host computed for our plan
+Received = wire.State | wire.Scan | wire.Clock | wire.Beacon | wire.ObstacleSet | Token | Invalid | RouterLink | Stop
+Input = Received | Law
 
 
 # ----------------------------------------------------------------------------------------- outputs

@@ -38,11 +38,6 @@ from reconswarm.net.cells import Cell, CellGrid
 from reconswarm.scenario.model import PlannerKind, Scenario
 
 XY = tuple[float, float]
-# Realtime: a live peer silent this long (wall seconds; at least 3 periods) has left the cells we listen to
-# (or is stuck): its last beacon shows where it was, not where it is, and planned with it is a ghost that can
-# pin an agent in place (seen: a ROS 2 mission where five ghosts held the last agent still for 180 s). Wall
-# time, not ticks: in an overloaded run every beacon is ticks old, yet a live neighbour is still heard.
-REALTIME_SILENT_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -169,11 +164,12 @@ class Neighbourhood:
         return out
 
     @staticmethod
-    def heard_lately(alive: Container[int], heard: dict[int, float], now: float, period_s: float) -> set[int]:
-        """Realtime: the live peers heard within REALTIME_SILENT_S (or 3 periods) of wall time. `heard` is in the
-        order its times were set (the newest last) and holds every live peer (its token's time if nothing else):
-        only the peers heard lately are read, not the whole swarm."""
-        quiet = max(REALTIME_SILENT_S, 3.0 * period_s)
+    def heard_lately(alive: Container[int], heard: dict[int, float], now: float, period_s: float,
+                     silent_s: float) -> set[int]:
+        """Realtime: the live peers heard within `silent_s` (the agent's policy: `realtime_peer_silent_s`) or 3
+        periods of wall time. `heard` is in the order its times were set (the newest last) and holds every live
+        peer (its token's time if nothing else): only the peers heard lately are read, not the whole swarm."""
+        quiet = max(silent_s, 3.0 * period_s)
         out = set()
         for a in reversed(heard):  # (newest first)
             if now - heard[a] > quiet:

@@ -28,6 +28,7 @@ from agent.messages import Input, Law, Output, Reconnect
 from agent.neighbours import Neighbourhood
 from agent.sets import PeerSets, own_set, scan_sets
 from reconswarm.net import wire
+from reconswarm.net.membership import Policy, silent
 from reconswarm.net.node import Exit, Invalid, Role, Stop, Token
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.scenario.model import Scenario
@@ -38,7 +39,7 @@ log = logging.getLogger("reconswarm.agent")
 class AgentNode:
     def __init__(self, s: Scenario, agent_id: int, now_s: float, timing: Timing = TIMING,
                  batched: bool = False) -> None:
-        self.s, self.id, self.timing = s, agent_id, timing
+        self.s, self.id, self.timing, self.policy = s, agent_id, timing, Policy.agent(timing)
         self.batched, self.planning = batched, -1  # batched: our plan out, its `Law` from our host (planning: its tick)
         self.brain = AgentBrain(s, agent_id)
         self.nb = Neighbourhood(s, agent_id)  # our cells and whom a tick waits for (agent/neighbours.py)
@@ -103,9 +104,9 @@ class AgentNode:
         st = self.h.states.get(k)
         if st is None or k <= self.k:
             return None
-        fresh, clock, silent = self.h.beacons.get(k, {}), self.h.clocks.get(k), self.timing.peer_silent_s
+        fresh, clock, heard = self.h.beacons.get(k, {}), self.h.clocks.get(k), self.h.heard
         waited = self._expected(k, clock)
-        need = sum(1 for a in waited if a not in fresh and now_s - self.h.heard.get(a, now_s) < silent)
+        need = sum(1 for a in waited if a not in fresh and not silent(self.policy, heard.get(a, now_s), now_s))
         if self.mode != "realtime":
             need += self.nb.also_heard(self.h.alive, self.h.beacons.get(k - 1, {}), fresh, waited)
             need += clock is None
@@ -214,7 +215,7 @@ class AgentNode:
         return live, lost
 
     def _lately(self) -> set[int]:
-        return self.nb.heard_lately(self.h.alive, self.h.heard, self.now, self.period_s)
+        return self.nb.heard_lately(self.h.alive, self.h.heard, self.now, self.period_s, self.policy.lately_s)
 
     def _beacon(self, st: wire.State) -> wire.Beacon:
         return wire.Beacon(self.id, st.k, st.t, st.px, st.py, self.radius, self.brain.rev)
@@ -258,13 +259,12 @@ class AgentNode:
             self._guess = f"gave up waiting {t.agent_wait_timeout_s:g} s for peers' data"
             return True
         fresh = self.h.beacons.get(k, {})
-        # Peers alive by their tokens that may matter at k whose beacon for k is not in: wait, unless one has
-        # said nothing for peer_silent_s (a token without data: a frozen process before its lease ends, forged).
+        # Peers alive by their tokens that may matter at k whose beacon for k is not in: wait, unless one is silent.
         missing = sorted(a for a in self._expected(k, clock) if a not in fresh)  # (not `- fresh.keys()`: many)
-        if any(now - self.h.heard.get(a, now) < t.peer_silent_s for a in missing) or (quiet and bool(missing)):
+        if any(not silent(self.policy, self.h.heard.get(a, now), now) for a in missing) or (quiet and bool(missing)):
             return False
         if missing:
-            self._guess = f"agents {missing} alive but silent for {t.peer_silent_s:g} s"
+            self._guess = f"agents {missing} alive but silent for {self.policy.fresh_s:g} s"
         if self._linked[0] != k:
             self._link(k, np.array([st.px, st.py]))
         if self.k < 0 and k > 0:  # joining a mission under way: every peer's cached set (any revision) first
@@ -345,7 +345,7 @@ class AgentNode:
     def _prune(self, k: int) -> None:
         self.h.prune(k)
         self.nb.prune(k)
-        p, stale_k = (self.h.states[k].px, self.h.states[k].py), k - round(self.timing.peer_silent_s / self.s.meta.dt_s)
+        p, stale_k = (self.h.states[k].px, self.h.states[k].py), k - round(self.policy.fresh_s / self.s.meta.dt_s)
         living = self.h.living(self.h.clocks.get(k)) if self.mode == "lockstep" else set()
         self.h.forget_stale(lambda b: self.nb.audible(p, b), living, stale_k)
         self.peer_sets.prune(self.brain.leader is not None)

@@ -120,7 +120,7 @@ class MonitorNode:
             elif m.role is Role.WORLD:
                 self._world_up(m.up, now_s)
         elif isinstance(m, RouterLink):
-            self.presence.members.link(m.up, now_s, self.t, self.timing.relink_settle_s)
+            self.presence.members.link(m.up, now_s, self.t)
         elif isinstance(m, Invalid):
             self.invalid += 1
 

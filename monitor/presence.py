@@ -14,7 +14,7 @@ import logging
 
 import numpy as np
 
-from reconswarm.net.membership import Membership
+from reconswarm.net.membership import Membership, Policy
 from reconswarm.net.timing import Timing
 from reconswarm.paper.events import Event, EventKind, Groups
 
@@ -29,7 +29,7 @@ class Presence:
     def __init__(self, ids: list[int], timing: Timing, unix_offset_s: float) -> None:
         self.ids, self.timing, self.unix_offset_s = ids, timing, unix_offset_s
         self.index = {a: k for k, a in enumerate(ids)}
-        self.members = Membership(confirm_s=timing.token_confirm_s)
+        self.members = Membership(Policy.monitor(timing))
         self.told: dict[int, bool] = {}  # agent -> alive as last judged by the membership
         self.alive = np.zeros(len(ids), dtype=bool)  # alive as recorded (scenario order)
         self.seen = np.zeros(len(ids), dtype=bool)

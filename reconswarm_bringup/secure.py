@@ -30,7 +30,8 @@ from pathlib import Path
 from typing import Any
 
 from reconswarm.errors import BadInput
-from reconswarm.net.session import LEASE_MS, ZenohOptions
+from reconswarm.net.session import ZenohOptions
+from reconswarm.net.timing import TIMING
 from reconswarm.scenario.model import Scenario
 from reconswarm_bringup import acl, creddir
 from reconswarm_bringup.deployment import Deployment, Host, tls_endpoint
@@ -184,7 +185,7 @@ def _base(mode: str, tls: dict[str, Any]) -> dict[str, Any]:
         "mode": mode,
         "scouting": {"multicast": {"enabled": False}},
         "timestamping": {"enabled": True},
-        "transport": {"link": {"tx": {"lease": LEASE_MS}, "tls": {**tls, "enable_mtls": True}}},
+        "transport": {"link": {"tx": {"lease": TIMING.lease_ms}, "tls": {**tls, "enable_mtls": True}}},
     }
 
 

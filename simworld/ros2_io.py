@@ -6,7 +6,7 @@ its state key, and takes `/robot_<i>/cmd_vel` (geometry_msgs/Twist: linear.x = v
 of the command key, as node `simworld` with rmw_zenoh's keys, attachments and liveliness tokens
 (reconswarm/net/ros2_node.py). Scans, clock and truth stay on the project's keys.
 
-`Ros2World` is the world's state machine (simworld/world.py) with the plant a robot base is (`Ros2Plant`): it
+`Ros2World` is the world's state machine (simworld/world.py) with the plant a robot base is (`Ros2Robots`): it
 holds the latest (v, ω) of each robot and moves the body on the exact arc (`unicycle.step_vw`, saturated to
 the scenario's limits). A Twist carries no tick: the port takes a cmd_vel as the command of the oldest tick
 whose odometry it published within `ros2_plan_age_periods` before the cmd_vel was sent (its attachment's
@@ -31,11 +31,11 @@ from reconswarm.net.timing import TIMING, Timing
 from reconswarm.net.wire import ClockMode
 from reconswarm.plant import unicycle
 from reconswarm.scenario.model import Scenario
-from simworld.plant import Plant
+from simworld.robots import Robots
 from simworld.world import WorldNode
 
 
-class Ros2Plant(Plant):
+class Ros2Robots(Robots):
     """The plant a robot base is: the (v, ω) of a cmd_vel is held as is and moves the body on its arc."""
 
     def __init__(self, s: Scenario, hold_sim_s: float) -> None:
@@ -57,7 +57,7 @@ def planned_tick(published_ns: dict[int, int], sent_ns: int, plan_age_ns: float)
     """The oldest tick whose odometry a cmd_vel sent at `sent_ns` can have been planned from: one published (tick ->
     when its odometries were out) at most `plan_age_ns` before it (agents send none planned from older:
     agent/ros2_io.py). The oldest keeps the plant's hold rules on the safe side: its reach is measured from where
-    the robot stood then, its hold counted from then (`Plant.apply`). Both times are wall clocks' (the plant's
+    the robot stood then, its hold counted from then (`Robots.apply`). Both times are wall clocks' (the plant's
     for its odometry, the agent's for its cmd_vel, as the agent compared them): a constant offset between two
     machines' clocks cancels. Ros2Error: sent later than that after every odometry kept (clocks drifted apart)."""
     since = sent_ns - plan_age_ns
@@ -74,7 +74,7 @@ class Ros2World(WorldNode):
     """The world whose plant is a robot base (its commands: cmd_vels, each of the tick the port dates it to)."""
 
     def __init__(self, s: Scenario, speed: float, timing: Timing = TIMING) -> None:
-        self.base = Ros2Plant(s, timing.hold_sim_s)
+        self.base = Ros2Robots(s, timing.hold_sim_s)
         super().__init__(s, ClockMode.REALTIME, speed, timing, self.base)
 
 
@@ -83,7 +83,7 @@ class WorldRos2:
 
     period_s: the run's period (wall seconds a tick lasts at its speed)."""
 
-    def __init__(self, session: Any, domain_id: int, base: Ros2Plant, callback: Any, period_s: float,
+    def __init__(self, session: Any, domain_id: int, base: Ros2Robots, callback: Any, period_s: float,
                  timing: Timing = TIMING) -> None:
         """callback(sample): where cmd_vel samples go (the process's inbox)."""
         self.base = base

@@ -3,7 +3,7 @@
 `WorldNode.step(inputs, now_s)` takes what arrived (liveliness tokens, the commands the process's gate admitted
 with the time each arrived, our own session's router link, a signal, what was dropped as invalid) and returns
 what to publish, in order: a tick's clock, truth and every robot's state (with its scan), and `Exit(0, end
-reason)` once the mission ends. It owns the plant (simworld/plant.py) and every rule of the world:
+reason)` once the mission ends. It owns the robots (the plant: simworld/robots.py) and every rule of the world:
 
 - membership: an agent is alive while its token is there AND its commands keep coming (a token alone can be
   forged; reconswarm/net/membership.py): a token that goes is gone `token_confirm_s` later; a token whose agent
@@ -36,12 +36,12 @@ import numpy as np
 
 from reconswarm.errors import ProcessFailure
 from reconswarm.net import wire
-from reconswarm.net.membership import Membership
+from reconswarm.net.membership import Membership, Policy
 from reconswarm.net.node import Exit, Invalid, Role, RouterLink, Stop, Token
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.net.wire import ClockMode
 from reconswarm.scenario.model import Scenario
-from simworld.plant import Plant
+from simworld.robots import Robots
 
 log = logging.getLogger("reconswarm.simworld")
 
@@ -79,13 +79,13 @@ class _Turn:
 
 class WorldNode:
     def __init__(self, s: Scenario, clock: ClockMode = ClockMode.LOCKSTEP, speed: float = 1.0,
-                 timing: Timing = TIMING, plant: Plant | None = None) -> None:
+                 timing: Timing = TIMING, robots: Robots | None = None) -> None:
         self.s, self.clock, self.speed, self.timing = s, clock, speed, timing
-        self.plant = Plant(s, timing.hold_sim_s) if plant is None else plant
-        self.ids, self.index = self.plant.ids, self.plant.index
-        # Who is alive (the one place the world decides it): a token AND own commands; a token without commands
-        # does not hold a lockstep tick up beyond a grace longer than an agent's own wait for its peers.
-        self.members = Membership(confirm_s=timing.token_confirm_s, await_grace_s=timing.agent_wait_timeout_s + 1.0)
+        self.robots = Robots(s, timing.hold_sim_s) if robots is None else robots
+        self.ids, self.index = self.robots.ids, self.robots.index
+        # Who is alive (the one place the world decides it): a token AND own commands (the world's policy: a token
+        # without commands does not hold a lockstep tick up beyond a grace longer than an agent's own wait).
+        self.members = Membership(Policy.world(timing))
         self.alive: set[int] = set()
         self.monitor = False
         self.stopping = False  # a signal came: the mission ends at the next tick
@@ -153,7 +153,7 @@ class WorldNode:
             elif m.role is Role.AGENT and m.agent in self.index:
                 self.members.token(m.agent, m.up, now_s, sim)
         elif isinstance(m, RouterLink):
-            self.members.link(m.up, now_s, sim, self.timing.relink_settle_s)
+            self.members.link(m.up, now_s, sim)
             self._link(m.up, now_s)
         elif isinstance(m, Stop):
             self.stopping = True
@@ -161,7 +161,7 @@ class WorldNode:
             self.rejected += 1
 
     def _command(self, c: wire.Cmd, at_s: float) -> None:
-        self.plant.command(c.id, c.k, c.v_mps, c.omega_radps)
+        self.robots.command(c.id, c.k, c.v_mps, c.omega_radps)
         if c.id in self.unresponsive:
             self.unresponsive.discard(c.id)
             self.strikes.pop(c.id, None)
@@ -228,10 +228,10 @@ class WorldNode:
 
     def _own_stall(self, now_s: float, gap_s: float) -> None:
         """The world itself did not run for gap_s (SIGSTOP, a starved machine): its session may have lapsed, and
-        tokens that go within `peer_silent_s` are kept (they come back as the sessions reconnect). Nobody was
-        late, so no step times out for it: lockstep waits afresh for the agents it waited for and publishes the
-        tick again now; realtime shifts its schedule."""
-        self.members.settle(now_s + self.timing.peer_silent_s)
+        tokens that go within its policy's `stall_settle_s` (peer_silent_s) are kept (they come back as the
+        sessions reconnect). Nobody was late, so no step times out for it: lockstep waits afresh for the agents it
+        waited for and publishes the tick again now; realtime shifts its schedule."""
+        self.members.settle(now_s + self.members.policy.stall_settle_s)
         if not self.started:
             return
         log.warning("simworld itself was stalled for %.1f s at tick %d: waiting afresh", gap_s, self.k)
@@ -263,7 +263,7 @@ class WorldNode:
 
     def _tick(self, now_s: float) -> _Turn:
         reason = ""
-        if self.plant.converged(self.alive):
+        if self.robots.converged(self.alive):
             reason = "converged"
         elif self.k == self.n_ticks:
             reason = "duration"
@@ -294,7 +294,7 @@ class WorldNode:
 
     def missing(self) -> list[int]:
         """Lockstep: agents the current tick still waits for."""
-        got = self.plant.cmds.get(self.k, {})
+        got = self.robots.cmds.get(self.k, {})
         live = self.waiting_for if self.resumed else self.waiting_for & self.alive
         return sorted(a for a in live if self.index[a] not in got)
 
@@ -320,7 +320,7 @@ class WorldNode:
         return _Turn(out, min(self._deadline(now_s), self.again_s))
 
     def _advance(self, now_s: float) -> _Turn:
-        got = self.plant.apply(self.k)
+        got = self.robots.apply(self.k)
         if self.clock == ClockMode.LOCKSTEP and self.uncommanded_k < 0 and len(got) < len(self.ids):
             self.uncommanded_k = self.k
         if self.clock == ClockMode.REALTIME:
@@ -341,7 +341,7 @@ class WorldNode:
         clock = wire.Clock(k, k * self.s.meta.dt_s, tuple(sorted(self.alive)), self.clock,
                            self.speed if self.clock == ClockMode.REALTIME else 0.0, end, reason, self.rejected,
                            self.stats() if end else {})
-        truth, states = self.plant.observe(k, self.alive)
+        truth, states = self.robots.observe(k, self.alive)
         self.pub_time[k] = now_s
         while (oldest := next(iter(self.pub_time))) < k - 1000:  # (oldest first: ticks go out in order)
             del self.pub_time[oldest]

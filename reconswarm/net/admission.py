@@ -19,8 +19,8 @@ which the receiver drops, counts (`IntrusionTally`) and logs. The rules:
 - an agent's messages (beacon, cmd): only from the session that agent speaks from (`Pins`, pinned at first
   sight; another session may take over only once the pinned one has been silent `repin_after_s`, as a
   restarted agent's new session does);
-- membership (`Membership`): an agent is alive while its liveliness token is there AND its own session's
-  data keeps coming; a token anyone can declare decides nothing alone.
+- membership (reconswarm/net/membership.py, not here): an agent is alive while its liveliness token is there
+  AND its own session's data keeps coming; a token anyone can declare decides nothing alone.
 
 Sources are the publishers' zenoh session ids as their samples carry them: the id in the sample's
 timestamp (`inbox.sample_source`), which every session of the run stamps (timestamping is on in all of
@@ -42,7 +42,7 @@ import numpy as np
 
 from reconswarm.geometry.plane import SAMPLE_SPACING_M, Edges, sample_boundary, signed_distance
 from reconswarm.net import wire
-from reconswarm.net.membership import Membership as Membership  # (its home before; re-exported)
+from reconswarm.net.timing import TIMING
 from reconswarm.paper.planner import max_repulsion_speed
 from reconswarm.plant.unicycle import arc_head_speed
 from reconswarm.scenario.model import Scenario
@@ -104,7 +104,7 @@ def command_bound_mps(s: Scenario) -> float:
 class Pins:
     """Which session speaks for whom: the world (pinned at its first clock) and each agent."""
 
-    repin_after_s: float = 1.0
+    repin_after_s: float = TIMING.repin_after_s
     world: str | None = None
     agents: dict[int, tuple[str, float]] = field(default_factory=dict)  # id -> (source, last heard, wall s)
 

@@ -25,7 +25,6 @@ from reconswarm.scenario.wire_limits import MAX_PAYLOAD_BYTES
 log = logging.getLogger("reconswarm")
 MODES = ("peer", "client", "router")
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
-LEASE_MS = TIMING.lease_ms  # a frozen process is declared gone after this (zenoh's 10 s is too slow for robots)
 
 # A router forwards no message with a payload over the wire's limit: every decoder refuses such a payload anyway
 # (reconswarm/net/wire.py), and a router that fans it out makes each receiver take it first (a flood of 1 MiB
@@ -68,7 +67,7 @@ class ZenohOptions:
             conf = zenoh.Config()
             conf.insert_json5("mode", json.dumps(self.mode))
             conf.insert_json5("scouting/multicast/enabled", "false")
-            conf.insert_json5("transport/link/tx/lease", str(LEASE_MS))
+            conf.insert_json5("transport/link/tx/lease", str(TIMING.lease_ms))
             conf.insert_json5("connect/timeout_ms", '{"router": -1, "peer": -1, "client": 15000}')
         # Advanced publishers (late joiners' obstacle sets) need timestamps.
         conf.insert_json5("timestamping/enabled", "true")

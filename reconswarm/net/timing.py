@@ -1,4 +1,5 @@
-"""Every protocol timing constant of the three roles (agent, simworld, monitor), in one place.
+"""Every protocol timing constant of the three roles (agent, simworld, monitor), in one place (who is alive:
+each role's `Policy` in reconswarm/net/membership.py, built from these).
 
 All of them are wall-clock durations (the processes measure them with `time.monotonic()`), except where
 the name says simulated time (`_sim_s`) or a fraction of the realtime period. The defaults are the values
@@ -20,6 +21,11 @@ class Timing:
     # A peer whose beacons stopped this long ago (alive by its token, but silent) is not waited for (a guess
     # too); longer than the lease for the same reason.
     peer_silent_s: float = 3.0
+    # Realtime: a live peer silent this long (wall seconds; at least 3 periods) has left the cells we listen to
+    # (or is stuck): its last beacon shows where it was, not where it is, and planned with it is a ghost that can
+    # pin an agent in place (seen: a ROS 2 mission where five ghosts held the last agent still for 180 s). Wall
+    # time, not ticks: in an overloaded run every beacon is ticks old, yet a live neighbour is still heard.
+    realtime_peer_silent_s: float = 1.0
     # Lockstep: the world publishes a tick it waits on again every `republish_s`; nothing from it (a clock, our
     # state) for this long, or its token gone: it stalls (frozen mid-tick, starved), nobody can have a new state
     # to announce, so no wait above is given up, and every wait starts afresh once it speaks again.
@@ -46,7 +52,7 @@ class Timing:
     ros2_plan_age_periods: float = 1.0
     # ROS 2 mode: an agent that sends none for that reason sends a stop (a zero Twist) once its robot's hold is
     # over, then this often while it still sends none: its heartbeat for the world, well inside the world's 2 s
-    # of silence after which an agent with a token is not counted alive (admission.Membership); a stop counts as
+    # of silence after which an agent with a token is not counted alive (`member_fresh_s`); a stop counts as
     # its robot's command in the missed-deadline ratio, so it is sent no more often than that.
     ros2_stop_every_s: float = 0.5
     # While not commanding for more than `waiting_log_s`, log what the next tick lacks, this often.
@@ -59,7 +65,7 @@ class Timing:
     # after this long with no later clock from the world (whose next clock says someone else claimed the end).
     end_confirm_s: float = 5.0
     # The agent's report (its counters, for the monitor) at least this often: its heartbeat, well inside the
-    # monitor's 2 s of silence after which an agent with a token is not counted alive (admission.Membership).
+    # monitor's 2 s of silence after which an agent with a token is not counted alive (`member_fresh_s`).
     telemetry_s: float = 0.5
 
     # -------------------------------------------------------------------------------------- simworld
@@ -100,6 +106,17 @@ class Timing:
     world_stall_s: float = 2.0
 
     # --------------------------------------------------------------------------- simworld and monitor
+    # Who is alive (membership.Membership: a token AND own data, commands for the world, reports for the monitor):
+    # an agent whose data has been silent this long of wall time AND this long of simulated time is not alive
+    # (neither a stalled world, during which nobody sends, nor a fast realtime clock makes a live agent look dead).
+    member_fresh_s: float = 2.0
+    member_fresh_sim_s: float = 2.0
+    # ... and one not heard since its token appeared (or since the start, or since our own link came back).
+    member_grace_s: float = 10.0
+    member_grace_sim_s: float = 5.0
+    # Lockstep: the world stops counting a token whose agent has sent nothing since a tick it waits on began this
+    # much after an agent's own wait for its peers (`agent_wait_timeout_s`) would have given up.
+    await_margin_s: float = 1.0
     # An agent's token that goes counts as gone this much later (unless back by then): a dying router takes
     # every token with it a moment before our own session sees its link go (uplink.py).
     token_confirm_s: float = 0.3
@@ -108,6 +125,9 @@ class Timing:
     relink_settle_s: float = 10.0
 
     # --------------------------------------------------------------------------------------- session
+    # Admission (admission.Pins): another session may speak for an agent once the one pinned to it has been silent
+    # this long (a restarted agent's new session takes over).
+    repin_after_s: float = 1.0
     # A frozen process is declared gone after this (zenoh's default 10 s is too slow for robots).
     lease_ms: int = 2000
     # Opening a session retries until the router answers or this passes (100+ processes starting at once on

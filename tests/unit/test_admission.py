@@ -22,7 +22,8 @@ from reconswarm.net.admission import (
     command_bound_mps,
 )
 from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.membership import Membership
+from reconswarm.net.membership import Membership, Policy
+from reconswarm.net.timing import Timing
 from reconswarm.paper.planner import command, neighbour_table
 from reconswarm.plant.sensing import ContourField
 from reconswarm.scenario.model import load
@@ -180,7 +181,7 @@ def test_clock_only_from_the_world() -> None:
 
 
 def test_a_forged_liveliness_token_does_not_keep_a_dead_agent_alive() -> None:
-    m = Membership(fresh_s=2.0, fresh_sim_s=2.0, grace_s=10.0, grace_sim_s=5.0)
+    m = Membership(Policy.world(Timing(token_confirm_s=0.0)))  # fresh 2 s / 2 s, grace 10 s / 5 s
     for a in (3, 4):
         m.token(a, True, 0.0, 0.0)
     assert m.alive_ids(0.5, 0.0) == [3, 4]  # before the start, tokens are enough
@@ -209,7 +210,7 @@ def test_a_forged_liveliness_token_does_not_keep_a_dead_agent_alive() -> None:
 def test_after_the_callers_own_stall_a_token_that_goes_is_kept_until_settled() -> None:
     """The world was frozen 10 s: its session lapsed, and every agent's token goes and comes back once it runs
     again. Nobody is gone for that; a token still gone once settled is."""
-    m = Membership(fresh_s=2.0, fresh_sim_s=2.0, grace_s=10.0, grace_sim_s=5.0)
+    m = Membership(Policy.world(Timing(token_confirm_s=0.0)))  # fresh 2 s / 2 s, grace 10 s / 5 s
     for a in (3, 4):
         m.token(a, True, 0.0, 0.0)
     m.start(1.0, 0.0)

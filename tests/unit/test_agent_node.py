@@ -15,7 +15,7 @@ import pytest
 
 from agent.brain import AgentBrain, Peer
 from agent.messages import Output, Reconnect
-from agent.neighbours import REALTIME_SILENT_S, Cells
+from agent.neighbours import Cells
 from agent.node import AgentNode
 from reconswarm.net import wire
 from reconswarm.net.node import Exit, Invalid, Stop
@@ -388,13 +388,13 @@ def test_realtime_acts_at_the_deadline_on_whatever_it_has() -> None:
 
 def test_realtime_a_live_peer_heard_no_more_is_not_a_ghost() -> None:
     """Realtime: a live peer that left the cells we listen to is heard no more; its last beacon shows where it
-    was. Silent past REALTIME_SILENT_S (wall) it is neither waited for (we act as soon as the others are in)
+    was. Silent past realtime_peer_silent_s (wall) it is neither waited for (we act as soon as the others are in)
     nor planned with (seen: stale beacons pinned an agent in place for 180 s of a ROS 2 mission)."""
     node = started(peers=(B, C))
     rt = {"mode": "realtime", "speed": 1.0}
     node.step([clock(0, (A, B, C), **rt), state(0, 100.0, 0.0), beacon(B, 0, 104.0, 0.0), beacon(C, 0, 110.0, 0.0)],
               0.0)
-    k, now = 30, REALTIME_SILENT_S + 0.5  # C has said nothing since tick 0: it left our cells
+    k, now = 30, T.realtime_peer_silent_s + 0.5  # C has said nothing since tick 0: it left our cells
     node.step([beacon(B, k - 1, 104.0, 0.0)], now - 0.05)
     out = node.step([clock(k, (A, B, C), **rt), state(k, 100.0, 0.0), beacon(B, k, 104.0, 0.0)], now)
     want = reference(k, (100.0, 0.0), [Peer(B, 104.0, 0.0, RADIUS[B])])

@@ -5,6 +5,7 @@ The layer contract itself is checked by `lint-imports` (pyproject.toml), which .
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import grimp
@@ -52,3 +53,35 @@ def test_no_function_level_project_imports_outside_entry_files():
 @pytest.mark.parametrize("path", _sources(), ids=lambda p: str(p.relative_to(ROOT)))
 def test_modules_are_readable_in_one_sitting(path: Path):
     assert len(path.read_text().splitlines()) < 400
+
+
+def _layer_map() -> str:
+    """The layer map of docs/architecture.md: the code block under its "## Layers" heading."""
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    return text.split("## Layers", 1)[1].split("```", 2)[1]
+
+
+def _unmapped() -> list[str]:
+    block, missing = _layer_map(), []
+    # reconswarm/'s subpackages: one entry each (`   net/  ...` up to the next entry), naming its modules as words.
+    entries: dict[str, str] = {}
+    current = None
+    for line in block.split(" reconswarm/ ", 1)[1].splitlines():
+        head = re.match(r"^   (\w+)/\s", line)
+        current = head.group(1) if head else current
+        if current is not None:
+            entries[current] = entries.get(current, "") + line + "\n"
+    for p in _sources():
+        rel = p.relative_to(ROOT)
+        if p.name.startswith("__"):
+            continue
+        if rel.parts[0] == "reconswarm" and len(rel.parts) == 3:
+            if not re.search(rf"\b{p.stem}\b", entries.get(rel.parts[1], "")):
+                missing.append(str(rel))
+        elif not re.search(rf"\b{re.escape(p.name)}\b", block):
+            missing.append(str(rel))
+    return missing
+
+
+def test_the_layer_map_names_every_module():
+    assert _unmapped() == []

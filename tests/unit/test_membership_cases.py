@@ -4,11 +4,14 @@ fresh data in either clock, the grace after a token appears, the bounds inclusiv
 
 from __future__ import annotations
 
-from reconswarm.net.membership import Membership
+from reconswarm.net.membership import Membership, Policy
+from reconswarm.net.timing import Timing
+
+P = Policy.world(Timing(token_confirm_s=0.0))  # fresh 2 s / 2 s, grace 10 s / 5 s, await 4 s, confirmed at once
 
 
 def _started(wall: float = 1000.0, sim: float = 0.0) -> Membership:
-    m = Membership()  # fresh 2 s / 2 s, grace 10 s / 5 s, await grace 4 s, tokens confirmed at once
+    m = Membership(P)
     m.token(1, True, wall, sim)
     m.start(wall, sim)
     return m
@@ -38,7 +41,7 @@ def test_data_from_before_a_token_came_back_does_not_count() -> None:
 
 
 def test_the_grace_of_a_new_token_counts_from_when_it_appeared_in_each_clock() -> None:
-    m = Membership()
+    m = Membership(P)
     m.start(990.0, 2.0)
     m.token(1, True, 1000.0, 7.0)  # joins later: the grace from (1000, 7)
     assert m.alive(1, 1010.0, 13.0)  # 10.0 s of wall: included
@@ -48,7 +51,7 @@ def test_the_grace_of_a_new_token_counts_from_when_it_appeared_in_each_clock() -
 
 
 def test_the_grace_in_wall_time_when_simulated_time_runs_ahead_of_it() -> None:
-    m = Membership()
+    m = Membership(P)
     m.start(4.0, 100.0)  # (a monotonic clock a few seconds old, a mission far into simulated time)
     m.token(1, True, 5.0, 200.0)
     assert m.alive(1, 15.0, 201.0)
@@ -91,7 +94,7 @@ def test_awaited_waits_out_a_settle_and_mutes_from_its_end_on() -> None:
 
 
 def test_awaited_before_the_start_mutes_nobody() -> None:
-    m = Membership()
+    m = Membership(P)
     m.token(1, True, 1000.0, 0.0)
     m.awaited(1, 1000.0, 1100.0)
     m.start(1101.0, 0.0)

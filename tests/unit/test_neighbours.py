@@ -16,10 +16,11 @@ from hypothesis import strategies as st
 
 from agent.brain import AgentBrain, Peer
 from agent.messages import Output
-from agent.neighbours import REALTIME_SILENT_S, Cells, Neighbourhood
+from agent.neighbours import Cells, Neighbourhood
 from agent.node import AgentNode
 from reconswarm.net import wire
 from reconswarm.net.cells import CellGrid
+from reconswarm.net.timing import TIMING
 from reconswarm.scenario.model import PlannerKind, load
 from tests.support import PAPER, joined, left
 
@@ -228,9 +229,9 @@ def test_peers_heard_lately_are_those_heard_within_the_quiet_time(updates: list[
     for a in alive:
         heard.setdefault(a, now)  # (every live peer has a time: its token's if nothing else)
     now += 0.5
-    quiet = max(REALTIME_SILENT_S, 3.0 * period_s)
+    quiet = max(TIMING.realtime_peer_silent_s, 3.0 * period_s)
     expected = {a for a in alive if now - heard[a] <= quiet}
-    assert Neighbourhood.heard_lately(alive, heard, now, period_s) == expected
+    assert Neighbourhood.heard_lately(alive, heard, now, period_s, TIMING.realtime_peer_silent_s) == expected
 
 
 def test_the_intruders_of_a_tick_are_the_peers_within_reach_it_did_not_wait_for() -> None:

@@ -10,8 +10,10 @@ import math
 
 import numpy as np
 
-from agent.neighbours import REALTIME_SILENT_S, Neighbourhood
+from agent.neighbours import Neighbourhood
 from reconswarm.net.cells import CellGrid
+from reconswarm.net.membership import Policy
+from reconswarm.net.timing import TIMING
 from reconswarm.plant import unicycle
 from reconswarm.scenario.model import load
 from tests.support import PAPER, beacon
@@ -70,10 +72,11 @@ def test_intruders_are_within_reach_on_both_axes_the_bound_included() -> None:
 
 def test_realtime_hears_lately_who_spoke_within_a_second_or_three_periods() -> None:
     heard = {2: 6.0, 3: 8.25, 4: 9.0, 5: 9.5}  # (in the order of their times)
-    assert Neighbourhood.heard_lately({2, 3, 4, 5}, heard, 10.0, DT) == {4, 5}  # 1.0 s ago: still heard
-    assert REALTIME_SILENT_S == 1.0
-    assert Neighbourhood.heard_lately({2, 3, 4, 5}, heard, 10.0, 0.5) == {4, 5}  # 1.5 s: 3 periods of 0.5 s
-    assert Neighbourhood.heard_lately({2, 3, 4}, heard, 9.75, 0.5) == {3, 4}  # 1.5 s ago: included; 5 is not alive
+    lately_s = Policy.agent(TIMING).lately_s
+    assert lately_s == 1.0
+    assert Neighbourhood.heard_lately({2, 3, 4, 5}, heard, 10.0, DT, lately_s) == {4, 5}  # 1.0 s ago: still heard
+    assert Neighbourhood.heard_lately({2, 3, 4, 5}, heard, 10.0, 0.5, lately_s) == {4, 5}  # 1.5 s: 3 periods of 0.5 s
+    assert Neighbourhood.heard_lately({2, 3, 4}, heard, 9.75, 0.5, lately_s) == {3, 4}  # 1.5 s ago: in; 5 is not alive
 
 
 def test_the_runtime_waits_for_live_peers_that_spoke_in_a_cell_it_hears() -> None:

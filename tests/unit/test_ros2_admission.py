@@ -14,7 +14,8 @@ from reconswarm.net.admission import Admission, IntrusionKind
 from reconswarm.net.cells import CellGrid
 from reconswarm.net.gate import Gate
 from reconswarm.net.keys import Keys
-from reconswarm.net.membership import Membership
+from reconswarm.net.membership import Membership, Policy
+from reconswarm.net.timing import Timing
 from reconswarm.record.summary import distinct_intrusions
 from reconswarm.scenario.model import load
 from tests.support import PAPER
@@ -100,7 +101,7 @@ def test_two_different_commands_for_one_agents_tick_conflict() -> None:
 
 
 def test_a_token_without_data_stops_holding_a_waiting_tick_after_the_grace() -> None:
-    m = Membership(await_grace_s=4.0)
+    m = Membership(Policy.world(Timing(token_confirm_s=0.0)))  # await grace 4 s
     for a in (3, 4):
         m.token(a, True, 0.0, 0.0)
     m.start(1.0, 0.0)
@@ -119,7 +120,7 @@ def test_a_token_without_data_stops_holding_a_waiting_tick_after_the_grace() -> 
 
 
 def test_an_agent_that_answered_is_never_muted_by_a_long_wait_for_another() -> None:
-    m = Membership(await_grace_s=4.0)
+    m = Membership(Policy.world(Timing(token_confirm_s=0.0)))  # await grace 4 s
     m.token(4, True, 0.0, 0.0)
     m.start(1.0, 0.0)
     m.data(4, 2.1, 0.05)

@@ -26,7 +26,7 @@ from reconswarm.net.session import ZenohOptions
 from reconswarm.plant import unicycle
 from reconswarm.scenario.model import load
 from simworld.process import WorldPort
-from simworld.ros2_io import Ros2Plant, Ros2World, WorldRos2, planned_tick
+from simworld.ros2_io import Ros2Robots, Ros2World, WorldRos2, planned_tick
 from simworld.world import Command
 from tests.support import PAPER, free_port
 from tests.unit.test_agent_host_sessions import two_sessions
@@ -90,7 +90,7 @@ def _wait(what: Any, n: int) -> list[Any]:
 def test_the_plant_dates_a_cmd_vel_by_its_attachments_source_timestamp() -> None:
     with two_sessions() as (z, out):
         inbox = Inbox()
-        world = WorldRos2(z, 0, Ros2Plant(S, 0.2), inbox.callback, PERIOD_S)
+        world = WorldRos2(z, 0, Ros2Robots(S, 0.2), inbox.callback, PERIOD_S)
         try:
             a = S.agents[0].id
             for k in range(4):  # ticks 0-3, a period apart
@@ -132,7 +132,7 @@ def test_the_plant_dates_a_cmd_vel_by_its_attachments_source_timestamp() -> None
 def test_the_plant_publishes_each_robots_odometry_and_keeps_when_each_tick_was_out() -> None:
     limited = dataclasses.replace(S, world=dataclasses.replace(S.world, max_speed_mps=1.0, max_turn_rate_radps=0.5))
     with two_sessions() as (z, out):
-        base = Ros2Plant(limited, 0.2)
+        base = Ros2Robots(limited, 0.2)
         world = WorldRos2(z, 0, base, lambda _sample: None, PERIOD_S)
         a, i = S.agents[1].id, 1
         heard: list[Any] = []

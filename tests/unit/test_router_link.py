@@ -7,11 +7,12 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 
 import pytest
 import zenoh
 
-from reconswarm.net.membership import Membership
+from reconswarm.net.membership import Membership, Policy
 from reconswarm.net.node import RouterLink
 from reconswarm.net.session import ZenohOptions
 from reconswarm.net.uplink import LinkChange, Uplink
@@ -20,8 +21,9 @@ from tests.support import ROOT, free_port
 from tests.unit.test_world_node import IDS, S, T, advance, commands, ended, started, ticks, tokens
 
 
-def _members() -> Membership:
-    m = Membership(fresh_s=2.0, fresh_sim_s=2.0, grace_s=10.0, grace_sim_s=5.0, confirm_s=0.3)
+def _members(relink_settle_s: float = T.relink_settle_s) -> Membership:
+    """Fresh 2 s / 2 s, grace 10 s / 5 s, a token's end confirmed 0.3 s later."""
+    m = Membership(replace(Policy.world(T), relink_settle_s=relink_settle_s))
     for a in (1, 2, 3):
         m.token(a, True, 0.0, 0.0)
     m.start(1.0, 0.0)
@@ -47,10 +49,10 @@ def test_while_our_router_is_gone_nobody_is_lost() -> None:
     m = _members()
     for a in (1, 2, 3):
         m.token(a, False, 10.5, 21.0)
-    m.link(False, 10.6, 21.2, settle_s=10.0)  # within confirm_s of the tokens going
+    m.link(False, 10.6, 21.2)  # within confirm_s of the tokens going
     for w in (11.0, 15.0, 30.0):
         assert m.alive_ids(w, 2 * w) == [1, 2, 3]  # no data for 20 s, tokens gone: nobody judged
-    m.link(True, 30.5, 61.0, settle_s=10.0)
+    m.link(True, 30.5, 61.0)  # tokens have 10 s to come back
     m.token(1, True, 31.0, 62.0)
     m.token(2, True, 34.0, 68.0)  # a client retries its router at most every 4 s
     assert m.alive_ids(35.0, 70.0) == [1, 2, 3]  # settling: 3 still has time to come back
@@ -62,9 +64,9 @@ def test_while_our_router_is_gone_nobody_is_lost() -> None:
 
 
 def test_after_the_link_is_back_a_token_that_goes_is_judged_again() -> None:
-    m = _members()
-    m.link(False, 10.6, 21.2, settle_s=1.0)
-    m.link(True, 12.0, 24.0, settle_s=1.0)
+    m = _members(relink_settle_s=1.0)
+    m.link(False, 10.6, 21.2)
+    m.link(True, 12.0, 24.0)
     m.data(2, 13.5, 27.0)
     m.token(2, False, 14.0, 28.0)
     assert not m.alive(2, 14.3, 28.6)

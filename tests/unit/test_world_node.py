@@ -140,7 +140,7 @@ def test_lockstep_waits_for_every_command_then_integrates() -> None:
     assert tick.clock.k == 0 and tick.clock.alive == tuple(sorted(IDS)) and not tick.clock.end
     assert [m.id for m in tick.states] == IDS and tick.truth.ids == tuple(IDS)
     assert all(m.scan.points for m in tick.states if m.scan is not None)
-    p0, th0 = node.plant.p.copy(), node.plant.theta.copy()
+    p0, th0 = node.robots.p.copy(), node.robots.theta.copy()
     assert node.awaiting(0.0) == len(IDS)  # the runtime sleeps until every command could be in
     assert node.step(commands(0, (0.5, 0.2), 0.01, skip=(IDS[3],)), 0.02) == [] and node.k == 0  # one missing
     assert node.awaiting(0.02) == 1 and node.missing() == [IDS[3]]
@@ -151,7 +151,7 @@ def test_lockstep_waits_for_every_command_then_integrates() -> None:
                   0.5 * np.sin(th0) + S.head_offsets * 0.2 * np.cos(th0)], axis=1)
     p1, th1 = unicycle.step(p0, th0, u, S.head_offsets, S.meta.dt_s, S.world.max_speed_mps,
                             S.world.max_turn_rate_radps)
-    assert np.array_equal(node.plant.p, p1) and np.array_equal(node.plant.theta, th1)
+    assert np.array_equal(node.robots.p, p1) and np.array_equal(node.robots.theta, th1)
     (tick1,) = ticks(node.step([], 0.05))
     assert tick1.clock.k == 1 and tick1.truth.px == tuple(p1[:, 0].tolist())
 
@@ -172,7 +172,7 @@ def test_a_silent_robot_is_held_then_stopped_and_strikes_out() -> None:
     now = 0.0
     node.step([], now)
     node.step(commands(0, (1.0, 0.0), now), now)
-    trail = [node.plant.p[i].copy()]
+    trail = [node.robots.p[i].copy()]
     hold_ticks = round(T.hold_sim_s / S.meta.dt_s)
     for k in range(1, 3):
         node.step([], now)  # publish tick k
@@ -183,14 +183,14 @@ def test_a_silent_robot_is_held_then_stopped_and_strikes_out() -> None:
         advance(node, now + T.step_timeout_s - 0.5, now + T.step_timeout_s)  # the step times out: held
         now += T.step_timeout_s
         assert node.k == k + 1 and silent in node.alive  # (its token is there, within the grace)
-        trail.append(node.plant.p[i].copy())
+        trail.append(node.robots.p[i].copy())
     assert node.strikes[silent] == 2 and silent in node.unresponsive
     # Not waited for any more: the others' commands are enough.
     for k in range(3, 3 + hold_ticks + 2):
         node.step([], now)
         node.step(commands(k, (1.0, 0.0), now, skip=(silent,)), now)
         assert node.k == k + 1
-        trail.append(node.plant.p[i].copy())
+        trail.append(node.robots.p[i].copy())
     moved = [float(np.linalg.norm(b - a)) for a, b in itertools.pairwise(trail)]
     assert all(m > 0 for m in moved[:hold_ticks])  # the last command is held for hold_sim_s
     assert all(m == 0 for m in moved[hold_ticks:])  # then the robot stops
@@ -211,7 +211,7 @@ def test_late_commands_count_as_the_latest() -> None:
     advance(node, now + 0.1, now + 0.1 + T.step_timeout_s)
     # held as the head point's velocity u = M(θ_0) [0.3, 0] at the heading of tick 0, the one it was planned at
     th0 = S.headings[0]
-    assert node.plant.held[0].tolist() == [0.3 * np.cos(th0), 0.3 * np.sin(th0)] and node.plant.held_k[0] == 0
+    assert node.robots.held[0].tolist() == [0.3 * np.cos(th0), 0.3 * np.sin(th0)] and node.robots.held_k[0] == 0
 
 
 def test_invalid_messages_and_commands_of_unknown_agents_are_counted_on_the_clock() -> None:
@@ -261,7 +261,7 @@ def test_a_token_that_goes_is_gone_once_confirmed_and_commands_alone_do_not_coun
 def test_in_ros2_mode_a_stop_dated_stale_keeps_its_agent_alive_and_moves_nothing() -> None:
     """An agent behind the clock sends no late plan, only a stop every 0.5 s, which the plant dates stale
     (simworld/ros2_io.py `WorldRos2.dated`): the world still counts it alive and its robot stands; an agent that
-    never sends anything is lost once the start's grace is over (10 s: admission.Membership), its robot held."""
+    never sends anything is lost once the start's grace is over (10 s: `member_grace_s`), its robot held."""
     node = Ros2World(S, speed=1.0, timing=T)
     assert node.step([*tokens(), MONITOR], 0.0) == [] and node.started
     stopper, silent = IDS[0], IDS[1]
@@ -308,7 +308,7 @@ def test_a_world_stalled_itself_waits_afresh_keeps_flapping_tokens_and_stays_in_
     node.step([], 10.5)
     assert node.alive == set(IDS)  # past token_confirm_s, but settling (peer_silent_s)
     node.step([*tokens(), *commands(0, (0.5, 0.0), 10.6)[:2]], 10.6)
-    assert node.k == 1 and node.plant.held_k.tolist() == [0] * len(IDS) and not node.resumed
+    assert node.k == 1 and node.robots.held_k.tolist() == [0] * len(IDS) and not node.resumed
 
 
 def test_after_its_own_stall_a_token_that_stays_gone_is_let_go_once_settled() -> None:
@@ -379,7 +379,7 @@ def test_stop_ends_the_mission_at_once_and_done_stays_done() -> None:
 
 def test_converged_ends_the_mission() -> None:
     node = started()
-    node.plant.p = np.asarray(S.target_m) + S.offsets
+    node.robots.p = np.asarray(S.target_m) + S.offsets
     out = node.step([], 0.0)
     assert ended(out) == "converged" and ticks(out)[0].clock.reason == "converged"
 
@@ -413,7 +413,7 @@ def test_a_robot_next_to_an_obstacle_gets_its_contour() -> None:
     node = started()
     ob = S.obstacles[0]
     vx, vy = ob.vertices_m[0]
-    node.plant.p[0] = (vx - 1.0, vy - 1.0)
+    node.robots.p[0] = (vx - 1.0, vy - 1.0)
     (tick,) = ticks(node.step([], 0.0))
     mine = [m.scan for m in tick.states if m.id == IDS[0] and m.scan is not None]
     assert len(mine) == 1 and mine[0].id == IDS[0] and mine[0].k == tick.clock.k and len(mine[0].points) > 0
@@ -427,12 +427,12 @@ def test_a_held_robot_is_in_the_scans_of_the_agents_near_it_and_only_theirs() ->
     """An agent gone: its robot is held, and the world's range sensing reports it to the agents within
     body_range_m (with cells they may never have heard its beacons), as (id, head point)."""
     node = started()
-    reach = node.plant.body_range_m
+    reach = node.robots.body_range_m
     gone, near, far = IDS[0], IDS[1], IDS[2]
-    node.plant.p[:] = [(0.0, 1e4 + 100.0 * i) for i in range(len(IDS))]  # everyone far apart, no obstacle near
-    node.plant.p[0] = (5000.0, 5000.0)
-    node.plant.p[1] = (5000.0 + reach - 1.0, 5000.0)  # just inside
-    node.plant.p[2] = (5000.0, 5000.0 + reach + 1.0)  # just outside
+    node.robots.p[:] = [(0.0, 1e4 + 100.0 * i) for i in range(len(IDS))]  # everyone far apart, no obstacle near
+    node.robots.p[0] = (5000.0, 5000.0)
+    node.robots.p[1] = (5000.0 + reach - 1.0, 5000.0)  # just inside
+    node.robots.p[2] = (5000.0, 5000.0 + reach + 1.0)  # just outside
     node.step(tokens([gone], up=False), 0.0)
     (tick,) = ticks(node.step([], 0.5))  # tick 0 again, its token's going confirmed
     scans = {m.id: m.scan for m in tick.states if m.scan is not None}  # (each scan rides in its state)

@@ -12,7 +12,7 @@ from reconswarm.net import wire
 from reconswarm.net.node import RouterLink, Stop
 from reconswarm.net.wire import ClockMode
 from reconswarm.scenario.model import Scenario
-from simworld.plant import Plant
+from simworld.robots import Robots
 from simworld.world import Command, Phase, WorldNode
 from tests.unit.test_world_node import (
     IDS,
@@ -298,13 +298,13 @@ def test_a_token_without_commands_holds_a_tick_up_for_the_agents_own_wait_plus_1
     assert node.k == 1 and mute not in node.alive
 
 
-def test_the_plant_given_is_the_one_stepped() -> None:
-    plant = Plant(S, T.hold_sim_s)
-    node = WorldNode(S, ClockMode.LOCKSTEP, 10.0, T, plant=plant)
-    assert node.plant is plant
+def test_the_robots_given_are_the_ones_stepped() -> None:
+    robots = Robots(S, T.hold_sim_s)
+    node = WorldNode(S, ClockMode.LOCKSTEP, 10.0, T, robots=robots)
+    assert node.robots is robots
     node.step([*tokens(), MONITOR], 0.0)
     run_ticks(node, range(0, 1), 0.0)
-    assert not (plant.p == S.starts).all()  # the robots it holds moved
+    assert not (robots.p == S.starts).all()  # the robots it holds moved
 
 
 def test_a_realtime_agent_silent_2_s_of_wall_and_of_simulated_time_is_gone_though_its_token_stays() -> None:

@@ -1,4 +1,4 @@
-"""The world's plant (simworld/plant.py) in the cases its mutation run (bench/mutation.py) found untested: what a
+"""The world's plant (simworld/robots.py) in the cases its mutation run (bench/mutation.py) found untested: what a
 tick's truth and states say, a held robot in a scan with no contour in range, the world's speed and turn
 limits, and a robot commanded at every tick moving at every tick. Pure: no zenoh."""
 
@@ -11,14 +11,14 @@ import pytest
 
 from reconswarm.net.cells import CellGrid
 from reconswarm.plant import unicycle
-from simworld.plant import Plant
+from simworld.robots import Robots
 from tests.unit.test_world_node import IDS, S
 
 DT = S.meta.dt_s
 
 
 def test_a_ticks_truth_and_states_say_its_tick_time_and_every_robots_pose() -> None:
-    plant = Plant(S, 0.2)
+    plant = Robots(S, 0.2)
     plant.theta = plant.theta + np.linspace(0.1, 1.0, len(IDS))  # distinct headings
     plant.p = plant.p + np.column_stack([np.arange(len(IDS)), 2.0 * np.arange(len(IDS))])
     plant.p[0] = np.asarray(S.obstacles[0].vertices_m[0]) - 1.0  # next to an obstacle: it has a scan
@@ -34,7 +34,7 @@ def test_a_ticks_truth_and_states_say_its_tick_time_and_every_robots_pose() -> N
 
 
 def test_a_held_robot_near_a_live_one_is_in_its_scan_even_with_no_contour_in_range() -> None:
-    plant = Plant(S, 0.2)
+    plant = Robots(S, 0.2)
     far = np.array([-5000.0, 3000.0])  # nowhere near an obstacle
     plant.p[0] = far
     plant.p[1] = far + np.array([3.0, 4.0])  # 5 m away; its agent is gone
@@ -46,7 +46,7 @@ def test_a_held_robot_near_a_live_one_is_in_its_scan_even_with_no_contour_in_ran
 
 def test_the_worlds_speed_and_turn_limits_bind_the_plant() -> None:
     limited = replace(S, world=replace(S.world, max_speed_mps=1.0, max_turn_rate_radps=0.5))
-    plant = Plant(limited, 0.2)
+    plant = Robots(limited, 0.2)
     p0, th0 = plant.p.copy(), plant.theta.copy()
     for a in IDS:
         plant.command(a, 0, 5.0, 3.0)  # asks for 5 m/s and 3 rad/s
@@ -60,7 +60,7 @@ def test_the_worlds_speed_and_turn_limits_bind_the_plant() -> None:
 
 
 def test_a_robot_commanded_at_every_tick_moves_at_every_tick() -> None:
-    plant = Plant(S, 0.2)  # holds a command 4 ticks
+    plant = Robots(S, 0.2)  # holds a command 4 ticks
     for k in range(12):
         before = plant.p.copy()
         for a in IDS:
@@ -69,16 +69,16 @@ def test_a_robot_commanded_at_every_tick_moves_at_every_tick() -> None:
         assert np.hypot(*(plant.p - before).T) == pytest.approx(1.0 * DT)  # straight at 1 m/s
 
 
-def apart(plant: Plant | None = None) -> Plant:
+def apart(plant: Robots | None = None) -> Robots:
     """Every robot far from every obstacle and from each other (commands of (0, 0): they stand still), in a new
     plant holding commands 0.2 s or the one given."""
-    plant = Plant(S, 0.2) if plant is None else plant
+    plant = Robots(S, 0.2) if plant is None else plant
     for i in range(len(IDS)):
         plant.p[i] = np.array([-5000.0, 3000.0 + 1000.0 * i])
     return plant
 
 
-def moved(plant: Plant, k: int) -> np.ndarray:
+def moved(plant: Robots, k: int) -> np.ndarray:
     """How far each head point moves over the step k -> k+1."""
     before = plant.p.copy()
     plant.apply(k)
@@ -110,7 +110,7 @@ def test_a_held_robot_is_reported_within_reach_plus_two_steps_and_not_beyond() -
 
 
 def test_a_missing_command_is_held_one_tick_when_hold_sim_s_is_one_tick_then_the_robot_stops() -> None:
-    plant = Plant(S, DT)
+    plant = Robots(S, DT)
     for a in IDS:
         plant.command(a, 0, 1.0, 0.0)
     assert moved(plant, 0) == pytest.approx(1.0 * DT)  # its own tick
@@ -147,7 +147,7 @@ def test_held_bodies_without_a_tick_is_the_start_only_robots_whose_agents_are_go
 def test_a_robot_never_commanded_is_held_from_tick_1_even_with_a_hold_of_many_ticks() -> None:
     """hold_sim_s = 5 s (100 ticks): a robot whose agent never commanded is held from tick 1 all the same (its
     commands never came; docs/wire.md), not only 100 ticks after some earlier time."""
-    plant = Plant(S, 5.0)
+    plant = Robots(S, 5.0)
     for i in range(len(IDS)):
         plant.p[i] = np.array([-5000.0, 3000.0 + 1000.0 * i])
     plant.p[1] = plant.p[0] + np.array([0.0, 5.0])

@@ -1,4 +1,4 @@
-"""How far the world drives a robot on a command of an earlier tick (simworld/plant.py, `hold_reach_m`): held, or
+"""How far the world drives a robot on a command of an earlier tick (simworld/robots.py, `hold_reach_m`): held, or
 taken late, only while the robot stands within d_safe / 2 of where its agent planned it; a command of its own tick
 always. Pure: no zenoh."""
 
@@ -7,28 +7,28 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from simworld.plant import Plant
-from simworld.ros2_io import Ros2Plant
-from tests.unit.test_plant_cases import apart as spread
-from tests.unit.test_plant_cases import moved
+from simworld.robots import Robots
+from simworld.ros2_io import Ros2Robots
+from tests.unit.test_robots_cases import apart as spread
+from tests.unit.test_robots_cases import moved
 from tests.unit.test_world_node import IDS, S
 
 DT = S.meta.dt_s
 
 
-def apart(plant: Plant) -> Plant:
-    """test_plant_cases.apart, every robot heading along +x."""
+def apart(plant: Robots) -> Robots:
+    """test_robots_cases.apart, every robot heading along +x."""
     spread(plant).theta[:] = 0.0
     return plant
 
 
 def test_the_reach_is_half_of_d_safe() -> None:
-    assert S.planner.d_safe_m == 2.0 and Plant(S, 0.2).hold_reach_m == 1.0
+    assert S.planner.d_safe_m == 2.0 and Robots(S, 0.2).hold_reach_m == 1.0
 
 
-@pytest.mark.parametrize("plant_kind", [Plant, Ros2Plant])
+@pytest.mark.parametrize("plant_kind", [Robots, Ros2Robots])
 def test_a_missing_command_is_held_only_while_the_robot_stands_within_reach_of_where_it_was_planned(
-        plant_kind: type[Plant]) -> None:
+        plant_kind: type[Robots]) -> None:
     """7 m/s is 0.35 m a step: held from 0.35 and 0.7 m away, not from 1.05 m, though `hold_sim_s` (4 ticks)
     would still hold it. The same for a robot base holding its (v, ω) (ROS 2 mode)."""
     plant = apart(plant_kind(S, 0.2))
@@ -40,14 +40,14 @@ def test_a_missing_command_is_held_only_while_the_robot_stands_within_reach_of_w
 
 def test_a_fast_command_moves_its_own_tick_and_is_not_held_beyond_it() -> None:
     """78 m/s (the paper's repulsion near a neighbour) is 3.9 m a step: farther than the reach at once."""
-    plant = apart(Plant(S, 0.2))
+    plant = apart(Robots(S, 0.2))
     plant.command(IDS[0], 0, 78.0, 0.0)
     assert [moved(plant, k)[0] for k in range(3)] == pytest.approx([78.0 * DT, 0.0, 0.0])
 
 
 def test_a_robot_commanded_at_every_tick_moves_at_every_tick_however_fast() -> None:
     """Lockstep's case: every command is its own tick's, planned where the robot stands (the engine's steps)."""
-    plant = apart(Plant(S, 0.2))
+    plant = apart(Robots(S, 0.2))
     for k in range(5):
         for a in IDS:
             plant.command(a, k, 78.0, 0.0)
@@ -59,7 +59,7 @@ def test_late_commands_planned_where_the_robot_stood_drive_it_only_within_reach(
     of ticks when its robot stood still, each planned from that same point. The first is the step it planned (late);
     the next ones would drive the robot on from farther and farther away: fast ones are refused at once, slow ones
     once the robot stands more than the reach from that point."""
-    plant = apart(Plant(S, 0.2))
+    plant = apart(Robots(S, 0.2))
     for k in range(5):
         assert np.all(moved(plant, k) == 0.0)  # nobody commands: everyone stands (ticks 0-4)
     steps = []
@@ -73,7 +73,7 @@ def test_late_commands_planned_where_the_robot_stood_drive_it_only_within_reach(
 def test_a_robot_no_command_moved_is_reported_held_in_its_neighbours_scans_at_the_next_tick() -> None:
     """Robot 1's fast command is not held beyond its tick: at the next tick it stands still for want of a command
     (its hold has not expired) and robot 0, 5 m away, hears of it in its scan; robot 2, held moving, is not."""
-    plant = apart(Plant(S, 0.2))
+    plant = apart(Robots(S, 0.2))
     plant.p[1] = plant.p[0] + np.array([0.0, 5.0])
     plant.p[2] = plant.p[0] + np.array([0.0, -5.0])
     for a in IDS:

@@ -1,4 +1,5 @@
-"""The world's plant: the robots' unicycles under the commands they hold, and their range sensing. Pure.
+"""The world's robots (the plant its agents control): their unicycles under the commands they hold, and their
+range sensing. Pure.
 
 Each robot holds the input of its agent's latest command (`plant_input`: the head point's velocity of eq. 3 at
 the heading the agent planned from, the zero-order hold the in-process engine uses) for `hold_sim_s`, then
@@ -8,7 +9,7 @@ paper's repulsion, |Ψ| = 65 m/s, moves a robot metres a tick), and driven from 
 by as much, through whatever the law never saw there. Two robots each that near their plans lose at most d_safe
 of the gap the law keeps. `observe` is what a tick publishes of it: the truth and every robot's state with its
 scan (the contour points in sensing range and the held robots near it). The state machine around it is
-simworld/world.py; ROS 2 mode's plant, a robot base holding (v, ω) itself, is simworld/ros2_io.Ros2Plant.
+simworld/world.py; ROS 2 mode's plant, a robot base holding (v, ω) itself, is simworld/ros2_io.Ros2Robots.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from reconswarm.plant.sensing import ContourField
 from reconswarm.scenario.model import Scenario
 
 
-class Plant:
+class Robots:
     def __init__(self, s: Scenario, hold_sim_s: float) -> None:
         self.s = s
         self.ids = [a.id for a in s.agents]

@@ -1,4 +1,4 @@
-"""Which held robots a scan reports (simworld/plant.py, `bodies`): a robot is in the scans of the live agents near
+"""Which held robots a scan reports (simworld/robots.py, `bodies`): a robot is in the scans of the live agents near
 it when its agent is gone, and also, from tick 1 on, when it stands still because its agent's commands stopped
 `hold_sim_s` ago or never came (an agent alive by its token that never spoke is heard by nobody, so its robot
 would otherwise be in nobody's plan). A swarm that commands every tick sees no bodies. Pure: no zenoh."""
@@ -7,16 +7,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from simworld.plant import Plant
+from simworld.robots import Robots
 from tests.unit.test_world_node import IDS, S
 
 HOLD_S = 0.2
 HOLD_TICKS = round(HOLD_S / S.meta.dt_s)
 
 
-def near_pair() -> Plant:
+def near_pair() -> Robots:
     """Robots 0 and 1 side by side, 5 m apart, far from every obstacle and every other robot."""
-    plant = Plant(S, HOLD_S)
+    plant = Robots(S, HOLD_S)
     far = np.array([-5000.0, 3000.0])
     plant.p[0], plant.p[1] = far, far + np.array([3.0, 4.0])
     for i in range(2, len(IDS)):
@@ -24,13 +24,13 @@ def near_pair() -> Plant:
     return plant
 
 
-def command(plant: Plant, k: int, agents: list[int]) -> None:
+def command(plant: Robots, k: int, agents: list[int]) -> None:
     for a in agents:
         plant.command(a, k, 0.0, 0.0)  # (standing still: positions stay as set)
     plant.apply(k)
 
 
-def bodies(plant: Plant, k: int, i: int) -> tuple[tuple[int, float, float], ...]:
+def bodies(plant: Robots, k: int, i: int) -> tuple[tuple[int, float, float], ...]:
     scan = plant.observe(k, set(IDS))[1][i].scan
     return () if scan is None else scan.bodies
 

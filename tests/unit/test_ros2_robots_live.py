@@ -89,7 +89,7 @@ def test_twist_from_an_unknown_robot_is_refused():
     world = Ros2World(load(PAPER), speed=10.0)
     now = _started(world)
     world.step([_twist(99, 1.0, 0.0, now)], now)
-    assert world.rejected == 1 and not world.plant.cmds
+    assert world.rejected == 1 and not world.robots.cmds
 
 
 def _decoded(msg: SceneUpdate) -> Any:
