@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Any
 
+import numpy as np
 import pytest
 import zenoh
 
@@ -220,8 +221,8 @@ def test_each_agent_gets_the_law_of_its_own_plan_when_the_plans_differ() -> None
     for batch in script()[:2]:
         out = node.step(batch, 0.0)
     (p,) = (o for o in out if isinstance(o, Plan))
-    mine = {1: p, 2: p._replace(pos=p.pos + [[3.0, -2.0]], theta=p.theta + 0.5),
-            3: p._replace(pos=p.pos + [[-4.0, 1.0]], theta=p.theta - 0.8)}
+    mine = {1: p, 2: p._replace(pos=p.pos + np.array([[3.0, -2.0]]), theta=p.theta + 0.5),
+            3: p._replace(pos=p.pos + np.array([[-4.0, 1.0]]), theta=p.theta - 0.8)}
     want = {aid: [Law(p.k, *commands([plan])[0])] for aid, plan in mine.items()}
     assert len({commands([plan])[0] for plan in mine.values()}) == 3  # (three different laws)
     z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{free_port()}",), "peer").config())
