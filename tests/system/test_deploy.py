@@ -1,6 +1,6 @@
 """The distributed deployment with real processes on 127.0.0.1 (router on a free port, explicit endpoints):
-lockstep equals the in-process engine, realtime converges, shutdown leaves nothing behind, a late agent
-catches up on the obstacles its peers know."""
+lockstep equals the in-process engine, realtime converges, shutdown leaves nothing behind, the world names who
+is missing. (A late agent catching up on the obstacles its peers know: tests/system/faults/test_agent_faults.py.)"""
 
 from __future__ import annotations
 
@@ -23,7 +23,6 @@ from tests.support import (
     max_difference,
     pids,
     reconswarm,
-    restart_and_rejoin,
     run_launcher,
     scenario_with,
     summary,
@@ -88,13 +87,6 @@ def test_sigint_stops_everything(tmp_path: Path, out: Path) -> None:
     assert_all_gone(out, grace_s=2.0)
     s = summary(out / "run.db")  # the record stays readable
     assert s["ticks"] > 50 and not s["converged"]
-
-
-def test_late_agent_catches_up_on_obstacles(tmp_path: Path, out: Path) -> None:
-    # Agent 8 is killed at t = 60 s (the diamond is known by then) and starts again half a second later.
-    joined = restart_and_rejoin(out, agent=8, at_s=60, after_s=0.5)
-    assert joined  # ("joining at tick" in its log)
-    assert "'diamond'" in joined[-1]  # learned from its peers' cached sets, before sensing anything itself
 
 
 def test_simworld_exits_3_naming_who_is_missing(tmp_path: Path) -> None:
