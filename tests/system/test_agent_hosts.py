@@ -183,6 +183,7 @@ def test_killing_a_hosted_agent_kills_its_host_and_the_survivors_avoid_them_all(
     assert all(abs(e["t"] - lost[0]["t"]) < 1.0 for e in lost)  # together: one process went
 
 
+@pytest.mark.realtime  # (ROS 2 mode runs on the realtime clock, at 3x)
 def test_ros2_mode_runs_agent_hosts_and_the_robots_of_a_killed_host_are_avoided(out: Path) -> None:
     """`--ros2` with hosts of 5: each hosted agent its own ROS 2 node (agent_i) on its host's session, odometry in
     and cmd_vel out; agent 3 killed at t = 60 s takes its host, and with it robots 1-5, which the survivors go round

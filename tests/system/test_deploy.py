@@ -53,6 +53,7 @@ def test_lockstep_equals_inprocess_engine(tmp_path: Path, out: Path) -> None:
     assert dist["min_obstacle_gap_m"] == pytest.approx(json.loads(sim.stdout)["min_obstacle_gap_m"], abs=1e-9)
 
 
+@pytest.mark.realtime  # (the realtime clock at 10x: agents act on their own timers)
 def test_realtime_converges(tmp_path: Path, out: Path) -> None:
     # Three agents, no obstacle: the realtime clock at 10x wall speed, agents acting on their own timers.
     text = PAPER.read_text().split("[[agents]]")[0] + "".join(

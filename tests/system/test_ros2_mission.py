@@ -23,11 +23,14 @@ from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
+import pytest
 import zenoh
 from rosbags.typesys import Stores, get_typestore
 
 from tests.support import PAPER, ROOT, free_port, launcher_cmd, summary, trajectories
 from tests.unit.test_ros2 import PUBLISHED_ODOMETRY_HASH, PUBLISHED_TWIST_HASH
+
+pytestmark = pytest.mark.realtime  # (holds only if the machine keeps the clock's pace: run alone, last)
 
 DOMAIN = 7
 SPEED = 1.0  # real time, as a robot base runs (--ros2's default)

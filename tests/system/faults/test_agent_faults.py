@@ -10,6 +10,7 @@ import pytest
 from tests.support import assert_all_gone, events, faults_log, positions, restart_and_rejoin, run_launcher
 
 
+@pytest.mark.realtime  # (the monitor notices the death within 1 s of wall time)
 def test_agent_killed(out: Path) -> None:
     """Killed at t = 40 s, robot 3 stops by the diamond's lower vertex, in the swarm's path: agents 6, 7 and 10
     stood still in the pocket between it and the diamond, 590 m from their slots (reconswarm/paper/blocked.py)."""

@@ -31,6 +31,7 @@ from tests.support import (
 pytestmark = pytest.mark.system
 
 
+@pytest.mark.realtime  # (a 10 s wall-clock freeze recorded as a stall of 9-14 s)
 def test_world_frozen_is_one_stall_and_lockstep_stays_exact(tmp_path: Path, out: Path) -> None:
     # The paper's scenario cut to 60 s; the world is stopped (SIGSTOP) for 10 s at t = 20.
     scen = scenario_with(tmp_path, "short.toml", PAPER.read_text(), **{"duration_s = 300.0": "duration_s = 60.0"})

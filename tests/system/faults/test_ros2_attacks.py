@@ -26,6 +26,8 @@ from reconswarm.net.session import ZenohOptions
 from tests.support import PAPER, ROOT, assert_all_gone, free_port, launcher_cmd, paper_with, read_run_id, tick_count
 from tests.system.faults.test_intrusions import refused_from
 
+pytestmark = pytest.mark.realtime  # (holds only if the machine keeps the clock's pace: run alone, last)
+
 DOMAIN = 11
 DURATION_S = 36.0
 ATTACK_FROM_S = 4.0  # simulated: the attack starts once the mission has run this long

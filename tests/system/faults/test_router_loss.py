@@ -10,7 +10,11 @@ import subprocess
 import time
 from pathlib import Path
 
+import pytest
+
 from tests.support import PAPER, ROOT, events, launcher_cmd, scenario_with, tick_count
+
+pytestmark = pytest.mark.realtime  # (holds only if the machine keeps the clock's pace: run alone, last)
 
 
 def three_agents(tmp: Path) -> Path:

@@ -18,11 +18,15 @@ import threading
 import time
 from pathlib import Path
 
+import pytest
+
 from reconswarm.net import ros2
 from tests.support import ROOT, assert_all_gone, free_port, launcher_cmd, paper_with, read_run_id, tick_count
 from tests.system.test_foxglove_live import watch
 
 from .test_secure import Catch, _anonymous_config, _open
+
+pytestmark = pytest.mark.realtime  # (holds only if the machine keeps the clock's pace: run alone, last)
 
 DOMAIN = 13
 DURATION_S = 30.0
