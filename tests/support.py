@@ -92,6 +92,14 @@ def wait_until(pred: Callable[[], Any], timeout_s: float, what: str, every_s: fl
         time.sleep(every_s)
 
 
+def attempt(call: Callable[..., Any], *args: Any) -> Any:
+    """call(*args), or None if it raised (for wait_until: retry until it succeeds, e.g. opening a session)."""
+    try:
+        return call(*args)
+    except Exception:
+        return None
+
+
 def router_listening(port: int, host: str = "127.0.0.1") -> bool:
     """A TCP connection to host:port succeeds (a router there accepts clients)."""
     try:

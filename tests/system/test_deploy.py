@@ -8,7 +8,6 @@ import json
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -28,6 +27,7 @@ from tests.support import (
     summary,
     tick_count,
     trajectories,
+    wait_until,
 )
 
 
@@ -72,13 +72,8 @@ def test_realtime_converges(tmp_path: Path, out: Path) -> None:
 def test_sigint_stops_everything(tmp_path: Path, out: Path) -> None:
     proc = subprocess.Popen(launcher_cmd(out), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
-        deadline = time.monotonic() + 90
-        while time.monotonic() < deadline:  # all 13 processes up and the record growing
-            if len(pids(out)) == 13 and (out / "run.db").exists() and tick_count(out / "run.db") > 50:
-                break
-            time.sleep(0.2)
-        else:
-            pytest.fail("the run did not start")
+        wait_until(lambda: len(pids(out)) == 13 and tick_count(out / "run.db") > 50, 90,
+                   "all 13 processes up and the record growing", every_s=0.2, proc=proc)
         proc.send_signal(signal.SIGINT)
         rc = proc.wait(timeout=30)
     finally:

@@ -35,7 +35,7 @@ from tests.support import (
     read_run_id,
     reconswarm,
     run_launcher,
-    tick_count,
+    wait_for_ticks,
 )
 
 SETTLE_S = 1.5  # declarations reaching the router and the other sessions
@@ -184,11 +184,8 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Live]:
         proc = subprocess.Popen(launcher_cmd(out, "--secure", port=port), cwd=ROOT, stdout=subprocess.DEVNULL,
                                 stderr=fh)
     try:
-        deadline = time.monotonic() + 120
-        while tick_count(out / "run.db") < 20:
-            if proc.poll() is not None or time.monotonic() > deadline:
-                pytest.fail(f"the secure run did not start (exit {proc.poll()}): {err.read_text()[-2000:]}")
-            time.sleep(0.2)
+        wait_for_ticks(out / "run.db", 20, proc, 120,
+                       lambda: f"the secure run did not start (exit {proc.poll()}): {err.read_text()[-2000:]}")
         yield Live(out, port, proc)
     finally:
         if proc.poll() is None:

@@ -17,7 +17,7 @@ import pytest
 import zenoh
 
 from reconswarm.net.keys import Keys
-from tests.support import ROOT, assert_all_gone, free_port, reconswarm
+from tests.support import ROOT, assert_all_gone, free_port, reconswarm, wait_for_ticks
 
 from .test_secure import Catch, _anonymous_config, _open
 
@@ -161,7 +161,7 @@ def test_secure_two_hosts_converge_through_a_partition_and_refuse_outsiders(tmp_
     import signal
 
     from reconswarm.scenario.model import load
-    from tests.support import events, launcher_cmd, paper_with, read_run_id, tick_count
+    from tests.support import events, launcher_cmd, paper_with, read_run_id
 
     from .test_partition import need_network_namespaces
 
@@ -173,10 +173,7 @@ def test_secure_two_hosts_converge_through_a_partition_and_refuse_outsiders(tmp_
         proc = subprocess.Popen(launcher_cmd(out, "-s", str(scen), "--secure", "--hosts", "2", "--fault",
                                              "partition@60+10", "--json"), cwd=ROOT, stdout=subprocess.PIPE, stderr=fh)
     try:
-        deadline = time.monotonic() + 300
-        while tick_count(out / "run.db") < 20:
-            assert proc.poll() is None and time.monotonic() < deadline, err.read_text()[-3000:]
-            time.sleep(0.2)
+        wait_for_ticks(out / "run.db", 20, proc, 300, lambda: err.read_text()[-3000:])
         secrets = out / "secrets"
         router_a = json.loads((secrets / "router-A.json5").read_text())
         ep_a = router_a["listen"]["endpoints"][0]
