@@ -14,6 +14,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# Property tests have no deadline per example: the suite runs beside other work (part 1 on every CPU), and a slow
+# example is not a wrong one.
+settings.register_profile("suite", deadline=None)
+settings.load_profile("suite")
 
 _SYSTEM = Path(__file__).parent / "system"
 
