@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from tests.support import assert_all_gone, events, faults_log, positions, restart_and_rejoin, run_launcher
+from tests.system.faults.test_router_loss import three_agents
 
 
 @pytest.mark.realtime  # (the monitor notices the death within 1 s of wall time)
@@ -27,8 +28,9 @@ def test_agent_killed(out: Path) -> None:
     assert len(track) > 100 and max(abs(x - track[0][1]) + abs(y - track[0][2]) for _, x, y in track) == 0.0
 
 
-def test_agent_frozen_then_rejoins(out: Path) -> None:
-    p = run_launcher(out, "--fault", "freeze:agent:2@50+5", "--json")
+def test_agent_frozen_then_rejoins(tmp_path: Path, out: Path) -> None:
+    """The paper's first three agents without obstacles (a freeze, a hold and a rejoin ask for no diamond)."""
+    p = run_launcher(out, "-s", str(three_agents(tmp_path)), "--fault", "freeze:agent:2@50+5", "--json")
     assert p.returncode == 0, p.stderr[-3000:]
     s = json.loads(p.stdout)
     assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
