@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import zenoh
 
 from reconswarm.geometry.plane import Edges
 from reconswarm.net import wire
@@ -117,8 +118,6 @@ def wait_router_listening(port: int, timeout_s: float = 60.0, proc: subprocess.P
 def wait_subscribed(session: Any, key: str, timeout_s: float = 10.0, matched: bool = True) -> None:
     """Wait until `session` knows a subscriber of another session to `key` (zenoh's matching status of a publisher
     declared for the wait): a put from `session` on `key` then reaches it. matched=False: until it knows none."""
-    import zenoh
-
     pub = session.declare_publisher(key, allowed_destination=zenoh.Locality.REMOTE)
     try:
         wait_until(lambda: pub.matching_status.matching == matched, timeout_s,
