@@ -121,6 +121,12 @@ def test_the_states_of_the_hosted_agents_wake_the_host_at_once_a_peers_beacon_do
             taker.join(40.0)
             assert not taker.is_alive()
             assert time.monotonic() - t0 < 15.0, "the states did not wake the take: it waited for its timeout"
+            if len(got) < 2:  # (a loaded machine can space the two states more than LINGER_S apart: then one
+                # take wakes on the first and the next at once on the second; tests/unit/test_tagged_inbox.py
+                # checks the burst without a network)
+                t1 = time.monotonic()
+                got += h.inbox.take(None, 30.0, urgent=1)
+                assert time.monotonic() - t1 < 15.0, "the second state did not wake the take"
             assert sorted(it[0] for _tag, it in got) == [KEYS.state(1), KEYS.state(2)]
         finally:
             h.close()
