@@ -34,11 +34,10 @@ from reconswarm_bringup.clockwatch import ClockWatch
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.fleet import ROOT, Fleet, Proc, allowed_cpus
 from reconswarm_bringup.network import Net, check_live_port, plan_network
+from reconswarm_bringup.restarts import MONITOR_DELAYS_S, ROUTER_DELAYS_S, Restarts
 
 log = logging.getLogger("reconswarm.launch")
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
-MONITOR_RESTARTS = 5  # a monitor that dies more often than this (restarted after 0.5, 1, 2, 4, 8 s) fails the run
-ROUTER_RESTARTS = 5  # a router that dies more often than this (restarted at once, then after 0.5, 1, 2, 4 s) likewise
 ZENOH_RUNTIME = "(" + ", ".join(f"{pool}: (worker_threads: 1)" for pool in ("app", "acc", "tx", "rx", "net")) + ")"
 
 
@@ -187,8 +186,8 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
     fatal: str | None = None  # the run cannot go on: stop everything, print the summary, exit 3
     halt: str | None = None  # the launcher ends the run early: "stopped" (a signal) or "timeout"
     live = outcome.LiveViewNotice(cfg.foxglove_port)
-    restarts = 0
-    router_restarts = 0
+    monitor_restarts = Restarts(MONITOR_DELAYS_S)
+    router_restarts = Restarts(ROUTER_DELAYS_S)
     try:
         while not stop_sig and fatal is None:
             watch.poll()
@@ -212,26 +211,22 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
                         why = outcome.last_line(p.log_path)
                         if "disk full" in why or rc == 2:  # (2: bad input, which a restart does not mend)
                             fatal = why
-                        elif restarts >= MONITOR_RESTARTS:
-                            fatal = f"the monitor died {restarts + 1} times (last: exit {rc}: {why})"
+                        elif (delay := monitor_restarts.after_death()) is None:
+                            fatal = f"the monitor died {monitor_restarts.done + 1} times (last: exit {rc}: {why})"
                         else:
-                            delay = min(8.0, 0.5 * 2**restarts)
-                            restarts += 1
                             log.warning("monitor died (exit %s: %s): restarting it in %.1f s (%d of %d)", rc, why,
-                                        delay, restarts, MONITOR_RESTARTS)
+                                        delay, monitor_restarts.done, monitor_restarts.limit)
                             timers.append((now + delay, lambda p=p: fleet.restart(p)))
                     elif p.role == "router" and world.popen.poll() is None:
                         # The same endpoint again: every client reconnects by itself (the world and the monitor
                         # judge nobody while their own link is gone: reconswarm/net/uplink.py).
-                        if router_restarts >= ROUTER_RESTARTS:
-                            fatal = f"the router died {router_restarts + 1} times (last: exit {rc}: " \
+                        if (delay := router_restarts.after_death()) is None:
+                            fatal = f"the router died {router_restarts.done + 1} times (last: exit {rc}: " \
                                     f"{outcome.last_line(p.log_path)})"
                         else:
-                            delay = 0.0 if router_restarts == 0 else min(4.0, 0.5 * 2 ** (router_restarts - 1))
-                            router_restarts += 1
                             log.warning("%s died (exit %s) at t = %.2f s: restarting it on the same endpoint "
-                                        "in %.1f s (%d of %d)", p.name, rc, watch.t, delay, router_restarts,
-                                        ROUTER_RESTARTS)
+                                        "in %.1f s (%d of %d)", p.name, rc, watch.t, delay, router_restarts.done,
+                                        router_restarts.limit)
                             timers.append((now + delay, lambda p=p: fleet.restart(p)))
                     elif p.role == "agent" and rc == 2 and watch.k < 0:
                         # Refused its input before the mission began: it will not come, and the world would wait

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -16,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import zenoh
 
 from reconswarm.geometry.plane import Edges
 from reconswarm.net import wire
@@ -27,10 +29,113 @@ ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
 
 
+PORTS_ENV = "RECONSWARM_TEST_PORTS"  # "A-B": the tests' ports come from A..B (deploy/run_tests.sh --ports A-B)
+_next_port: list[int] = []  # (the next candidate in this process's share of the range)
+
+
+def port_range(spec: str | None = None, worker: str | None = None, workers: int | None = None) -> range | None:
+    """This process's share of RECONSWARM_TEST_PORTS ("A-B", inclusive), or None when it is not set. Under
+    pytest-xdist each worker (PYTEST_XDIST_WORKER gwN of PYTEST_XDIST_WORKER_COUNT) draws from a slice of its own,
+    so parallel tests never pick the same port."""
+    spec = os.environ.get(PORTS_ENV, "") if spec is None else spec
+    if not spec.strip():
+        return None
+    lo_s, sep, hi_s = spec.strip().partition("-")
+    if not (sep and lo_s.isdigit() and hi_s.isdigit() and 1024 <= int(lo_s) <= int(hi_s) <= 65535):
+        raise ValueError(f"{PORTS_ENV}={spec!r}: expected A-B with 1024 <= A <= B <= 65535")
+    lo, hi = int(lo_s), int(hi_s) + 1
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "") if worker is None else worker
+    n = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) if workers is None else workers
+    if worker.startswith("gw") and worker[2:].isdigit() and n > 1:
+        share = (hi - lo) // n
+        if share < 1:
+            raise ValueError(f"{PORTS_ENV}={spec!r}: fewer ports than the {n} test workers")
+        i = int(worker[2:]) % n
+        lo, hi = lo + i * share, lo + (i + 1) * share
+    return range(lo, hi)
+
+
 def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    """A TCP port free on 127.0.0.1: the next free one of RECONSWARM_TEST_PORTS when that is set (in turn, so two
+    calls do not return the same port before it is taken), else one of the system's choosing."""
+    ports = port_range()
+    if ports is None:
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            s.bind(("127.0.0.1", 0))
+            return int(s.getsockname()[1])
+    if not _next_port:
+        _next_port.append(ports.start + os.getpid() % len(ports))  # (another process on the same range: elsewhere)
+    for _ in range(len(ports)):
+        port = ports.start + (_next_port[0] - ports.start) % len(ports)
+        _next_port[0] = port + 1
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    raise AssertionError(f"{PORTS_ENV}: no free port in {ports.start}-{ports.stop - 1}")
+
+
+def wait_until(pred: Callable[[], Any], timeout_s: float, what: str, every_s: float = 0.05,
+               proc: subprocess.Popen[Any] | None = None) -> Any:
+    """Poll pred until it returns a true value, and return that value; fail naming `what` once timeout_s has
+    passed (or once `proc`, the process it waits on, has exited). The one wait for a condition in the tests."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        got = pred()
+        if got:
+            return got
+        if proc is not None and proc.poll() is not None:
+            raise AssertionError(f"{what}: the process exited ({proc.returncode}) first")
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{what}: not within {timeout_s:g} s")
+        time.sleep(every_s)
+
+
+def attempt(call: Callable[..., Any], *args: Any) -> Any:
+    """call(*args), or None if it raised (for wait_until: retry until it succeeds, e.g. opening a session)."""
+    try:
+        return call(*args)
+    except Exception:
+        return None
+
+
+def router_listening(port: int, host: str = "127.0.0.1") -> bool:
+    """A TCP connection to host:port succeeds (a router there accepts clients)."""
+    try:
+        with socket.create_connection((host, port), timeout=1.0):
+            return True
+    except OSError:
+        return False
+
+
+def wait_router_listening(port: int, timeout_s: float = 60.0, proc: subprocess.Popen[Any] | None = None) -> None:
+    """Wait until a router listens on 127.0.0.1:port (`proc`: the router's process, if the test started it)."""
+    wait_until(lambda: router_listening(port), timeout_s, f"a router listening on 127.0.0.1:{port}", proc=proc)
+
+
+def wait_subscribed(session: Any, key: str, timeout_s: float = 10.0, matched: bool = True) -> None:
+    """Wait until `session` knows a subscriber of another session to `key` (zenoh's matching status of a publisher
+    declared for the wait): a put from `session` on `key` then reaches it. matched=False: until it knows none."""
+    pub = session.declare_publisher(key, allowed_destination=zenoh.Locality.REMOTE)
+    try:
+        wait_until(lambda: pub.matching_status.matching == matched, timeout_s,
+                   f"a subscriber to {key} {'known' if matched else 'gone'} to the session")
+    finally:
+        pub.undeclare()
+
+
+def wait_token(session: Any, key: str, timeout_s: float = 10.0) -> None:
+    """Wait until `session` sees a liveliness token on `key` (declared by another session)."""
+    wait_until(lambda: any(r.ok is not None for r in session.liveliness().get(key, timeout=1.0)), timeout_s,
+               f"the token {key} seen")
+
+
+def wait_clock_at(db: Path, t_s: float, launch: subprocess.Popen[Any] | None, timeout_s: float,
+                  dt_s: float = 0.05) -> None:
+    """Wait until the run recorded at db has reached simulated time t_s (its tick at t_s is recorded)."""
+    wait_for_ticks(db, round(t_s / dt_s) + 1, launch, timeout_s, f"the run at {db} never reached t = {t_s:g} s")
 
 
 def launcher_cmd(out: Path, *args: str, port: int | None = None) -> list[str]:
@@ -92,13 +197,16 @@ def alive(pid: int) -> bool:
         return False
 
 
+def gone_within(procs: list[int], timeout_s: float) -> list[int]:
+    """Wait up to timeout_s for every process of `procs` to exit; those still alive then."""
+    with contextlib.suppress(AssertionError):
+        wait_until(lambda: not any(alive(p) for p in procs), timeout_s, "the processes exit", every_s=0.1)
+    return [p for p in procs if alive(p)]
+
+
 def assert_all_gone(out: Path, grace_s: float = 5.0) -> None:
     """Every process the run started has exited; kill (and fail on) any leftover, by PID."""
-    deadline = time.monotonic() + grace_s
-    left = [p for p in pids(out) if alive(p)]
-    while left and time.monotonic() < deadline:
-        time.sleep(0.1)
-        left = [p for p in left if alive(p)]
+    left = gone_within(pids(out), grace_s)
     for p in left:
         os.kill(p, signal.SIGKILL)
     assert not left, f"processes outlived the run: {left}"
@@ -147,25 +255,30 @@ def wait_for_ticks(db: Path, n: int, launch: subprocess.Popen[Any] | None, timeo
                    why: Callable[[], str] | str = "") -> None:
     """Wait until the run record at db holds n ticks; fail the test if the launch exits first or timeout_s
     passes (the message: `why`, e.g. the launch's stderr so far)."""
-    deadline = time.monotonic() + timeout_s
-    while tick_count(db) < n:
-        if (launch is not None and launch.poll() is not None) or time.monotonic() > deadline:
-            raise AssertionError((why() if callable(why) else why) or f"the run did not record {n} ticks in {db}")
-        time.sleep(0.2)
+    try:
+        wait_until(lambda: tick_count(db) >= n, timeout_s, f"{n} ticks in {db}", every_s=0.2, proc=launch)
+    except AssertionError as e:
+        raise AssertionError((why() if callable(why) else why) or f"the run did not record {n} ticks in {db}: {e}") \
+            from None
 
 
-def restart_and_rejoin(out: Path, agent: int, at_s: float, after_s: float) -> list[str]:
-    """Run the paper mission with `agent` restarted at `at_s` (`after_s` wall seconds later); check the mission
-    completed without contact or loss and that the agent was lost and joined again. Returns the agent's
-    "joining at tick" log lines (which name the obstacle sets it got from its peers' caches)."""
-    p = run_launcher(out, "--fault", f"restart:agent:{agent}@{at_s:g}+{after_s:g}", "--json")
+def restart_and_rejoin(out: Path, restarts: dict[int, tuple[float, float]]) -> dict[int, list[str]]:
+    """Run the paper mission with each agent of `restarts` restarted at its `at_s` (`after_s` wall seconds later);
+    check the mission completed without contact or loss and that each was lost and joined again. Returns each
+    agent's "joining at tick" log lines (which name the obstacle sets it got from its peers' caches)."""
+    faults = [arg for a, (at_s, after_s) in restarts.items()
+              for arg in ("--fault", f"restart:agent:{a}@{at_s:g}+{after_s:g}")]
+    p = run_launcher(out, *faults, "--json")
     assert p.returncode == 0, p.stderr[-3000:]
     s = json.loads(p.stdout)
     assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
-    ev = [e["kind"] for e in events(out / "run.db") if e.get("agent") == agent]
-    assert ev == ["agent_lost", "agent_joined"]
-    log = (out / "logs" / f"agent-{agent}.log").read_text().splitlines()
-    return [ln for ln in log if "joining at tick" in ln]
+    joined = {}
+    for agent in restarts:
+        ev = [e["kind"] for e in events(out / "run.db") if e.get("agent") == agent]
+        assert ev == ["agent_lost", "agent_joined"], (agent, ev)
+        log = (out / "logs" / f"agent-{agent}.log").read_text().splitlines()
+        joined[agent] = [ln for ln in log if "joining at tick" in ln]
+    return joined
 
 
 def view_of(p: np.ndarray, n_rows: int, n_cols: int, entries: list[tuple[int, int, np.ndarray]]) -> ObstacleView:

@@ -10,7 +10,6 @@ import json
 import os
 import queue
 import subprocess
-import time
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
@@ -26,6 +25,7 @@ from reconswarm_bringup.fleet import allowed_cpus
 from tests.support import (
     PAPER,
     ROOT,
+    attempt,
     events,
     free_port,
     launcher_cmd,
@@ -34,6 +34,7 @@ from tests.support import (
     run_launcher,
     scenario_with,
     trajectories,
+    wait_until,
 )
 
 IDS = tuple(range(1, 11))
@@ -49,16 +50,15 @@ def agent_pids(out: Path) -> dict[int, int]:
 
 def host_cpus(out: Path, proc: subprocess.Popen[str], hosts: int) -> dict[int, set[int]]:
     """Each running agent host's CPUs, once `hosts` of them are in processes.tsv (agent id -> its host's CPUs)."""
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and proc.poll() is None:
+    def running() -> dict[int, int] | None:
         try:
             pids = agent_pids(out)
         except (OSError, ValueError, IndexError):  # (not there yet, or a line half written)
-            pids = {}
-        if len(set(pids.values())) == hosts:
-            return {a: os.sched_getaffinity(pid) for a, pid in pids.items()}
-        time.sleep(0.05)
-    raise AssertionError(f"{hosts} agent hosts never ran")
+            return None
+        return pids if len(set(pids.values())) == hosts else None
+
+    pids = wait_until(running, 120, f"{hosts} agent hosts running", proc=proc)
+    return {a: os.sched_getaffinity(pid) for a, pid in pids.items()}
 
 
 @pytest.fixture(scope="module")
@@ -104,14 +104,8 @@ def test_packed_lockstep_equals_inprocess_engine(short: tuple[Path, dict], out: 
 
 
 def _open(ep: str, launcher: subprocess.Popen[str], timeout_s: float = 300.0) -> Any:
-    deadline = time.monotonic() + timeout_s
-    while True:
-        try:
-            return zenoh.open(ZenohOptions.build([ep], None, "client", None).config())
-        except Exception:
-            if time.monotonic() > deadline or launcher.poll() is not None:
-                raise
-            time.sleep(0.3)
+    conf = ZenohOptions.build([ep], None, "client", None).config()
+    return wait_until(lambda: attempt(zenoh.open, conf), timeout_s, f"a session on {ep}", every_s=0.3, proc=launcher)
 
 
 @pytest.mark.parametrize("mode", ["client", "peer"])  # (peers: the run's samples reach the router all the same)
@@ -183,6 +177,7 @@ def test_killing_a_hosted_agent_kills_its_host_and_the_survivors_avoid_them_all(
     assert all(abs(e["t"] - lost[0]["t"]) < 1.0 for e in lost)  # together: one process went
 
 
+@pytest.mark.realtime  # (ROS 2 mode runs on the realtime clock, at 3x)
 def test_ros2_mode_runs_agent_hosts_and_the_robots_of_a_killed_host_are_avoided(out: Path) -> None:
     """`--ros2` with hosts of 5: each hosted agent its own ROS 2 node (agent_i) on its host's session, odometry in
     and cmd_vel out; agent 3 killed at t = 60 s takes its host, and with it robots 1-5, which the survivors go round

@@ -13,6 +13,8 @@ from reconswarm.scenario.generate import generate
 from reconswarm.scenario.model import load, to_toml
 from tests.support import reconswarm
 
+pytestmark = pytest.mark.parallel  # (no launch, no router, no wall-clock bound: beside the unit tests)
+
 
 @pytest.fixture(scope="module")
 def place(tmp_path_factory: pytest.TempPathFactory) -> Path:

@@ -1,6 +1,6 @@
 """The distributed deployment with real processes on 127.0.0.1 (router on a free port, explicit endpoints):
-lockstep equals the in-process engine, realtime converges, shutdown leaves nothing behind, a late agent
-catches up on the obstacles its peers know."""
+lockstep equals the in-process engine, realtime converges, shutdown leaves nothing behind, the world names who
+is missing. (A late agent catching up on the obstacles its peers know: tests/system/faults/test_agent_faults.py.)"""
 
 from __future__ import annotations
 
@@ -8,7 +8,6 @@ import json
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -23,12 +22,12 @@ from tests.support import (
     max_difference,
     pids,
     reconswarm,
-    restart_and_rejoin,
     run_launcher,
     scenario_with,
     summary,
     tick_count,
     trajectories,
+    wait_until,
 )
 
 
@@ -54,6 +53,7 @@ def test_lockstep_equals_inprocess_engine(tmp_path: Path, out: Path) -> None:
     assert dist["min_obstacle_gap_m"] == pytest.approx(json.loads(sim.stdout)["min_obstacle_gap_m"], abs=1e-9)
 
 
+@pytest.mark.realtime  # (the realtime clock at 10x: agents act on their own timers)
 def test_realtime_converges(tmp_path: Path, out: Path) -> None:
     # Three agents, no obstacle: the realtime clock at 10x wall speed, agents acting on their own timers.
     text = PAPER.read_text().split("[[agents]]")[0] + "".join(
@@ -72,13 +72,8 @@ def test_realtime_converges(tmp_path: Path, out: Path) -> None:
 def test_sigint_stops_everything(tmp_path: Path, out: Path) -> None:
     proc = subprocess.Popen(launcher_cmd(out), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
-        deadline = time.monotonic() + 90
-        while time.monotonic() < deadline:  # all 13 processes up and the record growing
-            if len(pids(out)) == 13 and (out / "run.db").exists() and tick_count(out / "run.db") > 50:
-                break
-            time.sleep(0.2)
-        else:
-            pytest.fail("the run did not start")
+        wait_until(lambda: len(pids(out)) == 13 and tick_count(out / "run.db") > 50, 90,
+                   "all 13 processes up and the record growing", every_s=0.2, proc=proc)
         proc.send_signal(signal.SIGINT)
         rc = proc.wait(timeout=30)
     finally:
@@ -88,13 +83,6 @@ def test_sigint_stops_everything(tmp_path: Path, out: Path) -> None:
     assert_all_gone(out, grace_s=2.0)
     s = summary(out / "run.db")  # the record stays readable
     assert s["ticks"] > 50 and not s["converged"]
-
-
-def test_late_agent_catches_up_on_obstacles(tmp_path: Path, out: Path) -> None:
-    # Agent 8 is killed at t = 60 s (the diamond is known by then) and starts again half a second later.
-    joined = restart_and_rejoin(out, agent=8, at_s=60, after_s=0.5)
-    assert joined  # ("joining at tick" in its log)
-    assert "'diamond'" in joined[-1]  # learned from its peers' cached sets, before sensing anything itself
 
 
 def test_simworld_exits_3_naming_who_is_missing(tmp_path: Path) -> None:

@@ -13,6 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.parallel  # (no launch, no router, no wall-clock bound: beside the unit tests)
+
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
 _SCRIPT = Path(sys.executable).parent / "reconswarm"

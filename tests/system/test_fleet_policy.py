@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
 from reconswarm_bringup.fleet import OBSERVER_NICE, Fleet, allowed_cpus
+from tests.support import wait_until
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "SCHED_BATCH"), reason="SCHED_BATCH is Linux's")
 
@@ -34,8 +34,7 @@ def run_child(fleet: Fleet, role: str, ident: str = "-", child: str = CHILD) -> 
     # Fleet starts `python -m reconswarm_bringup.cli ARGS`; the prefix turns that into `python -c CHILD`.
     proc = fleet.start(role, ident, [], prefix=[sys.executable, "-c", child, "--"])
     assert proc.popen.wait(timeout=60) == 0
-    time.sleep(0.05)
-    return [int(x) for x in proc.log_path.read_text().split()]
+    return [int(x) for x in wait_until(lambda: proc.log_path.read_text().split(), 10, f"{proc.log_path} written")]
 
 
 def policies(tmp_path: Path, batch: bool, role: str = "probe", child: str = CHILD) -> list[int]:

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import pytest
 import websockets
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from websockets.typing import Subprotocol
@@ -108,6 +109,7 @@ async def watch(port: int, seconds: float, connect_timeout_s: float = 60.0, unti
     return w
 
 
+@pytest.mark.realtime  # (the scene streams at 1-21 messages per wall second)
 def test_live_view_serves_the_paper_mission(tmp_path: Path, out: Path) -> None:
     port = free_port()
     cmd = launcher_cmd(out, "-s", str(PAPER), "--foxglove", str(port), "--json")

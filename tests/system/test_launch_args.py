@@ -19,6 +19,8 @@ from reconswarm.scenario.generate import generate
 from reconswarm.scenario.model import to_toml
 from reconswarm_bringup import validate
 
+pytestmark = pytest.mark.parallel  # (no launch, no router, no wall-clock bound: beside the unit tests)
+
 ROOT = Path(__file__).resolve().parents[2]
 RUN_LOCAL = ROOT / "deploy" / "run_local.sh"
 MEMINFO = "MemTotal:       24684096 kB\nMemFree:         1000000 kB\nMemAvailable:   23929832 kB\n"

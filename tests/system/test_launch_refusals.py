@@ -14,6 +14,8 @@ import pytest
 
 from tests.support import ROOT, free_port, pids
 
+pytestmark = pytest.mark.parallel  # (refused before anything starts: beside the unit tests)
+
 
 def _launch(out: Path, *args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "reconswarm_bringup.cli_launch", "-o", str(out), "--no-progress",

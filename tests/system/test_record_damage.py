@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.parallel  # (no launch, no router, no wall-clock bound: beside the unit tests)
+
 ROOT = Path(__file__).resolve().parents[2]
 PAPER_TEXT = (ROOT / "deploy" / "scenarios" / "paper.toml").read_text()
 COMMANDS = ["summary", "events", "export", "plot"]

@@ -39,6 +39,7 @@ def _refused(r: subprocess.CompletedProcess[str], needle: str) -> None:
     assert len(lines) == 1 and needle in lines[0], lines
 
 
+@pytest.mark.parallel  # (no launch: beside the unit tests)
 @pytest.mark.parametrize("cmd", [("export", "--format", "csv"), ("export", "--format", "mcap"), ("plot",),
                                  ("animate",)])
 def test_a_reader_never_writes_over_its_record(tiny: tuple[Path, Path], tmp_path: Path, cmd: tuple[str, ...]) -> None:
@@ -53,6 +54,7 @@ def test_a_reader_never_writes_over_its_record(tiny: tuple[Path, Path], tmp_path
     assert summary(db)["mode"] == "inprocess"
 
 
+@pytest.mark.parallel  # (no launch: beside the unit tests)
 def test_sim_replaces_its_own_record_but_not_a_claimed_dir(tiny: tuple[Path, Path], tmp_path: Path) -> None:
     path, _ = tiny
     out = tmp_path / "sim"

@@ -14,7 +14,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from tests.support import PAPER, run_launcher
+
+pytestmark = pytest.mark.realtime  # (holds only if the machine keeps the clock's pace: run alone, last)
 
 
 def test_a_ros2_mission_behind_the_clock_stops_its_robots_rather_than_collide(out: Path) -> None:

@@ -23,11 +23,14 @@ from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
+import pytest
 import zenoh
 from rosbags.typesys import Stores, get_typestore
 
-from tests.support import PAPER, ROOT, free_port, launcher_cmd, summary, trajectories
+from tests.support import PAPER, ROOT, attempt, free_port, launcher_cmd, summary, trajectories, wait_until
 from tests.unit.test_ros2 import PUBLISHED_ODOMETRY_HASH, PUBLISHED_TWIST_HASH
+
+pytestmark = pytest.mark.realtime  # (holds only if the machine keeps the clock's pace: run alone, last)
 
 DOMAIN = 7
 SPEED = 1.0  # real time, as a robot base runs (--ros2's default)
@@ -45,14 +48,7 @@ def _open(ep: str, launcher: subprocess.Popen[str], timeout_s: float = 300.0) ->
     conf.insert_json5("mode", '"client"')
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("connect/endpoints", json.dumps([ep]))
-    deadline = time.monotonic() + timeout_s
-    while True:
-        try:
-            return zenoh.open(conf)
-        except Exception:
-            if time.monotonic() > deadline or launcher.poll() is not None:
-                raise
-            time.sleep(0.3)
+    return wait_until(lambda: attempt(zenoh.open, conf), timeout_s, f"a session on {ep}", every_s=0.3, proc=launcher)
 
 
 def _yaw(q: Any) -> float:

@@ -11,6 +11,8 @@ from tests.support import reconswarm as cli
 from tests.unit import test_scenario as unit
 from tests.unit.test_scenario import BAD, CHECK_IN_SUBPROCESS, sub
 
+pytestmark = pytest.mark.parallel  # (no launch, no router, no wall-clock bound: beside the unit tests)
+
 bad_files = unit.bad_files  # the same files as the in-process table (a module-scoped fixture)
 
 

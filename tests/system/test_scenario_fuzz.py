@@ -26,6 +26,8 @@ from reconswarm.scenario.limits import physics_warnings
 from reconswarm.scenario.model import Scenario, parse, warnings
 from reconswarm_bringup import engine
 
+pytestmark = pytest.mark.parallel  # (no launch, no router, no wall-clock bound: beside the unit tests)
+
 ROOT = Path(__file__).resolve().parents[2]
 BASE = (ROOT / "deploy" / "scenarios" / "paper.toml").read_text().replace(
     "converge_tol_m = 0.5\n", "converge_tol_m = 0.5\nstall_window_s = 5.0\n")

@@ -34,6 +34,8 @@ from reconswarm.scenario.wire_limits import (
     MAX_VERTICES,
 )
 
+pytestmark = pytest.mark.parallel  # (no launch, no router, no wall-clock bound: beside the unit tests)
+
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "deploy" / "scenarios" / "paper.toml"
 PAPER_TEXT = PAPER.read_text()

@@ -8,9 +8,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from reconswarm.scenario.generate import generate
 from reconswarm.scenario.model import to_toml
 from tests.support import summary
+
+pytestmark = pytest.mark.parallel  # (no launch, no router, no wall-clock bound: beside the unit tests)
 
 
 def _cli(cwd: Path, *args: str) -> subprocess.CompletedProcess[str]:

@@ -24,6 +24,8 @@ from reconswarm_bringup.cli import app
 from reconswarm_bringup.sweep import COLUMNS, make_jobs, run_sweep
 from tests.support import reconswarm
 
+pytestmark = pytest.mark.parallel  # (no launch, no router, no wall-clock bound: beside the unit tests)
+
 PLANNERS = ("reconfigurable", "virtual-leader")
 SEEDS = (0, 1)
 # Two tiny generated scenarios cut short: at 170 s every run of the first converges (reconfigurable

@@ -20,7 +20,7 @@ import pytest
 from reconswarm.scenario.generate import generate
 from reconswarm.scenario.model import to_toml
 from reconswarm_bringup.sweep import COLUMNS
-from tests.support import ROOT, free_port, reconswarm
+from tests.support import ROOT, free_port, reconswarm, wait_until
 
 pytest.importorskip("distributed")
 DASK = shutil.which("dask") or str(Path(__import__("sys").executable).with_name("dask"))
@@ -59,15 +59,24 @@ def cluster_processes(tmp: Path) -> Iterator[tuple[str, subprocess.Popen[bytes],
         from distributed import Client
 
         deadline = time.monotonic() + 60
-        while True:  # the scheduler up and both worker processes registered
+
+        def both_workers() -> bool:  # the scheduler up and both worker processes registered
             try:
                 with Client(address, timeout=2, set_as_default=False) as c:
                     c.wait_for_workers(2, timeout=max(1.0, deadline - time.monotonic()))
-                    break
+                    return True
             except OSError:
+<<<<<<< HEAD
                 assert sched.poll() is None and time.monotonic() < deadline, (tmp / "scheduler.log").read_text()
                 time.sleep(0.3)
         yield address, sched, worker
+=======
+                return False
+
+        wait_until(both_workers, 60, f"the scheduler up and 2 workers: {tmp / 'scheduler.log'}", every_s=0.3,
+                   proc=sched)
+        yield address
+>>>>>>> ci52
     finally:
         _stop(worker)
         _stop(sched)

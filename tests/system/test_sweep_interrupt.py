@@ -13,7 +13,6 @@ import re
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -21,7 +20,7 @@ import pytest
 from reconswarm.scenario.generate import generate
 from reconswarm.scenario.model import to_toml
 from reconswarm_bringup.sweep import COLUMNS
-from tests.support import ROOT, alive
+from tests.support import ROOT, gone_within, wait_until
 
 MAX_RSS_MB = 300  # the sweep process itself; it reached 892 MB in 25 s when it built 10^8 jobs first
 
@@ -56,11 +55,8 @@ def test_huge_sweep_streams_and_a_signal_keeps_every_finished_row(tmp_path: Path
                           "--jobs", "2", "-o", str(out)], cwd=ROOT, text=True, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE)
     try:
-        deadline = time.monotonic() + 120
-        while len(_rows(out / "results.csv")) < 4:  # header + 3 finished runs
-            assert p.poll() is None, p.communicate()
-            assert time.monotonic() < deadline, "no rows: the sweep did not start running"
-            time.sleep(0.2)
+        wait_until(lambda: len(_rows(out / "results.csv")) >= 4, 120, "3 rows: the sweep running", every_s=0.2,
+                   proc=p)  # (a header and 3 finished runs)
         assert _peak_rss_mb(p.pid) < MAX_RSS_MB
         workers = _children(p.pid)
         assert len(workers) >= 2, workers  # the two workers (and the resource tracker)
@@ -84,8 +80,7 @@ def test_huge_sweep_streams_and_a_signal_keeps_every_finished_row(tmp_path: Path
     for r in body:
         assert (out / "runs" / "tiny" / r[1] / f"seed{r[2]}" / "run.db").is_file()
     # no worker outlived the sweep
-    time.sleep(0.5)
-    left = [w for w in workers if alive(w)]
+    left = gone_within(workers, 10.0)
     for w in left:
         os.kill(w, signal.SIGKILL)
     assert not left

@@ -31,6 +31,7 @@ from tests.support import (
     read_run_id,
     reconswarm,
     wait_for_ticks,
+    wait_until,
 )
 
 
@@ -156,10 +157,8 @@ def test_refused_when_a_world_is_alive_on_an_outside_router(tmp_path: Path, smal
         with (logs / "simworld.log").open("wb") as fh:
             started.append(subprocess.Popen([*cli, "simworld", "--scenario", str(scen), "--connect", ep, "--run",
                                              "byhand-1", "--start-timeout", "120"], cwd=ROOT, stdout=fh, stderr=fh))
-        deadline = time.monotonic() + 60
-        while "waiting for" not in (logs / "simworld.log").read_text():
-            assert time.monotonic() < deadline and started[1].poll() is None, (logs / "simworld.log").read_text()
-            time.sleep(0.2)
+        wait_until(lambda: "waiting for" in (logs / "simworld.log").read_text(), 60, "the world waiting for its run",
+                   every_s=0.2, proc=started[1])
         out = tmp_path / "run"
         rc, _, err = _finish(_launch(out, port, "-s", str(scen)), timeout=120)
     finally:

@@ -6,7 +6,6 @@ payload over the wire's limit on its direct links (as the router forwards none).
 from __future__ import annotations
 
 import queue
-import time
 from pathlib import Path
 from typing import Any
 
@@ -18,17 +17,16 @@ from reconswarm.scenario.model import load
 from reconswarm.scenario.wire_limits import MAX_PAYLOAD_BYTES
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.network import PEER_LISTEN, peer_args, plan_network, zenoh_mode
-from tests.support import PAPER, free_port
+from tests.support import PAPER, free_port, wait_until
 
 SIZES = [0, 1000, MAX_PAYLOAD_BYTES, MAX_PAYLOAD_BYTES + 1, 3 * MAX_PAYLOAD_BYTES, 10]
 
 
 def _until(check: Any, timeout_s: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while not check():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.05)
+    try:
+        wait_until(check, timeout_s, "the check")
+    except AssertionError:
+        return False
     return True
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Any
 
+import numpy as np
 import pytest
 import zenoh
 
@@ -212,6 +213,27 @@ def test_the_plans_of_a_round_are_answered_together_by_tick_then_forgotten(host:
     want = commands([p1])[0]
     assert answers(host) == {1: [Law(p1.k, *want)], 2: [Law(p2.k, *want)]}
     assert answers(host) == {}
+
+
+def test_each_agent_gets_the_law_of_its_own_plan_when_the_plans_differ() -> None:
+    """Three hosted agents with three different plans of one tick: each law goes to the agent whose plan it is."""
+    node, out = AgentNode(NODE_S, NODE_AGENT, 0.0, NODE_T, batched=True), []
+    for batch in script()[:2]:
+        out = node.step(batch, 0.0)
+    (p,) = (o for o in out if isinstance(o, Plan))
+    mine = {1: p, 2: p._replace(pos=p.pos + np.array([[3.0, -2.0]]), theta=p.theta + 0.5),
+            3: p._replace(pos=p.pos + np.array([[-4.0, 1.0]]), theta=p.theta - 0.8)}
+    want = {aid: [Law(p.k, *commands([plan])[0])] for aid, plan in mine.items()}
+    assert len({commands([plan])[0] for plan in mine.values()}) == 3  # (three different laws)
+    z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{free_port()}",), "peer").config())
+    host = make_host(z, (1, 2, 3))
+    try:
+        for aid, plan in mine.items():
+            assert host.act(aid, plan, 0.0) is False
+        assert answers(host) == want
+    finally:
+        host.close()
+        z.close()
 
 
 def answers(host: AgentHost) -> dict[int, list[Any]]:

@@ -5,6 +5,7 @@ that fails the handshake again and again does not flood the log (before: one lin
 from __future__ import annotations
 
 import base64
+import contextlib
 import json
 import logging
 import os
@@ -16,7 +17,7 @@ import numpy as np
 
 from monitor.live import LiveView
 from reconswarm.scenario.model import load
-from tests.support import PAPER
+from tests.support import PAPER, wait_until
 
 S = load(PAPER)
 
@@ -42,7 +43,16 @@ def _client_that_never_reads(port: int, channels: list[int]) -> socket.socket:
     c.sendall((f"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
                f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
                f"Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n").encode())
-    time.sleep(0.3)  # (the server advertises its channels)
+    heard = bytearray()  # (the handshake's answer, then the server advertises its channels)
+
+    def advertised() -> bool:
+        with contextlib.suppress(TimeoutError):
+            heard.extend(c.recv(65536))
+        return b'"advertise"' in heard
+
+    c.settimeout(0.1)
+    wait_until(advertised, 10.0, "the live view's advertisement of its channels", every_s=0.0)
+    c.settimeout(None)
     subs = [{"id": k, "channelId": ch} for k, ch in enumerate(channels)]
     c.sendall(_masked_text_frame(json.dumps({"op": "subscribe", "subscriptions": subs})))
     return c

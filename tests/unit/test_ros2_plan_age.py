@@ -28,7 +28,7 @@ from reconswarm.scenario.model import load
 from simworld.process import WorldPort
 from simworld.ros2_io import Ros2Robots, Ros2World, WorldRos2, planned_tick
 from simworld.world import Command
-from tests.support import PAPER, free_port
+from tests.support import PAPER, free_port, wait_subscribed, wait_until
 from tests.unit.test_agent_host_sessions import two_sessions
 
 MS = 1_000_000  # ns
@@ -79,10 +79,11 @@ def test_sent_times_are_taken_once_in_the_order_they_came_for_equal_bytes() -> N
 
 def _wait(what: Any, n: int) -> list[Any]:
     got: list[Any] = []
-    deadline = time.monotonic() + 10.0
-    while len(got) < n and time.monotonic() < deadline:
-        got += what()
-        time.sleep(0.02)
+    def more() -> bool:
+        got.extend(what())
+        return len(got) >= n
+
+    wait_until(more, 10.0, f"{n} samples", every_s=0.02)
     assert len(got) == n
     return got
 
@@ -98,7 +99,7 @@ def test_the_plant_dates_a_cmd_vel_by_its_attachments_source_timestamp() -> None
                 time.sleep(PERIOD_S)
             agent = Ros2Publisher(out, ros2.cmd_vel_key(0, a))
             twist = ros2.twist_to_ros(1.0, 0.0)
-            time.sleep(0.5)  # (the outside session's declarations propagate)
+            wait_subscribed(out, agent.key)  # (the world's subscription reached the outside session)
             agent.put(twist, world.published_ns[1] + 2 * MS)  # planned from tick 1's odometry
             agent.put(twist, world.published_ns[3] + 5 * MS)  # from tick 3's (the same bytes, taken in order)
             agent.put(ros2.twist_to_ros(2.0, 0.0), world.published_ns[0] - 500 * MS)  # half a second before any
@@ -138,7 +139,7 @@ def test_the_plant_publishes_each_robots_odometry_and_keeps_when_each_tick_was_o
         heard: list[Any] = []
         sub = out.declare_subscriber(ros2.odom_key(0, a), heard.append)
         try:
-            time.sleep(0.5)  # (the outside session's declarations propagate)
+            wait_subscribed(z, ros2.odom_key(0, a))  # (the outside session's subscription reached the world's)
             base.integrate(base.vw + [[3.0, 2.0]] * len(base.ids))  # (v, ω) beyond the world's limits: saturated
             assert tuple(base.vw[i]) == (1.0, 0.5)
             before = time.time_ns()
@@ -188,7 +189,8 @@ def test_an_agent_sends_no_command_planned_from_odometry_older_than_a_period() -
         sub = out.declare_subscriber(ros2.cmd_vel_key(0, a), cmd_vels.append)
         try:
             plant = Ros2Publisher(out, ros2.odom_key(0, a))
-            time.sleep(0.5)  # (the outside session's declarations propagate)
+            wait_subscribed(out, plant.key)  # (each side's subscription reached the other)
+            wait_subscribed(z, ros2.cmd_vel_key(0, a))
             now = time.time_ns()
             plant.put(ros2.odom_to_ros(ros2.Odom(a, 5 * S.meta.dt_s, 0.0, 0.0, 0.0, 0.0, 0.0)), now - 10_000 * MS)
             plant.put(ros2.odom_to_ros(ros2.Odom(a, 6 * S.meta.dt_s, 0.0, 0.0, 0.0, 0.0, 0.0)), now)

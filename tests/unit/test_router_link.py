@@ -6,7 +6,6 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-import time
 from dataclasses import replace
 
 import pytest
@@ -17,7 +16,7 @@ from reconswarm.net.node import RouterLink
 from reconswarm.net.session import ZenohOptions
 from reconswarm.net.uplink import LinkChange, Uplink
 from reconswarm.net.wire import ClockMode
-from tests.support import ROOT, free_port
+from tests.support import ROOT, free_port, wait_until
 from tests.unit.test_world_node import IDS, S, T, advance, commands, ended, started, ticks, tokens
 
 
@@ -78,13 +77,10 @@ def _router(endpoint: str) -> subprocess.Popen[bytes]:
 
 
 def _wait(uplink: Uplink, timeout_s: float) -> LinkChange | None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        change = uplink.poll()
-        if change is not None:
-            return change
-        time.sleep(0.05)
-    return None
+    try:
+        return wait_until(uplink.poll, timeout_s, "a change of the router link")
+    except AssertionError:
+        return None
 
 
 def test_uplink_sees_its_router_killed_and_a_new_one_on_the_same_endpoint() -> None:

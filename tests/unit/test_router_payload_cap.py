@@ -4,6 +4,7 @@ takes none either: tests/system/test_zenoh_peers.py.)"""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import threading
 import time
@@ -13,7 +14,7 @@ import zenoh
 
 from reconswarm.net.session import PAYLOAD_CAP, ZenohOptions, open_session
 from reconswarm.scenario.wire_limits import MAX_PAYLOAD_BYTES
-from tests.support import free_port
+from tests.support import free_port, wait_until
 
 SIZES = [0, 1000, 70_000, MAX_PAYLOAD_BYTES, MAX_PAYLOAD_BYTES + 1, 3 * MAX_PAYLOAD_BYTES, 10]
 
@@ -36,9 +37,8 @@ def _through(router: ZenohOptions, endpoint: str) -> list[int]:
         probe.undeclare()
         for n in SIZES:
             pub.put(bytes(n))
-        deadline = time.monotonic() + 10.0
-        while (not got or got[-1] != SIZES[-1]) and time.monotonic() < deadline:
-            time.sleep(0.05)
+        with contextlib.suppress(AssertionError):  # (the assertions below say what did not come)
+            wait_until(lambda: got and got[-1] == SIZES[-1], 10.0, "the last payload")
         sub.undeclare()
     finally:
         for z in (p, s, r):

@@ -4,18 +4,15 @@ new one. Real zenoh sessions on 127.0.0.1: a router, a listener and the replaced
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 from reconswarm.net.inbox import sample_source
 from reconswarm.net.session import ZenohOptions, open_session
-from tests.support import free_port
+from tests.support import free_port, wait_subscribed, wait_until
 
 
 def _wait(got: list[Any], n: int) -> None:
-    deadline = time.monotonic() + 5.0
-    while len(got) < n and time.monotonic() < deadline:
-        time.sleep(0.02)
+    wait_until(lambda: len(got) >= n, 5.0, f"{n} samples heard", every_s=0.02)
 
 
 def test_a_replacing_session_speaks_with_the_closed_ones_id() -> None:
@@ -28,14 +25,14 @@ def test_a_replacing_session_speaks_with_the_closed_ones_id() -> None:
     try:
         first = open_session(client, "agent", timeout_s=10.0)
         zid = str(first.info.zid())
-        time.sleep(0.3)
+        wait_subscribed(first, "id/a")
         first.put("id/a", b"1")
         _wait(got, 1)
         first.close()
         second = open_session(client, "agent", timeout_s=10.0, zid=zid)
         try:
             assert str(second.info.zid()) == zid
-            time.sleep(0.3)
+            wait_subscribed(second, "id/a")
             second.put("id/a", b"2")
             _wait(got, 2)
         finally:

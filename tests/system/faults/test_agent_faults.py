@@ -5,9 +5,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from tests.support import events, faults_log, positions, restart_and_rejoin, run_launcher
+import pytest
+
+from tests.support import assert_all_gone, events, faults_log, positions, restart_and_rejoin, run_launcher
+from tests.system.faults.test_router_loss import three_agents
 
 
+@pytest.mark.realtime  # (the monitor notices the death within 1 s of wall time)
 def test_agent_killed(out: Path) -> None:
     """Killed at t = 40 s, robot 3 stops by the diamond's lower vertex, in the swarm's path: agents 6, 7 and 10
     stood still in the pocket between it and the diamond, 590 m from their slots (reconswarm/paper/blocked.py)."""
@@ -24,8 +28,9 @@ def test_agent_killed(out: Path) -> None:
     assert len(track) > 100 and max(abs(x - track[0][1]) + abs(y - track[0][2]) for _, x, y in track) == 0.0
 
 
-def test_agent_frozen_then_rejoins(out: Path) -> None:
-    p = run_launcher(out, "--fault", "freeze:agent:2@50+5", "--json")
+def test_agent_frozen_then_rejoins(tmp_path: Path, out: Path) -> None:
+    """The paper's first three agents without obstacles (a freeze, a hold and a rejoin ask for no diamond)."""
+    p = run_launcher(out, "-s", str(three_agents(tmp_path)), "--fault", "freeze:agent:2@50+5", "--json")
     assert p.returncode == 0, p.stderr[-3000:]
     s = json.loads(p.stdout)
     assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
@@ -39,9 +44,26 @@ def test_agent_frozen_then_rejoins(out: Path) -> None:
     assert len(set(after)) > 10
 
 
-def test_agent_restarted_rejoins_with_shared_obstacles(out: Path) -> None:
-    joined = restart_and_rejoin(out, agent=4, at_s=70, after_s=1)
+@pytest.fixture(scope="module")
+def restarted(tmp_path_factory: pytest.TempPathFactory) -> dict[int, list[str]]:
+    """One paper mission, two agents restarted: 8 killed at t = 60 s (the diamond is known by then) and started
+    again half a second later, 4 at t = 70 s and a second later. Each agent's "joining at tick" log lines."""
+    out = tmp_path_factory.mktemp("restarted") / "run"
+    try:
+        return restart_and_rejoin(out, {8: (60, 0.5), 4: (70, 1)})
+    finally:
+        assert_all_gone(out)
+
+
+def test_agent_restarted_rejoins_with_shared_obstacles(restarted: dict[int, list[str]]) -> None:
+    joined = restarted[4]
     assert joined and "'diamond'" in joined[-1]  # its peers' cached obstacle sets
+
+
+def test_late_agent_catches_up_on_obstacles(restarted: dict[int, list[str]]) -> None:
+    joined = restarted[8]
+    assert joined  # ("joining at tick" in its log)
+    assert "'diamond'" in joined[-1]  # learned from its peers' cached sets, before sensing anything itself
 
 
 def test_dead_robot_is_still_avoided_after_a_world_stall(out: Path) -> None:

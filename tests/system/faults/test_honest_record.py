@@ -34,6 +34,7 @@ from tests.support import (
     paper_with,
     read_run_id,
     wait_for_ticks,
+    wait_until,
 )
 
 DURATION_S = 20.0
@@ -66,11 +67,13 @@ class Stamper:
                 self.ids.setdefault("agent 2", s.timestamp.get_id())
 
     def ready(self) -> tuple[wire.Clock, Any, Any]:
-        while True:
+        def heard() -> tuple[wire.Clock, Any, Any] | None:
             with self.lock:
                 if self.clock is not None and {"world", "agent 2"} <= set(self.ids):
                     return self.clock, self.ids["world"], self.ids["agent 2"]
-            time.sleep(0.02)
+                return None
+
+        return wait_until(heard, 60.0, "the clock and the ids of the world and of agent 2", every_s=0.02)
 
     def put_as(self, zid: Any, key: str, payload: bytes) -> None:
         self.z.put(key, payload, timestamp=zenoh.Timestamp(datetime.datetime.now(datetime.UTC), zid),

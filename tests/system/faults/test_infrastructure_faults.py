@@ -1,4 +1,8 @@
-"""The monitor killed, the router restarted, 10,000 malformed messages: the mission goes on, the record holds."""
+"""The monitor killed, the router restarted, 10,000 malformed messages: the mission goes on, the record holds.
+
+The monitor and router faults concern the infrastructure, not the paper's geometry: they run the paper's first
+three agents without obstacles (tests/system/faults/test_router_loss.py `three_agents`: converged at 172.05 s,
+in a fraction of the paper's wall time). The flood's fan-out counts are the paper's ten agents."""
 
 from __future__ import annotations
 
@@ -6,10 +10,11 @@ import json
 from pathlib import Path
 
 from tests.support import faults_log, run_launcher, summary
+from tests.system.faults.test_router_loss import three_agents
 
 
-def test_monitor_killed_is_restarted_and_appends(out: Path) -> None:
-    p = run_launcher(out, "--fault", "kill:monitor@80", "--json")
+def test_monitor_killed_is_restarted_and_appends(tmp_path: Path, out: Path) -> None:
+    p = run_launcher(out, "-s", str(three_agents(tmp_path)), "--fault", "kill:monitor@80", "--json")
     assert p.returncode == 0, p.stderr[-3000:]
     s = json.loads(p.stdout)
     assert s["converged"] and s["collisions"] == 0
@@ -22,12 +27,12 @@ def test_monitor_killed_is_restarted_and_appends(out: Path) -> None:
     assert len((out / "logs" / "monitor.log").read_text().split("monitor up")) == 3  # two incarnations
 
 
-def test_router_restarted(out: Path) -> None:
-    p = run_launcher(out, "--fault", "restart:router@90+2", "--json")
+def test_router_restarted(tmp_path: Path, out: Path) -> None:
+    p = run_launcher(out, "-s", str(three_agents(tmp_path)), "--fault", "restart:router@90+2", "--json")
     assert p.returncode == 0, p.stderr[-3000:]
     s = json.loads(p.stdout)
     assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
-    assert s["convergence_time_s"] <= 240
+    assert s["convergence_time_s"] <= 190  # (172.05 s undisturbed)
 
 
 def test_flood_of_malformed_messages(out: Path) -> None:

@@ -40,6 +40,7 @@ from tests.support import (
     launcher_cmd,
     read_run_id,
     wait_for_ticks,
+    wait_until,
 )
 
 KILL_AT_S = 90.0
@@ -69,11 +70,11 @@ class Attacker:
                 self.clock = c
 
     def now(self) -> tuple[wire.Truth, wire.Clock]:
-        while True:
+        def both() -> tuple[wire.Truth, wire.Clock] | None:
             with self.lock:
-                if self.truth is not None and self.clock is not None:
-                    return self.truth, self.clock
-            time.sleep(0.05)
+                return None if self.truth is None or self.clock is None else (self.truth, self.clock)
+
+        return wait_until(both, 60.0, "the world's truth and clock heard")
 
     def put(self, key: str, payload: bytes) -> None:
         # BLOCK: a put under zenoh's default (DROP) may be dropped by our own session when its queue is full

@@ -17,7 +17,16 @@ import pytest
 import zenoh
 
 from reconswarm.net.keys import Keys
-from tests.support import ROOT, assert_all_gone, free_port, reconswarm
+from tests.support import (
+    ROOT,
+    assert_all_gone,
+    free_port,
+    reconswarm,
+    router_listening,
+    wait_for_ticks,
+    wait_router_listening,
+    wait_until,
+)
 
 from .test_secure import Catch, _anonymous_config, _open
 
@@ -62,6 +71,9 @@ agents = [6, 7, 8, 9, 10]
         routers.append(subprocess.Popen([sys.executable, "-m", "reconswarm_bringup.cli", "router", "--zenoh-config",
                                          str(two.cfg(host, f"router-{host}"))], cwd=ROOT, stdout=log, stderr=log))
     try:
+        wait_router_listening(pa, proc=routers[0])
+        wait_until(lambda: router_listening(pb, "localhost"), 60, f"router B listening on localhost:{pb}",
+                   proc=routers[1])
         yield two
     finally:
         for r in routers:
@@ -71,6 +83,16 @@ agents = [6, 7, 8, 9, 10]
         assert_all_gone(d)
 
 
+def heard_probe(speaker: zenoh.Session, key: str, *catches: Catch, payload: bytes = b"probe") -> None:
+    """Put `payload` on `key` from `speaker` every 0.2 s until each of `catches` heard it (the way is open)."""
+
+    def heard() -> bool:
+        speaker.put(key, payload)
+        return all(payload in c.payloads(key) for c in catches)
+
+    wait_until(heard, 60, f"{payload!r} on {key} heard", every_s=0.2)
+
+
 def test_what_a_process_may_say_crosses_hosts_and_nothing_else(two: Two) -> None:
     """Listeners and speakers are separate sessions (a session hears its own puts whatever the routers say)."""
     keys = Keys(RUN)
@@ -78,19 +100,27 @@ def test_what_a_process_may_say_crosses_hosts_and_nothing_else(two: Two) -> None
     b6, b7 = (_open(two.cfg("B", n)) for n in ("agent-6", "agent-7"))  # host B
     try:
         on_a, on_b = Catch(), Catch()
-        a1.declare_subscriber(keys.cell_agents(None, "beacon"), on_a)
         a1.declare_subscriber(keys.clock, on_a)
+        a1.declare_subscriber(keys.cell_agents(None, "beacon"), on_a)
         b6.declare_subscriber(keys.clock, on_b)
         b6.declare_subscriber(keys.cell_agents(None, "beacon"), on_b)
-        time.sleep(3.0)  # declarations across both routers
+        # The declarations crossed both routers once a probe on a beacon key each way comes through (each listener
+        # declared its clock subscription first: it is through too). The probes' cell (1_1) is one no check reads.
+        probe7, probe2 = keys.beacon((1, 1), 7), keys.beacon((1, 1), 2)
+        heard_probe(b7, probe7, on_a)
+        heard_probe(a2, probe2, on_b)
         for _ in range(5):
             b7.put(keys.beacon((0, 0), 7), b"seven")  # its own: crosses to A
             b7.put(keys.beacon((0, 0), 1), b"forged")  # agent 1's, from B: stopped at B's router
             b7.put(keys.clock, b"forged clock")  # only the world (on A) may
             world.put(keys.clock, b"clock")  # crosses to B
             a2.put(keys.beacon((0, 0), 2), b"two")  # crosses to B
-            time.sleep(0.2)
-        time.sleep(1.5)
+            time.sleep(0.2)  # (the pace of a round)
+        # b7's forgeries went the ways its own beacons go, in order: a last probe of its own heard on both hosts
+        # means they came or never will; and the world's and agent 2's five each
+        heard_probe(b7, probe7, on_a, on_b, payload=b"last")
+        wait_until(lambda: len(on_a.payloads(keys.clock)) >= 5 and len(on_b.payloads(keys.clock)) >= 5
+                   and len(on_b.payloads(keys.beacon((0, 0), 2))) >= 5, 30, "the world's clocks and agent 2's beacons")
         print("heard on A:", sorted(on_a.key_set()), "on B:", sorted(on_b.key_set()))
         assert on_a.payloads(keys.beacon((0, 0), 7)) == [b"seven"] * 5
         assert on_b.payloads(keys.beacon((0, 0), 2)) == [b"two"] * 5
@@ -113,12 +143,14 @@ def test_a_router_admits_only_its_own_hosts_processes(two: Two) -> None:
         stray.declare_subscriber("swarm/**", got_stray)
         stray.declare_subscriber(keys.cell_agents(None, "beacon"), got_stray)
         b6.declare_subscriber(keys.cell_agents(None, "beacon"), got_b6)
-        time.sleep(2.0)
+        probe7 = keys.beacon((1, 1), 7)  # (a cell no check reads)
+        heard_probe(b7, probe7, got_b6)  # agent 6's subscription is in place
         for _ in range(5):
             stray.put(keys.beacon((0, 0), 1), b"from B's router")
             b7.put(keys.beacon((0, 0), 7), b"seven")
-            time.sleep(0.2)
-        time.sleep(1.0)
+            time.sleep(0.2)  # (the pace of a round)
+        wait_until(lambda: len(got_b6.payloads(keys.beacon((0, 0), 7))) >= 5, 30, "agent 7's five beacons at agent 6")
+        # (the stray's last put went to the same router before agent 7's last beacon: it had as long to arrive)
         print("stray heard:", sorted(got_stray.key_set()), "agent 6 heard:", sorted(got_b6.key_set()))
         assert got_b6.payloads(keys.beacon((0, 0), 7)) == [b"seven"] * 5  # B works for its own
         assert got_b6.payloads(keys.beacon((0, 0), 1)) == []  # the stray's puts reach nobody
@@ -161,7 +193,7 @@ def test_secure_two_hosts_converge_through_a_partition_and_refuse_outsiders(tmp_
     import signal
 
     from reconswarm.scenario.model import load
-    from tests.support import events, launcher_cmd, paper_with, read_run_id, tick_count
+    from tests.support import events, launcher_cmd, paper_with, read_run_id
 
     from .test_partition import need_network_namespaces
 
@@ -173,10 +205,7 @@ def test_secure_two_hosts_converge_through_a_partition_and_refuse_outsiders(tmp_
         proc = subprocess.Popen(launcher_cmd(out, "-s", str(scen), "--secure", "--hosts", "2", "--fault",
                                              "partition@60+10", "--json"), cwd=ROOT, stdout=subprocess.PIPE, stderr=fh)
     try:
-        deadline = time.monotonic() + 300
-        while tick_count(out / "run.db") < 20:
-            assert proc.poll() is None and time.monotonic() < deadline, err.read_text()[-3000:]
-            time.sleep(0.2)
+        wait_for_ticks(out / "run.db", 20, proc, 300, lambda: err.read_text()[-3000:])
         secrets = out / "secrets"
         router_a = json.loads((secrets / "router-A.json5").read_text())
         ep_a = router_a["listen"]["endpoints"][0]
