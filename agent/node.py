@@ -61,6 +61,7 @@ class AgentNode:
         self.clock_in: wire.Clock | None = None  # the latest clock received: an end stands if nothing came after it
         self.world_gone = False  # the world's token went away and nothing came from it since (a stalled world)
         self.link_lost = False  # lockstep: our router link went (or changed) mid-mission since our last tick
+        self.unlinked = False  # our session has no router (nobody's token that goes is judged meanwhile)
         self.started = False  # the mission began (first clock): the watches run from then on
         self.last_cmd: wire.Cmd | None = None
         self.last_act = self.acted = now_s  # wall time of our latest command, re-sent or not (acted: of a new tick)
@@ -84,6 +85,8 @@ class AgentNode:
             if isinstance(m, Stop):  # (a signal: we leave at once, our report says what happened)
                 return [Exit(0, "stopped")]
             self._take(m, now_s)
+        if self.h.going and not self.unlinked:
+            self.h.confirm(now_s, self.timing.token_confirm_s)
         self._advance(now_s)
         if self.planning < 0:  # (a plan out: the watch waits for its law)
             watch(self, now_s)  # (the safety nets: agent/watch.py)
@@ -144,6 +147,10 @@ class AgentNode:
             self.rejected += 1
         elif isinstance(m, RouterLink):  # what was in flight to us meanwhile is lost: nobody sends it again
             self.link_lost |= self.started and self.mode == "lockstep" and not self.ended
+            self.unlinked = not m.up  # (its tokens went with it: judged only once they had time to come back)
+            self.h.hold(now + (self.timing.relink_settle_s if m.up else 0.0))
+            if m.up and self.beacon_sent in self.h.states:  # our newest beacon may have been lost with the link:
+                self._out.append(self._beacon(self.h.states[self.beacon_sent]))  # peers place us by it
         elif isinstance(m, wire.Clock):
             self._world_back(now)
             self.h.clock(m, now)
