@@ -304,7 +304,7 @@ class AgentNode:
         if self.mode == "lockstep" and not self._guess:
             late = self.nb.intruders(k, self.h.beacons.get(k, {}))
             gone = "our router link went: what was in flight to us (a beacon, a set) is lost" if self.link_lost else ""
-            self._guess = self.nb.unexpected(late[0]) if late else gone
+            self._guess = gone or (self.nb.unexpected(late[0]) if late else "")  # (the link first: their cause)
         self.link_lost = False
         if self._guess and self.guessed_k < 0:
             self.guessed_k = k
