@@ -10,6 +10,7 @@ world's clock.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from collections.abc import Set as AbstractSet
 
@@ -23,6 +24,10 @@ class Heard:
         self.beacons: dict[int, dict[int, wire.Beacon]] = {}  # tick -> peer -> its beacon at that tick
         self.last_seen: dict[int, wire.Beacon] = {}  # peer -> its newest beacon (a lost peer stays there)
         self.alive, self.gone = set[int](), set[int]()  # (gone: peers whose token we saw go, and not come back)
+        # Tokens that went, not yet gone (`confirm`): peer -> wall time it went. A dying router takes every token
+        # with it a moment before our session finds its own link gone; while it is gone nobody's token is judged.
+        self.going: dict[int, float] = {}
+        self.judge_from = -math.inf  # (wall: tokens that went are judged from then on; see `hold`)
         self.tokens = 0  # how many token changes came (what `living` says changes only with one, or a new clock)
         self.heard: dict[int, float] = {}  # wall time of each peer's latest beacon (or of its token), the newest last
         self.state_at: dict[int, float] = {}  # wall time each tick's state arrived (lockstep: while its clock is due)
@@ -39,12 +44,28 @@ class Heard:
             self.last_seen[a] = m
 
     def token(self, agent: int, up: bool, now: float) -> None:
-        """A peer's token came (up) or went."""
+        """A peer's token came (up) or went (gone once `confirm` says so)."""
         self.tokens += 1
         (self.alive.add if up else self.alive.discard)(agent)
-        (self.gone.discard if up else self.gone.add)(agent)
         if up:
+            self.gone.discard(agent)
+            self.going.pop(agent, None)
             self.heard.setdefault(agent, now)
+        elif agent not in self.gone:
+            self.going.setdefault(agent, now)
+
+    def hold(self, until: float) -> None:
+        """Judge no token that went before `until` (our own link down, or back: tokens have until then to return)."""
+        self.judge_from = max(self.judge_from, until)
+
+    def confirm(self, now: float, confirm_s: float) -> bool:
+        """The tokens that went `confirm_s` ago (and not before `judge_from`) are gone. True if any."""
+        due = [a for a, at in self.going.items() if now - max(at, self.judge_from) >= confirm_s]
+        for a in due:
+            del self.going[a]
+            self.gone.add(a)
+        self.tokens += bool(due)
+        return bool(due)
 
     def scan(self, m: wire.Scan, radius: dict[int, float]) -> None:
         """Our scan; the robots it says are held near us (their agents gone; maybe never heard: lost far away)."""

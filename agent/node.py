@@ -9,6 +9,8 @@ leader) and the obstacle sets of those within link range (all for the virtual le
 commands. Realtime: it acts shortly after each new state on whatever it has (latest beacons, sets). A lost
 peer stays where last seen or where the world's scan reports it held; a live one out of our cells is dropped.
 A new session of its process (`reconnected`) keeps the node: peers, lost peers, knowledge, revisions, escape state.
+Its router link lost (or changed) mid-mission in lockstep, what was in flight to it is lost and nobody sends it
+again: the next tick it acts on is a guess (`guessed_k`).
 What it heard is agent/heard.py's. Hosted with others (`batched`), it returns its tick's `Plan` and takes its
 command back as `Law`: its host computes the law of every plan of a round at once (agent/host.py).
 """
@@ -24,12 +26,13 @@ import numpy as np
 
 from agent.brain import AgentBrain, Body, commands
 from agent.heard import Heard
-from agent.messages import Input, Law, Output, Reconnect
+from agent.messages import Input, Law, Output
 from agent.neighbours import Neighbourhood
 from agent.sets import PeerSets, own_set, scan_sets
+from agent.watch import watch
 from reconswarm.net import wire
 from reconswarm.net.membership import Policy, silent
-from reconswarm.net.node import Exit, Invalid, Role, Stop, Token
+from reconswarm.net.node import Exit, Invalid, Role, RouterLink, Stop, Token
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.scenario.model import Scenario
 
@@ -58,6 +61,8 @@ class AgentNode:
         self.last_clock, self.world_at, self.ended = now_s, now_s, False  # (world_at: its latest clock or our state)
         self.clock_in: wire.Clock | None = None  # the latest clock received: an end stands if nothing came after it
         self.world_gone = False  # the world's token went away and nothing came from it since (a stalled world)
+        self.link_lost = False  # lockstep: our router link went (or changed) mid-mission since our last tick
+        self.unlinked = False  # our session has no router (nobody's token that goes is judged meanwhile)
         self.started = False  # the mission began (first clock): the watches run from then on
         self.last_cmd: wire.Cmd | None = None
         self.last_act = self.acted = now_s  # wall time of our latest command, re-sent or not (acted: of a new tick)
@@ -81,9 +86,11 @@ class AgentNode:
             if isinstance(m, Stop):  # (a signal: we leave at once, our report says what happened)
                 return [Exit(0, "stopped")]
             self._take(m, now_s)
+        if self.h.going and not self.unlinked:
+            self.h.confirm(now_s, self.timing.token_confirm_s)
         self._advance(now_s)
         if self.planning < 0:  # (a plan out: the watch waits for its law)
-            self._watch(now_s)
+            watch(self, now_s)  # (the safety nets: agent/watch.py)
         out, self._out = self._out, []
         return out
 
@@ -139,6 +146,12 @@ class AgentNode:
                 self.world_gone = True
         elif isinstance(m, Invalid):
             self.rejected += 1
+        elif isinstance(m, RouterLink):  # what was in flight to us meanwhile is lost: nobody sends it again
+            self.link_lost |= self.started and self.mode == "lockstep" and not self.ended
+            self.unlinked = not m.up  # (its tokens went with it: judged only once they had time to come back)
+            self.h.hold(now + (self.timing.relink_settle_s if m.up else 0.0))
+            if m.up and self.beacon_sent in self.h.states:  # our newest beacon may have been lost with the link:
+                self._out.append(self._beacon(self.h.states[self.beacon_sent]))  # peers place us by it
         elif isinstance(m, wire.Clock):
             self._world_back(now)
             self.h.clock(m, now)
@@ -290,7 +303,9 @@ class AgentNode:
         st = self.h.states[k]
         if self.mode == "lockstep" and not self._guess:
             late = self.nb.intruders(k, self.h.beacons.get(k, {}))
-            self._guess = self.nb.unexpected(late[0]) if late else ""
+            gone = "our router link went: what was in flight to us (a beacon, a set) is lost" if self.link_lost else ""
+            self._guess = gone or (self.nb.unexpected(late[0]) if late else "")  # (the link first: their cause)
+        self.link_lost = False
         if self._guess and self.guessed_k < 0:
             self.guessed_k = k
             log.warning("agent %d: tick %d: %s: acting without them; lockstep is no longer deterministic",
@@ -376,24 +391,3 @@ class AgentNode:
             self._act(k, now)
             if self.planning >= 0:
                 return
-
-    def _watch(self, now: float) -> None:
-        """The safety nets: a silent world (exit 3), no command for long (a new session), the waiting log."""
-        t = self.timing
-        if not self.started and self.h.clocks:  # the mission began: the watch starts now
-            self.started, self.last_act, self.acted = True, now, now
-        if self.started and now - self.last_clock > t.world_silence_s:
-            log.error("agent %d: no clock from the world for %.0f s", self.id, t.world_silence_s)
-            self._out.append(Exit(3))
-            return
-        if self.started and (now - self.last_act > (t.resubscribe_world_gone_s if self.world_gone else t.resubscribe_s)
-                             or now - self.acted > t.resubscribe_world_gone_s):
-            self._out.append(Reconnect())
-            return
-        if self.started and now - self.last_act > t.waiting_log_s and now > self.told_waiting + t.waiting_log_s:
-            self.told_waiting = now
-            log.info("agent %d: %s", self.id, self.waiting_for())
-        last = self.clock_in  # an end stands once the world's token went after it, or no clock came for a while (a
-        self.ended |= last is not None and last.end and (self.world_gone or now - self.last_clock > t.end_confirm_s)
-        if self.ended:  # later clock from the world, whatever tick the end claimed, says it was not the world's)
-            self._out.append(Exit(0))

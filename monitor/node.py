@@ -31,6 +31,7 @@ from reconswarm.net.node import Exit, Invalid, Role, RouterLink, Stop, Token
 from reconswarm.net.report import Report
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.paper.events import Event, EventKind
+from reconswarm.record.extra import WORLD_END_REASONS, world_stats
 from reconswarm.record.recorder import Recorder
 from reconswarm.scenario.model import Scenario
 
@@ -193,6 +194,8 @@ class MonitorNode:
                 self._put(Meta((("mission_start_unix", start),)))
         if c.end and self.end is None:
             self.end, self.end_at, self.end_source = c, now_s, source
+            if c.reason not in WORLD_END_REASONS:
+                self._refuse_end("no end the world gives")
 
     # ------------------------------------------------------------------------------------- data
 
@@ -293,8 +296,12 @@ class MonitorNode:
         """Close the record: counters, the end reason (or the world's loss), the wall time."""
         self._count()
         extra: dict[str, Any] = {}
-        if self.end is not None:
-            extra = dict(self.end.stats)
+        if self.end is not None:  # (its statistics: only the world's counters, checked; the rest is dropped)
+            extra, dropped = world_stats(self.end.stats)
+            if dropped:
+                log.warning("the end's statistics %s are not the world's counters: dropped", sorted(dropped))
+                self.invalid += 1
+                self._count()
             extra["end_reason"] = self.end.reason
         elif self.stall_since is not None:
             self._emit(Event(round(self.stall_t, 9), EventKind.WORLD_LOST,

@@ -2,11 +2,16 @@
 
 The wire decoders (wire.py) refuse what is malformed. This module refuses what is well formed but that the
 run cannot contain, from what the scenario says and what has been seen; each refusal is an `Intrusion`,
-which the receiver drops, counts (`IntrusionTally`) and logs. The rules:
+which the receiver drops, counts (`tally.IntrusionTally`) and logs. The rules:
 
 - agents: only the scenario's ids; a beacon's radius is the scenario's radius for that id; a position lies
   inside the scenario's extent grown by what the fastest possible motion covers by then, and within the
-  same bound of that agent's previous beacon (`reach_m`);
+  same bound of that agent's previous beacon (`reach_m`). "Then" is trusted time: a beacon's t is its
+  tick's (k dt) and its tick no later than the newest tick of the world's clock the receiver holds plus
+  `CLOCK_LEAD_TICKS` (before any clock, the mission's last tick); the time between two beacons is the larger of
+  how far the tick moved on (never back) and how far the receiver's clock did. A message's
+  claimed time never widens its own bound beyond trusted time (nor, stored, the next one's); odometry's time
+  is held to the same bound;
 - obstacle sets: only the scenario's obstacle ids (so never more ids than it has); a hull has at most as
   many vertices as the sensor samples on that obstacle, and every vertex lies on the true obstacle's
   boundary within `HULL_TOL_M`: agents only share hulls of sensed contour points, which lie on the true
@@ -50,6 +55,9 @@ from reconswarm.scenario.model import Scenario
 HULL_TOL_M = 1e-3  # a shared vertex must lie within this of the true boundary (float error is ~1e-12 m)
 RADIUS_RTOL = 1e-9
 POSITION_MARGIN_M = 1.0
+# How many ticks a beacon may lie ahead of the newest clock its receiver holds (a peer's beacon of tick k+1 comes
+# after the world's clock of k+1 through one router; a few ticks of slack for priorities and co-hosted agents).
+CLOCK_LEAD_TICKS = 4
 COMMAND_TOL = 1e-9  # relative
 UNATTRIBUTED = "unattributed"  # the source of a message that carries no publisher id
 # Hull vertices remembered as checked (~100 bytes each: a few MB at most, however many distinct truthful
@@ -179,8 +187,9 @@ class Admission:
         self.lo = allp.min(axis=0) - grow
         self.hi = allp.max(axis=0) + grow
         self.clock_mode: tuple[str, float] | None = None
-        self.last_beacon: dict[int, tuple[float, float, float]] = {}  # id -> (t, px, py)
-        self.last_odom: dict[int, tuple[float, float, float]] = {}  # id -> (t, x, y) of its robot's odometry
+        # id -> (t, px, py, the receiver's tick then) of the last admitted beacon; of its robot's odometry
+        self.last_beacon: dict[int, tuple[float, float, float, int]] = {}
+        self.last_odom: dict[int, tuple[float, float, float, int]] = {}
         self.cmds: dict[tuple[int, int], tuple[float, float]] = {}  # (id, k) -> (v, ω) admitted, recent ticks
 
     # -- helpers -------------------------------------------------------------------------------------
@@ -195,6 +204,20 @@ class Admission:
     def reach_m(self, dt_s: float) -> float:
         """How far a head point can move in dt_s of simulated time (|ṗ| = |u| for the unicycle's head)."""
         return self.u_max * max(0.0, dt_s) + POSITION_MARGIN_M
+
+    def trusted_t(self, world_k: int) -> float:
+        """The latest simulated time a message can be of: the receiver's newest clock (tick world_k; -1: none
+        yet) plus `CLOCK_LEAD_TICKS`, and never after the mission's last tick."""
+        return min(self.last_tick, self.last_tick if world_k < 0 else world_k + CLOCK_LEAD_TICKS) * self.s.meta.dt_s
+
+    def _elapsed(self, t: float, world_k: int, last: tuple[float, float, float, int]) -> float:
+        """Simulated time an agent can have moved for since its previous admitted message `last` (t0, x, y, the
+        receiver's tick then): how far the message's (trusted-bounded) time moved on, never back, or how far the
+        receiver's own clock did (an honest message's time is true, so the first bounds it; the second undoes a
+        forged one's time stored ahead within a few ticks); whichever is larger."""
+        t0, _x, _y, k0 = last
+        ran = (world_k - k0) * self.s.meta.dt_s if world_k >= 0 and k0 >= 0 else 0.0
+        return max(0.0, t - t0, ran)
 
     def _position(self, px: float, py: float, t: float) -> str | None:
         r = self.reach_m(t)
@@ -212,23 +235,33 @@ class Admission:
 
     # -- agent messages -------------------------------------------------------------------------------
 
-    def check_beacon(self, b: wire.Beacon, source: str, key: str, now: float) -> Intrusion | None:
+    def check_beacon(self, b: wire.Beacon, source: str, key: str, now: float, world_k: int = -1) -> Intrusion | None:
+        """world_k: the newest tick of the world's clock the receiver holds (-1: none yet)."""
         if b.id not in self.radius:
             return Intrusion(IntrusionKind.UNKNOWN_AGENT, source, key, f"agent {b.id} is not in the scenario")
         want = self.radius[b.id]
         if abs(b.radius - want) > RADIUS_RTOL * max(1.0, want):
             return Intrusion(IntrusionKind.RADIUS, source, key, f"radius {b.radius:.6g} m, the scenario's is {want} m")
-        bad = self._position(b.px, b.py, b.t)
-        if bad is None and b.id in self.last_beacon:
-            t0, x0, y0 = self.last_beacon[b.id]
-            jump = math.hypot(b.px - x0, b.py - y0)
-            if jump > self.reach_m(abs(b.t - t0)):
-                bad = f"moved {jump:.6g} m in {abs(b.t - t0):.6g} s"
+        dt = self.s.meta.dt_s
+        t = b.k * dt  # (the tick's time: what the beacon claims as t must be it)
+        bad = None
+        if not abs(b.t - t) <= 1e-9 * max(1.0, abs(t)):
+            bad = f"t = {b.t:.9g} s at tick {b.k} (dt {dt} s)"
+        elif not t <= self.trusted_t(world_k) + 1e-9:
+            bad = (f"tick {b.k} ahead of the world's tick {world_k} by more than {CLOCK_LEAD_TICKS}" if world_k >= 0
+                   else f"tick {b.k} after the mission's last ({self.last_tick})")
+        else:
+            bad = self._position(b.px, b.py, t)
+        last = self.last_beacon.get(b.id)
+        if bad is None and last is not None:
+            jump, elapsed = math.hypot(b.px - last[1], b.py - last[2]), self._elapsed(t, world_k, last)
+            if jump > self.reach_m(elapsed):
+                bad = f"moved {jump:.6g} m in {elapsed:.6g} s"
         if bad is not None:
             return Intrusion(IntrusionKind.POSITION, source, key, bad)
         who = self._agent(b.id, source, key, now)
         if who is None:
-            self.last_beacon[b.id] = (b.t, b.px, b.py)
+            self.last_beacon[b.id] = (t if last is None else max(t, last[0]), b.px, b.py, world_k)
         return who
 
     def check_cmd(self, c: wire.Cmd, source: str, key: str, now: float, world_k: int,
@@ -261,21 +294,23 @@ class Admission:
                 del self.cmds[ck]
         return None
 
-    def check_odometry(self, st: wire.State, source: str, key: str) -> Intrusion | None:
+    def check_odometry(self, st: wire.State, source: str, key: str, world_k: int = -1) -> Intrusion | None:
         """A robot's odometry (ROS 2 mode) as its agent receives it: the plant's (the world's session, as a
-        state), a pose the robot can have reached, and within reach of the last admitted one."""
+        state), a pose the robot can have reached, and within reach of the last admitted one; its time taken
+        no later than trusted time (world_k: the receiver's newest clock, -1: none)."""
         bad = self.check_world_source(source, key)
         if bad is not None:
             return bad
-        where = self._position(st.x, st.y, st.t)
-        if where is None and st.id in self.last_odom:
-            t0, x0, y0 = self.last_odom[st.id]
-            jump = math.hypot(st.x - x0, st.y - y0)
-            if not jump <= self.reach_m(abs(st.t - t0)):
-                where = f"odometry moved {jump:.6g} m in {abs(st.t - t0):.6g} s"
+        t = min(st.t, self.trusted_t(world_k))
+        where = self._position(st.x, st.y, t)
+        last = self.last_odom.get(st.id)
+        if where is None and last is not None:
+            jump, elapsed = math.hypot(st.x - last[1], st.y - last[2]), self._elapsed(t, world_k, last)
+            if not jump <= self.reach_m(elapsed):
+                where = f"odometry moved {jump:.6g} m in {elapsed:.6g} s"
         if where is not None:
             return Intrusion(IntrusionKind.POSITION, source, key, where)
-        self.last_odom[st.id] = (st.t, st.x, st.y)
+        self.last_odom[st.id] = (t if last is None else max(t, last[0]), st.x, st.y, world_k)
         return None
 
     def check_set_size(self, n_bytes: int, source: str, key: str) -> Intrusion | None:
@@ -346,29 +381,3 @@ class Admission:
                              f"mode {c.mode} x{c.speed:g}, the run's is {self.clock_mode[0]} x{self.clock_mode[1]:g}")
         self.clock_mode = (c.mode, c.speed)
         return None
-
-
-@dataclass
-class IntrusionTally:
-    """Counts per (kind, source), with the first time each was seen; `add` says whether to log it."""
-
-    rows: dict[tuple[str, str], list[float]] = field(default_factory=dict)  # -> [count, first_t]
-    max_rows: int = 256
-    total: int = 0  # every intrusion counted (the rows' counts summed)
-
-    def add(self, i: Intrusion, t: float) -> bool:
-        self.total += 1
-        k = (i.kind.value, i.source)
-        row = self.rows.get(k)
-        if row is None:
-            if len(self.rows) >= self.max_rows:  # an attacker cycling session ids: fold the rest into one row
-                k = (i.kind.value, "(other sources)")
-                row = self.rows.setdefault(k, [0, t])
-            else:
-                row = self.rows[k] = [0, t]
-        row[0] += 1
-        return row[0] == 1
-
-    def as_rows(self) -> list[tuple[str, str, int, float]]:
-        """(kind, source, count, first_t), as the run record stores them."""
-        return [(k, s, int(r[0]), float(r[1])) for (k, s), r in sorted(self.rows.items())]

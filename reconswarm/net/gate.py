@@ -12,8 +12,9 @@ from __future__ import annotations
 import logging
 
 from reconswarm.net import wire
-from reconswarm.net.admission import Admission, HullChecks, Intrusion, IntrusionTally
+from reconswarm.net.admission import Admission, HullChecks, Intrusion
 from reconswarm.net.report import Report
+from reconswarm.net.tally import IntrusionTally
 from reconswarm.scenario.model import Scenario
 
 log = logging.getLogger("reconswarm.admission")
@@ -48,7 +49,7 @@ class Gate:
             if got is None:
                 self.t, self.world_k = max(self.t, m.t), max(self.world_k, m.k)
         elif isinstance(m, wire.Beacon):
-            got = adm.check_beacon(m, source, key, now_s)
+            got = adm.check_beacon(m, source, key, now_s, self.world_k)
         elif isinstance(m, wire.Cmd):
             got = adm.check_cmd(m, source, key, now_s, self.world_k)
         elif isinstance(m, wire.ObstacleSet):
@@ -64,7 +65,7 @@ class Gate:
 
     def admit_odometry(self, st: wire.State, source: str, key: str, now_s: float) -> bool:
         """A robot's odometry (ROS 2 mode), decoded as its state: True to deliver it."""
-        got = self.adm.check_odometry(st, source, key)
+        got = self.adm.check_odometry(st, source, key, self.world_k)
         if got is None:
             return True
         self.refuse(got, now_s)

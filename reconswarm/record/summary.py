@@ -6,14 +6,12 @@ from typing import Any
 
 import numpy as np
 
+from reconswarm.record.extra import trusted
 from reconswarm.record.store import RunRecord
 
 FIELDS = ("scenario", "planner", "mode", "agents", "duration_s", "converged", "convergence_time_s",
           "final_max_error_m", "min_agent_gap_m", "min_obstacle_gap_m", "collisions", "safety_violations",
           "splits", "merges", "agents_lost", "messages_rejected", "intrusions", "path_length_m", "wall_time_s")
-
-# The world's statistics that are counts (the clock carries every statistic as a float)
-COUNTS = ("world_overruns", "latency_samples", "missed_deadlines", "deadlines", "stalls")
 
 
 def _r(v: float | None, nd: int = 3) -> float | None:
@@ -112,12 +110,8 @@ def summarize(rec: RunRecord) -> dict[str, Any]:
         "determinism_lost_at_s": None,
     }
     extra = rec.meta_json("extra", {})
-    if isinstance(extra, dict):
-        out.update(extra)
-    for key in COUNTS:  # (the world's statistics travel as numbers of one kind: a count is whole)
-        v = out.get(key)
-        if isinstance(v, float) and v.is_integer():
-            out[key] = int(v)
+    if isinstance(extra, dict):  # (only what its writers may add, checked: never a field computed above)
+        out.update(trusted(extra, out))
     return out
 
 

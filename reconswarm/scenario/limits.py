@@ -19,6 +19,7 @@ a collision-free run needs. The run goes on without them, but contacts are to be
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -87,6 +88,12 @@ def _magnitudes(s: Scenario, agent_path: dict[int, str]) -> Iterator[Problem]:
             v = getattr(a, key)
             if v > COORD_MAX_M:
                 yield f"{agent_path[a.id]}.{key}", f"must be at most {COORD_MAX_M:g} m, got {v}"
+        # The body's turn rate is ω = u⊥ / head_offset_m: for the fastest step allowed (STEP_MAX_M per dt_s) it
+        # must be finite, or the robot's heading is not (a normal offset of 1e-302 m overflows it at 2e7 m/s).
+        if not math.isfinite(STEP_MAX_M / s.meta.dt_s / a.head_offset_m):
+            yield f"{agent_path[a.id]}.head_offset_m", (
+                f"must be at least {STEP_MAX_M / s.meta.dt_s / sys.float_info.max:.6g} m (the turn rate of a step of "
+                f"{STEP_MAX_M:g} m, |u| / head_offset_m, must be finite), got {a.head_offset_m!r}")
         # A heading is an angle: beyond a few turns float64 keeps no useful fraction of a turn (at 1e16 rad
         # consecutive values are 2 rad apart).
         if abs(a.heading_rad) > 1000 * math.pi:

@@ -1,10 +1,12 @@
-"""A strict reader of parsed TOML tables: unknown or missing keys, wrong types and non-finite numbers are
-refused with one `BadInput` naming the source file and the field's path (`agents[3].start_m[1]`)."""
+"""A strict reader of parsed TOML tables: unknown or missing keys, wrong types, non-finite numbers and subnormal
+ones (nonzero, below 2.2e-308) are refused with one `BadInput` naming the source file and the field's path
+(`agents[3].start_m[1]`)."""
 
 from __future__ import annotations
 
 import difflib
 import math
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -51,6 +53,7 @@ class TableReader:
             raise self.fail(where, f"expected a number, got {kind_of(v)}")
         if not math.isfinite(v):
             raise self.fail(where, f"must be finite, got {v}")
+        subnormal(float(v), where, self.fail)
         if check is not None and not check(float(v)):
             raise self.fail(where, f"must be {need}, got {v}")
         return float(v)
@@ -85,6 +88,7 @@ class TableReader:
                 raise self.fail(f"{where}[{k}]", f"expected a number, got {kind_of(c)}")
             if not math.isfinite(c):
                 raise self.fail(f"{where}[{k}]", f"must be finite, got {c}")
+            subnormal(float(c), f"{where}[{k}]", self.fail)
             limits.check_point(where, k, c, self.fail)
             out.append(float(c))
         return (out[0], out[1])
@@ -94,6 +98,13 @@ class TableReader:
         if key not in data:
             return self._default(join_path(path, key), default)
         return self.point(data[key], join_path(path, key))
+
+
+def subnormal(v: float, where: str, fail: Callable[[str, str], Exception]) -> None:
+    """0 or a normal float: a nonzero value below the smallest normal (2.2e-308) loses its precision, and a division
+    by it, or by its square root, is not finite (a head offset of 5e-324 m made a robot NaN from the first step)."""
+    if v != 0.0 and abs(v) < sys.float_info.min:
+        raise fail(where, f"must be 0 or a normal float (magnitude at least {sys.float_info.min:.6g}), got {v!r}")
 
 
 def join_path(path: str, key: str) -> str:

@@ -47,7 +47,7 @@ def test_an_agent_that_exits_2_at_start_ends_the_launch_at_once(tmp_path: Path,
     try:
         with caplog.at_level(logging.INFO, logger="reconswarm.launch"):
             code = launcher._supervise(LaunchConfig(out=tmp_path, progress=False), load(PAPER), fleet, world, mon,
-                                       NotStarted(), [])  # type: ignore[arg-type]
+                                       NotStarted(), [], [])  # type: ignore[arg-type]
     finally:
         fleet.stop_all()
     took = time.monotonic() - t0

@@ -66,17 +66,11 @@ def cluster_processes(tmp: Path) -> Iterator[tuple[str, subprocess.Popen[bytes],
                     c.wait_for_workers(2, timeout=max(1.0, deadline - time.monotonic()))
                     return True
             except OSError:
-<<<<<<< HEAD
-                assert sched.poll() is None and time.monotonic() < deadline, (tmp / "scheduler.log").read_text()
-                time.sleep(0.3)
-        yield address, sched, worker
-=======
                 return False
 
         wait_until(both_workers, 60, f"the scheduler up and 2 workers: {tmp / 'scheduler.log'}", every_s=0.3,
                    proc=sched)
-        yield address
->>>>>>> ci52
+        yield address, sched, worker
     finally:
         _stop(worker)
         _stop(sched)

@@ -18,11 +18,11 @@ from reconswarm.net.admission import (
     Admission,
     Intrusion,
     IntrusionKind,
-    IntrusionTally,
     command_bound_mps,
 )
 from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.membership import Membership, Policy
+from reconswarm.net.tally import IntrusionTally
 from reconswarm.net.timing import Timing
 from reconswarm.paper.planner import command, neighbour_table
 from reconswarm.plant.sensing import ContourField

@@ -400,7 +400,7 @@ def test_odometry_from_the_world_within_reach_of_the_last_pose() -> None:
     assert refused(got, K.POSITION, WORLD, key, "odometry moved")  # along x only
     assert refused(adm.check_odometry(odom(2, x0, y0), X, key), K.NOT_FROM_WORLD, X, key)
     assert refused(adm.check_odometry(odom(2, 1e8, y0), WORLD, key), K.POSITION, WORLD, key, "outside the reachable")
-    assert adm.last_odom[2] == (dt, x0 + 0.6 * step, y0 + 0.8 * step)  # refused poses are not remembered
+    assert adm.last_odom[2] == (dt, x0 + 0.6 * step, y0 + 0.8 * step, -1)  # refused poses are not remembered
 
 
 def test_reports_come_from_the_agent_or_the_world_they_name() -> None:

@@ -139,9 +139,12 @@ def test_a_peer_the_clock_counts_is_waited_for_though_its_token_comes_later() ->
     want = reference(0, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 120.0, 0.0, RADIUS[C])])
     assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(0, *want)]
     assert node.guessed_k == -1  # nothing was guessed: the command is the in-process engine's
-    # A token we saw go is not waited for, though the clock (of the world's view a moment ago) still counts it.
+    # A token we saw go (and not back within token_confirm_s) is not waited for, though the clock (of the world's
+    # view a moment ago) still counts it.
     node.step([joined(B), left(B)], 0.02)
     node.step([clock(1), state(1, 100.05, 0.0), beacon(C, 1, 120.0, 0.0)], 0.05)
+    assert node.k == 0  # (its token went 0.03 s ago: it may come back, as with a router that dies)
+    node.step([], 0.02 + T.token_confirm_s)
     assert node.k == 1 and node.guessed_k == -1
 
 

@@ -120,13 +120,15 @@ def test_a_lost_clock_is_not_given_up_while_the_world_is_silent() -> None:
 
 def test_a_peer_whose_token_goes_while_we_wait_is_waited_for_no_more() -> None:
     """The wait set of a tick is kept between steps (`_expected`) until the clock or a token changes: C's token
-    going while we wait for its beacon ends the wait at once (its robot: a lost one, where last seen)."""
+    going while we wait for its beacon ends the wait once it has not come back within `token_confirm_s` (its
+    robot: a lost one, where last seen)."""
     node = started()
     assert cmds(node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 105.0, 0.0), beacon(C, 0, 109.0, 0.0)],
                           0.0))
     assert not cmds(node.step([clock(1), state(1, 100.05, 0.0), beacon(B, 1, 105.0, 0.0)], 0.1))
     assert node.awaiting(0.1) == 1 and not cmds(node.step([], 0.15))  # C's beacon
-    assert [c.k for c in cmds(node.step([left(C)], 0.2))] == [1]
+    assert not cmds(node.step([left(C)], 0.2))
+    assert [c.k for c in cmds(node.step([], 0.2 + T.token_confirm_s))] == [1]
 
 
 def test_a_tick_whose_clock_comes_again_without_a_peer_is_waited_for_by_the_new_clock() -> None:

@@ -136,9 +136,10 @@ def test_odometry_comes_from_the_world_and_within_reach_of_the_last(logged: pyte
     assert not g.admit_odometry(_state(1), X, topic, 0.1)  # not the world's session
     late = wire.State(2, 2000, 2000 * DT, 40.0, 0.0, 0.0, 41.0, 0.0, None)  # (t = 100 s: anywhere near is reachable)
     far = wire.State(2, 2001, 2001 * DT, 540.0, 0.0, 0.0, 541.0, 0.0, None)  # but not 500 m in one tick
+    assert g.admit(clock(2000), WORLD, KEYS.clock, 0.1)  # (the receiver's clock: odometry's time is no later)
     assert g.admit_odometry(late, WORLD, topic, 0.1)
     assert not g.admit_odometry(far, WORLD, topic, 0.1)
     assert not g.admit_odometry(far, WORLD, topic, 0.2)
-    assert _rows(g) == {("not_from_world", X): (1, 0.0), ("position", WORLD): (2, 0.0)}
+    assert _rows(g) == {("not_from_world", X): (1, 0.0), ("position", WORLD): (2, 100.0)}
     assert [m.split(" on ")[1].split(": ")[0] for m in logged.messages] == [topic, topic]
     assert "odometry moved 500 m in 0.05 s" in logged.messages[1]

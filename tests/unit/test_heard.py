@@ -27,7 +27,8 @@ def test_a_peer_is_heard_from_the_first_clock_that_counts_it() -> None:
 def test_a_peer_alive_or_gone_by_its_token_is_not_counted_by_the_clock() -> None:
     h = Heard(1)
     h.token(2, True, 5.0)  # heard from its token
-    h.token(3, False, 5.0)  # gone before any clock
+    h.token(3, False, 5.0)  # gone before any clock (once not back within the confirmation)
+    assert not h.confirm(5.2, 0.3) and h.gone == set() and h.confirm(5.31, 0.3) and h.gone == {3}
     h.clock(clock(0, (1, 2, 3)), 10.0)
     assert h.heard == {2: 5.0} and h.living(h.clocks[0]) == {1, 2}
     h.token(3, True, 11.0)  # back: heard from its token, and the same clock again counts nobody new

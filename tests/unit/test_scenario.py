@@ -69,6 +69,16 @@ BAD = [
     ("negative-radius", sub("radius_m = 2.60", "radius_m = -2.60"), "agents[0].radius_m"),
     ("zero-dt", sub("dt_s = 0.05", "dt_s = 0.0"), "scenario.dt_s"),
     ("bad-name", sub('name = "paper"', 'name = "my paper"'), "scenario.name"),
+    # Subnormal floats (nonzero, below 2.2e-308): a division or a square root of them is not finite.
+    ("subnormal-head-offset", sub("head_offset_m = 0.5", "head_offset_m = 5e-324"), "agents[0].head_offset_m"),
+    ("subnormal-radius", sub("radius_m = 2.60", "radius_m = 1e-310"), "agents[0].radius_m"),
+    ("subnormal-dt", sub("dt_s = 0.05", "dt_s = 5e-324"), "scenario.dt_s"),
+    ("subnormal-d_safe", sub("d_safe_m = 2.0", "d_safe_m = 1e-320"), "planner.d_safe_m"),
+    ("subnormal-max-speed", sub("max_speed_mps = 0.0", "max_speed_mps = 5e-324"), "world.max_speed_mps"),
+    ("subnormal-heading", sub("heading_rad = 0.0", "heading_rad = -5e-324"), "agents[0].heading_rad"),
+    ("subnormal-start", sub("start_m = [41.3, 50.5]", "start_m = [41.3, 1e-310]"), "agents[0].start_m[1]"),
+    # A normal head offset so small that the turn rate of the fastest step, |u| / head_offset_m, is not finite.
+    ("tiny-head-offset", sub("head_offset_m = 0.5", "head_offset_m = 1e-302"), "agents[0].head_offset_m"),
 ]
 
 

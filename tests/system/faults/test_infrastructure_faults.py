@@ -33,6 +33,10 @@ def test_router_restarted(tmp_path: Path, out: Path) -> None:
     s = json.loads(p.stdout)
     assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
     assert s["convergence_time_s"] <= 190  # (172.05 s undisturbed)
+    # What was in flight when the router went is lost: the record claims the engine's path only if it kept it.
+    # Every agent's link went mid-mission, so each says its next tick was a guess, from the restart on.
+    restart_t = faults_log(out)[0][1]
+    assert s["deterministic"] is False and restart_t <= s["determinism_lost_at_s"] <= restart_t + 10.0, s
 
 
 def test_flood_of_malformed_messages(out: Path) -> None:
@@ -43,15 +47,19 @@ def test_flood_of_malformed_messages(out: Path) -> None:
     if s["deterministic"]:
         assert s["convergence_time_s"] == 222.25  # malformed input changed nothing
     else:
-        # On a slow machine the flood can hold the swarm's messages up longer than an agent waits
-        # (agent_wait_timeout_s), which then acts without them and says so. Never because it believed a
-        # malformed message: every agent's first guess is a wait that ran out, after the flood began.
+        # On a slow machine the flood holds the swarm's messages up: an agent waits longer than it may
+        # (agent_wait_timeout_s) and acts without them; a process starved past its session's lease (2 s) has
+        # its link dropped by the router (what was in flight to it is lost: it says so on its next tick); or a
+        # peer's beacon of the tick before comes after our state (zenoh-python delivers each subscriber's
+        # samples on a thread of its own, and the flood swamps the cell subscribers), so the peer is missing
+        # from the tick's wait set and its beacon within reach is "not expected". Each is said by the agent,
+        # after the flood began; none comes from believing a malformed message (none is an intrusion, below).
         (_, flood_t, _), = faults_log(out)
         assert s["determinism_lost_at_s"] >= flood_t, s
         firsts = [next(line for line in f.read_text().splitlines() if "no longer deterministic" in line)
                   for f in sorted((out / "logs").glob("agent-*.log")) if "no longer deterministic" in f.read_text()]
-        assert firsts and all("acting without them" in line and any(
-            w in line for w in ("silent for", "gave up waiting", "clock never came")) for line in firsts), firsts
+        said = ("silent for", "gave up waiting", "clock never came", "our router link went", "came late")
+        assert firsts and all(any(w in line for w in said) for line in firsts), firsts
     sent = json.loads((out / "logs" / "flood.log").read_text().strip().splitlines()[-1])
     assert sent["total"] == 10_000
     # One payload in 8 is over the wire's limit: the run's router forwards none of them (PAYLOAD_CAP), so

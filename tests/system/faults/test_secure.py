@@ -338,19 +338,9 @@ def test_the_docs_example_of_joining_as_a_role_receives(live: Live) -> None:
     block = next(b.split("```", 1)[0] for b in doc.split("```python\n")[1:] if "observer.json5" in b)
     heard: list[str] = []
     scope: dict[str, Any] = {"print": lambda *a: heard.append(" ".join(map(str, a)))}
-<<<<<<< HEAD
     assert "time.sleep(5)" in block
     code = block.replace("runs/latest", str(live.out)).replace("time.sleep(5)", f"time.sleep({SETTLE_S + 2.0})")
     exec(compile(code, "docs/security.md", "exec"), scope)  # returns: the example closes its sessions itself
-=======
-    exec(compile(block.replace("runs/latest", str(live.out)), "docs/security.md", "exec"), scope)
-    try:
-        wait_until(lambda: any(h.endswith("/clock") for h in heard) and any(h.endswith("/beacon") for h in heard),
-                   30, "the clock and a beacon heard by the example's sessions")
-    finally:
-        for z in (scope["obs"], scope["a3"]):
-            z.close()
->>>>>>> ci52
     assert any(h.endswith("/clock") for h in heard), heard[:5]
     assert any(h.endswith("/beacon") for h in heard), heard[:5]
 
