@@ -88,7 +88,7 @@ def test_only_the_worlds_policy_stops_counting_a_token_that_holds_a_tick_up() ->
     assert world.alive_ids(4.6, 0.0) == [1]  # its command came: counted again
 
 
-def test_agent_joined_lost_by_its_token_at_once_and_back() -> None:
+def test_agent_joined_lost_by_its_token_once_confirmed_and_back() -> None:
     h = Heard(0)
     h.token(1, True, 0.0)
     h.token(2, True, 0.0)
@@ -97,7 +97,10 @@ def test_agent_joined_lost_by_its_token_at_once_and_back() -> None:
     h.clock(c, 0.1)
     assert h.living(c) == {0, 1, 2}
     h.token(2, False, 0.2)
-    assert h.living(c) == {0, 1}  # token gone: lost at once (confirm 0), though the clock still counts it
+    assert h.living(c) == {0, 1, 2}  # token going: not judged before token_confirm_s (a dying router's news)
+    assert not h.confirm(0.2 + T.token_confirm_s / 2, T.token_confirm_s)
+    assert h.confirm(0.2 + T.token_confirm_s, T.token_confirm_s)
+    assert h.living(c) == {0, 1}  # token gone: lost, though the clock still counts it
     assert h.living(None) == {1}
     h.token(2, True, 0.3)
     assert h.living(c) == {0, 1, 2}  # back
