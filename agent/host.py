@@ -10,7 +10,11 @@ is for, through one inbox and one loop that steps every hosted node (agent/node.
   listening to a cell the host already hears gets the newest set of each publisher there (what its own
   advanced subscriber's history would have brought), from the host's copy;
 - per agent: its state (urgent: it starts a tick; in ROS 2 mode its odometry and its scan);
-- a sample is decoded once; each agent takes it through its own link (agent/link.py: its gate, counters);
+- a sample is decoded and admitted once, whatever number of hosted agents it is for: a peer's beacon or set
+  and the clock are judged by the host's one admission (the hosted agents' gates share it) and the message is
+  appended to the batch of each agent that listens (a refusal is counted by each of them, as a lone agent
+  would); what concerns one agent alone (its state, a sample on its own key, a malformed one) goes through
+  its own link (agent/link.py: its gate, counters);
 - the law: each hosted agent's node returns its tick's plan (agent/brain.py `Plan`); once every node of a
   round has been stepped, the plans of one tick are computed in one call of `law` (the planner batched over
   them, each row the same bit for bit as the agent's alone) and each node takes its command back (`Law`).
@@ -26,91 +30,30 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
-import threading
 import time
-from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import zenoh
 from zenoh import ext
 
 from agent.brain import Plan, commands
-from agent.link import PEER_MESSAGES, AgentLink, Decoded, decode_sample
+from agent.link import OWN, PASSED, PEER_MESSAGES, AgentLink, Decoded, decode_sample
 from agent.messages import Input, Law, Reconnect
 from agent.neighbours import Cells
+from agent.tagged_inbox import ALL, Tag, TaggedInbox
 from reconswarm.net import trace, wire
+from reconswarm.net.admission import Intrusion
 from reconswarm.net.cells import Cell, chunk_cell
-from reconswarm.net.inbox import Inbox, Item, to_item
+from reconswarm.net.inbox import Item
 from reconswarm.net.keys import Keys
 from reconswarm.net.lifecycle import Stopper
-from reconswarm.net.node import Exit
+from reconswarm.net.node import Exit, Invalid
 from reconswarm.net.runtime import Runtime
 
 log = logging.getLogger("reconswarm.agent")
 RECONNECT = -1  # AgentHost.run's answer when the session must be opened again
-ALL = ("all", None)  # the tag of a sample for every hosted agent (clock, liveliness)
-Tag = tuple[str, Any]  # ALL | ("own", agent id) | ("cell", cell or None): the subscription it came through
-
-
-class TaggedInbox:
-    """Samples from zenoh with the subscription they came through, held raw until the loop takes them all at
-    once (inbox.Inbox's rules: `want` of them, or the hosted agents' states, wake the loop; nothing blocks or
-    calls zenoh in a callback); counted in inbox.Inbox's process totals.
-
-    The world publishes every robot's state of a tick in one burst: the loop wakes once the states of all the
-    hosted agents that wait for one are in (`urgent` of them), or `LINGER_S` after the first, so that one
-    round, not several, takes the burst."""
-
-    LINGER_S = 0.002  # how long the rest of a burst of states may take after its first
-
-    def __init__(self) -> None:
-        self._samples: deque[tuple[Tag, Any, float, bool]] = deque()
-        self._ready = threading.Event()
-        self._want: float = 1
-
-    def callback(self, tag: Tag, urgent: bool = False) -> Callable[[Any], None]:
-        def cb(sample: Any) -> None:
-            self._samples.append((tag, sample, time.monotonic(), urgent))
-            if urgent or len(self._samples) >= self._want:
-                self._ready.set()
-
-        return cb
-
-    def handler(self, tag: Tag, urgent: bool = False) -> Any:
-        return zenoh.handlers.Callback(self.callback(tag, urgent))
-
-    def _states(self) -> tuple[int, float]:
-        """How many hosted agents' urgent samples wait, and when the first came (inf: none)."""
-        got = [(at, tag) for tag, _s, at, urgent in list(self._samples) if urgent]  # (list(): one atomic copy)
-        return len({tag for _at, tag in got}), min((at for at, _tag in got), default=math.inf)
-
-    def take(self, want: int | None, timeout: float | None, urgent: int = 1) -> list[tuple[Tag, Item]]:
-        """Every sample waiting, once `want` of them (None: only states) are in, or the states of `urgent` hosted
-        agents (or some, `LINGER_S` ago), or once `timeout` seconds passed (at once if 0)."""
-        self._want = math.inf if want is None else max(1, want)
-        end = math.inf if timeout is None else time.monotonic() + timeout
-        while timeout != 0:
-            self._ready.clear()  # (before looking: a sample that comes after the look sets it again)
-            if len(self._samples) >= self._want:
-                break
-            states, first = self._states()
-            until = min(end, first + self.LINGER_S)
-            now = time.monotonic()
-            if states >= max(1, urgent) or now >= until:
-                break
-            self._ready.wait(None if until == math.inf else until - now)
-        if timeout != 0:  # (a round that only hands over what co-hosted agents published does not count)
-            Inbox.wakeups += 1
-        out = []
-        while self._samples:
-            tag, sample, at, _urgent = self._samples.popleft()
-            item = to_item(sample, at)
-            if item is not None:
-                out.append((tag, item))
-        Inbox.samples_in += len(out)
-        return out
+ALONE = (Invalid, *OWN)  # what each agent's own link takes for itself (a malformed sample, a state or scan)
 
 
 class AgentHost:
@@ -137,7 +80,10 @@ class AgentHost:
         self.replay: list[tuple[int, Tag, Item]] = []  # (agent, tag, obstacle set) for that agent alone (replayed)
         self._cells: dict[str, Cell | None] = {}  # key -> the cell in it (None: not a cell key)
         self._alive: tuple[int, ...] = ()  # the newest clock's live agents (one tuple while they stay the same)
-        self.known = {a.id for a in next(iter(links.values())).node.s.agents}
+        first = next(iter(links.values()))
+        self.known = {a.id for a in first.node.s.agents}
+        # The hosted agents' gates share one admission (agent/process.py): this one judges each sample once.
+        self.gate = first.gate
         # The cells around the hosted agents' starts, declared with every cell's subscription: an agent that listens
         # to every cell until its first command then finds its own cells declared (not declared all at once, on
         # the mission's first tick, when every hosted agent commands for the first time).
@@ -277,39 +223,53 @@ class AgentHost:
         cohosted = tag[0] == "local"
         if source == self.source and not cohosted and self._echo(key, payload):
             return  # our own set from our publisher's cache: the others had it at its put (or have it replayed)
-        if key.endswith("/obstacles") and not cohosted:
-            who = [a for a in who if self.active[a].admit_bytes(len(payload), source, key)]
-            if not who:
+        if key.endswith("/obstacles") and not cohosted:  # (its size, before decoding: once for all)
+            too_big = self.gate.adm.check_set_size(len(payload), source, key)
+            if too_big is not None:
+                self._refuse(who, too_big)
                 return
         m: Decoded = sent if sent is not None else decode_sample(self.keys, key, payload, kind)
         if isinstance(m, wire.Clock):  # (the live agents of the clock before, if the same: one tuple, known at once)
             if m.alive == self._alive:
                 m = dataclasses.replace(m, alive=self._alive)
             self._alive = m.alive
-        if cohosted:
+        if cohosted or m is None or isinstance(m, PASSED):
             if m is not None:
                 for aid in who:
                     batches[aid].append(m)
             return
         # In the name of an agent running in this process, from another session: forged (ours never come that way).
         forged = m.id if isinstance(m, PEER_MESSAGES) and m.id in self.active else None
-        admitted = False
+        if forged is not None or isinstance(m, ALONE):  # (rare: each agent's own link says what it is)
+            for aid in who:
+                link = self.active[aid]
+                if forged is not None and aid != forged:  # (its own link counts one on its own key as invalid)
+                    link.refuse_cohosted(forged, key, source)
+                elif (got := link.take(m, key, source)) is not None:
+                    batches[aid].append(got)
+            return
+        # A peer's beacon or set, the clock: judged once for every agent it is for (their gates share one admission)
+        bad = self.gate.check(m, source, key, time.monotonic())
+        if bad is not None:
+            self._refuse(who, bad)
+            return
         for aid in who:
-            link = self.active[aid]
-            if forged is not None and aid != forged:  # (its own link counts one on its own key as invalid)
-                link.refuse_cohosted(forged, key, source)
-                continue
-            got = link.take(m, key, source)
-            if got is not None:
-                batches[aid].append(got)
-                admitted = admitted or got is m
-        if admitted and isinstance(m, wire.Beacon):
+            batches[aid].append(m)
+        if isinstance(m, wire.Beacon):
             trace.mark(trace.Mark.BEACON_IN, m.k, m.id, at_s)
-        # Kept for an agent that starts listening to its cell later: a set some hosted agent admitted (a co-hosted
-        # agent's own is kept by `act`), never one that was refused (it would stand in for the genuine one).
-        if (admitted and forged is None and isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known
-                and self._cell(key) is not None):
+        elif isinstance(m, wire.Clock):  # (each gate's newest clock: the first_t of what it refuses)
+            for aid in who:
+                self.active[aid].gate.clocked(m)
+        # Kept for an agent that starts listening to its cell later: a set admitted (a co-hosted agent's own is kept
+        # by `act`), never one that was refused (it would stand in for the genuine one).
+        elif isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known and self._cell(key) is not None:
             self.sets[m.id] = (tag, item)
+
+    def _refuse(self, who: list[int], bad: Intrusion) -> None:
+        """A sample admission refused: counted (and logged) by each agent it was for."""
+        now = time.monotonic()
+        for aid in who:
+            self.active[aid].gate.refuse(bad, now)
 
     def _echo(self, key: str, payload: bytes) -> bool:
         """The newest set a hosted agent put, as its publisher's cache holds it: a cell subscription declared after the

@@ -18,7 +18,7 @@ from agent.host import RECONNECT, AgentHost, TaggedInbox
 from agent.link import AgentLink
 from agent.node import AgentNode
 from reconswarm.errors import BadInput
-from reconswarm.net.admission import HullChecks
+from reconswarm.net.admission import Admission
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Rejections
 from reconswarm.net.keys import Keys
@@ -78,8 +78,10 @@ def run(cfg: AgentConfig) -> int:
         raise BadInput(f"--id: agent {missing[0]} is not in {cfg.scenario}")
     # Kept across new sessions: each agent's node, gate and rejection count.
     nodes = {a: AgentNode(s, a, time.monotonic(), cfg.timing, batched=len(ids) > 1) for a in ids}
-    hulls = HullChecks(s)  # (whether a hull lies on its obstacle is the hull's alone: measured once per process)
-    gates = {a: Gate(s, f"agent-{a}", hulls=hulls) for a in ids}
+    # One admission for the process's agents (who speaks for whom, where each peer was, whether a hull lies on its
+    # obstacle): the host judges each sample once for all it is for; each agent's gate counts its refusals.
+    adm = Admission(s)
+    gates = {a: Gate(s, f"agent-{a}", adm=adm) for a in ids}
     rejs = {a: Rejections(f"agent {a}") for a in ids}
     keys = Keys(cfg.run_id or s.meta.name)
     who = _who(ids)

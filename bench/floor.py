@@ -87,7 +87,7 @@ def agent_main(port: int, run: str, s: Scenario, ids: list[int], pattern: str, s
     what a co-hosted agent publishes is counted by the others in the process, not sent back through zenoh."""
     import zenoh
 
-    from agent.host import TaggedInbox  # the agent processes' own inbox: the same wake-ups
+    from agent.tagged_inbox import TaggedInbox  # the agent processes' own inbox: the same wake-ups
 
     keys, pts, dt = Keys(run), head_points(s), s.meta.dt_s
     radius = {a: float(s.radii[s.agent_index(a)]) for a in ids}

@@ -22,10 +22,12 @@ Message = wire.Beacon | wire.Cmd | wire.ObstacleSet | wire.Clock | wire.State | 
 
 
 class Gate:
-    def __init__(self, s: Scenario, process: str, report_every_s: float = 1.0, hulls: HullChecks | None = None) -> None:
-        """hulls: the process's hull checks, shared by its agents' gates (a question about the hull alone)."""
+    def __init__(self, s: Scenario, process: str, report_every_s: float = 1.0, hulls: HullChecks | None = None,
+                 adm: Admission | None = None) -> None:
+        """hulls: the process's hull checks, shared by its agents' gates (a question about the hull alone); adm: the
+        process's admission, shared by an agent host's gates (what one of them admits, all do)."""
         self.process = process
-        self.adm = Admission(s, hulls=hulls)
+        self.adm = adm or Admission(s, hulls=hulls)
         self.tally = IntrusionTally()
         self.t = 0.0  # simulated time of the newest admitted clock (first_t of the intrusions)
         self.world_k = -1  # newest tick of the admitted clocks
@@ -40,16 +42,18 @@ class Gate:
     def count(self) -> int:
         return self.tally.total
 
-    def admit(self, m: Message, source: str, key: str, now_s: float) -> bool:
-        """True: deliver m. False: it was refused, counted and logged."""
+    def check(self, m: Message, source: str, key: str, now_s: float) -> Intrusion | None:
+        """The rules for m, nothing counted: None admits it (an admitted clock is the gate's newest, `clocked`).
+        An agent host judges each remote sample once for every hosted agent it is for (agent/host.py), whose gates
+        share one Admission (agent/process.py) and each count a refusal."""
         adm = self.adm
         got: Intrusion | None
-        if isinstance(m, wire.Clock):
+        if isinstance(m, wire.Beacon):  # (most of what an agent takes: first)
+            got = adm.check_beacon(m, source, key, now_s, self.world_k)
+        elif isinstance(m, wire.Clock):
             got = adm.check_clock(m, source, key)
             if got is None:
-                self.t, self.world_k = max(self.t, m.t), max(self.world_k, m.k)
-        elif isinstance(m, wire.Beacon):
-            got = adm.check_beacon(m, source, key, now_s, self.world_k)
+                self.clocked(m)
         elif isinstance(m, wire.Cmd):
             got = adm.check_cmd(m, source, key, now_s, self.world_k)
         elif isinstance(m, wire.ObstacleSet):
@@ -58,6 +62,15 @@ class Gate:
             got = adm.check_report(m.agent_id, source, key, now_s)
         else:  # state, scan, truth: the world's
             got = adm.check_world_source(source, key)
+        return got
+
+    def clocked(self, c: wire.Clock) -> None:
+        """An admitted clock: its tick and time are the newest (the intrusions' first_t)."""
+        self.t, self.world_k = max(self.t, c.t), max(self.world_k, c.k)
+
+    def admit(self, m: Message, source: str, key: str, now_s: float) -> bool:
+        """True: deliver m. False: it was refused, counted and logged."""
+        got = self.check(m, source, key, now_s)
         if got is None:
             return True
         self.refuse(got, now_s)

@@ -169,3 +169,37 @@ def test_a_set_forged_in_a_co_hosted_agents_name_never_stands_in_for_its_genuine
     host.route([(("cell", A), (KEYS.obstacles(A, 3), wire.obstacles_to_wire(made_up), "PUT", PEER, 0.0))])
     assert host.links[1].gate.count == 1
     assert wire.obstacles_from_wire(host.sets[3][1][1], 3).rev == 1
+
+
+def test_a_remote_sample_is_judged_once_for_every_hosted_agent_it_is_for(host: AgentHost,
+                                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """Admission is a question about the sample (who sent it, can the robot be there), not about who receives it: a
+    host asks its one admission once per sample, and every listening agent takes the admitted message."""
+    host.listen(1, Cells(A, frozenset({A})))
+    host.listen(2, Cells(A, frozenset({A})))
+    asked: list[int] = []
+    judge = host.gate.adm.check_beacon
+
+    def counted(b: wire.Beacon, *rest: Any) -> Any:
+        asked.append(b.id)
+        return judge(b, *rest)
+
+    monkeypatch.setattr(host.gate.adm, "check_beacon", counted)
+    got = host.route([(("cell", A), beacon(3, A)), (("cell", A), beacon(4, A))])
+    assert asked == [3, 4] and ids(got[1]) == ids(got[2]) == [("Beacon", 3), ("Beacon", 4)]
+    assert got[1][0] is got[2][0]  # (one message for both)
+    # Refused once, counted by each agent it was for (as each would count it alone).
+    got = host.route([(("cell", A), beacon(3, A, source="someone-else", k=1))])
+    assert asked == [3, 4, 3] and got == {1: [], 2: []}
+    assert host.links[1].gate.count == host.links[2].gate.count == 1
+
+
+def test_who_speaks_for_a_peer_is_one_answer_for_the_whole_host(host: AgentHost) -> None:
+    """A peer pinned to its session by what one hosted agent heard is pinned for the others too: a second session in
+    its name is refused by an agent that had not heard the peer yet (it would have believed it, alone)."""
+    host.listen(1, Cells(A, frozenset({A})))
+    host.listen(2, Cells(B, frozenset({B})))
+    assert ids(host.route([(("cell", A), beacon(3, A))])[1]) == [("Beacon", 3)]
+    got = host.route([(("cell", B), beacon(3, B, source="someone-else", k=1))])
+    assert got == {1: [], 2: []} and host.links[2].gate.count == 1
+    assert set(host.links[2].gate.tally.rows) == {("impersonation", "someone-else")}

@@ -1,4 +1,4 @@
-"""An agent host's inbox (agent/host.TaggedInbox) against its rules, fed by hand as zenoh's callbacks feed it: the
+"""An agent host's inbox (agent/tagged_inbox.py) against its rules, fed by hand as zenoh's callbacks feed it: the
 loop wakes once `want` samples are in, or once the states (urgent samples) of `urgent` hosted agents are in, so
 that one round takes the world's burst of states, or `LINGER_S` after the first state if the rest does not come.
 
@@ -14,7 +14,7 @@ import threading
 import time
 from typing import Any
 
-from agent.host import TaggedInbox
+from agent.tagged_inbox import TaggedInbox
 from reconswarm.net.inbox import Inbox
 
 

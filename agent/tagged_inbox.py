@@ -1,0 +1,76 @@
+"""An agent host's inbox: the samples from zenoh with the subscription each came through (agent/host.py)."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+
+from reconswarm.net.inbox import Inbox, Item, to_item
+
+ALL = ("all", None)  # the tag of a sample for every hosted agent (clock, liveliness)
+Tag = tuple[str, Any]  # ALL | ("own", agent id) | ("cell", cell or None): the subscription it came through
+
+
+class TaggedInbox:
+    """Samples from zenoh with the subscription they came through, held raw until the loop takes them all at
+    once (inbox.Inbox's rules: `want` of them, or the hosted agents' states, wake the loop; nothing blocks or
+    calls zenoh in a callback); counted in inbox.Inbox's process totals.
+
+    The world publishes every robot's state of a tick in one burst: the loop wakes once the states of all the
+    hosted agents that wait for one are in (`urgent` of them), or `LINGER_S` after the first, so that one
+    round, not several, takes the burst."""
+
+    LINGER_S = 0.002  # how long the rest of a burst of states may take after its first
+
+    def __init__(self) -> None:
+        self._samples: deque[tuple[Tag, Any, float, bool]] = deque()
+        self._ready = threading.Event()
+        self._want: float = 1
+
+    def callback(self, tag: Tag, urgent: bool = False) -> Callable[[Any], None]:
+        def cb(sample: Any) -> None:
+            self._samples.append((tag, sample, time.monotonic(), urgent))
+            if urgent or len(self._samples) >= self._want:
+                self._ready.set()
+
+        return cb
+
+    def handler(self, tag: Tag, urgent: bool = False) -> Any:
+        return zenoh.handlers.Callback(self.callback(tag, urgent))
+
+    def _states(self) -> tuple[int, float]:
+        """How many hosted agents' urgent samples wait, and when the first came (inf: none)."""
+        got = [(at, tag) for tag, _s, at, urgent in list(self._samples) if urgent]  # (list(): one atomic copy)
+        return len({tag for _at, tag in got}), min((at for at, _tag in got), default=math.inf)
+
+    def take(self, want: int | None, timeout: float | None, urgent: int = 1) -> list[tuple[Tag, Item]]:
+        """Every sample waiting, once `want` of them (None: only states) are in, or the states of `urgent` hosted
+        agents (or some, `LINGER_S` ago), or once `timeout` seconds passed (at once if 0)."""
+        self._want = math.inf if want is None else max(1, want)
+        end = math.inf if timeout is None else time.monotonic() + timeout
+        while timeout != 0:
+            self._ready.clear()  # (before looking: a sample that comes after the look sets it again)
+            if len(self._samples) >= self._want:
+                break
+            states, first = self._states()
+            until = min(end, first + self.LINGER_S)
+            now = time.monotonic()
+            if states >= max(1, urgent) or now >= until:
+                break
+            self._ready.wait(None if until == math.inf else until - now)
+        if timeout != 0:  # (a round that only hands over what co-hosted agents published does not count)
+            Inbox.wakeups += 1
+        out = []
+        while self._samples:
+            tag, sample, at, _urgent = self._samples.popleft()
+            item = to_item(sample, at)
+            if item is not None:
+                out.append((tag, item))
+        Inbox.samples_in += len(out)
+        return out
