@@ -85,7 +85,7 @@ class JobPlan:
         self.files: list[tuple[str, str, Scenario]] = []  # (label, stem, scenario)
         stems: dict[str, int] = {}
         for path in paths:
-            base = load(path)  # BadInput naming the file and field
+            base = load(path, wire=False)  # BadInput naming the file and field (the engine uses no wire)
             stem = path.stem
             stems[stem] = stems.get(stem, 0) + 1
             if stems[stem] > 1:
