@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from reconswarm.geometry.pairs import NearPairs
 from reconswarm.geometry.plane import Edges, rows_where
-from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
+from reconswarm.paper.deadlock import Generators, StallState, stall_step, window_ticks
 from reconswarm.paper.knowledge import SwarmKnowledge, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
 from reconswarm.paper.link import HYSTERESIS_M, linked
@@ -76,7 +76,7 @@ class Engine:
         self.field = ContourField.from_scenario(s)
         self.know = SwarmKnowledge(self.field.samples, self.field.start, self.field.count, self.n)
         w = window_ticks(self.cfg.stall_window_s, s.meta.dt_s)
-        self.stall = StallState.create(self.n, w, [generator(s.meta.seed, int(i)) for i in self.ids])
+        self.stall = StallState.create(self.n, w, Generators(s.meta.seed, self.ids.tolist()))
         self.leader = VirtualLeader(s) if self.cfg.kind == PlannerKind.VIRTUAL_LEADER else None
         self.rmax = float(self.r.max())
         self.true_d = np.zeros((self.n, self.field.n_obstacles))

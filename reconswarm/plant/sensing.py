@@ -74,12 +74,7 @@ class ContourField:
             return np.zeros((n, 0))
         if np.isinf(exact_within_m) or n * m <= 256:  # small: exact everywhere is cheaper than picking
             return self._exact_all(p)
-        # norm2(p[:, None, :] - centre[None, :, :]) on coordinate planes (a 3-D broadcast is several times
-        # slower for the same arithmetic)
-        cx, cy, _ = self._derived()
-        dx = p[:, 0:1] - cx  # (N, M)
-        dy = p[:, 1:2] - cy
-        bound = np.sqrt(dx * dx + dy * dy) - self.reach  # (N, M)
+        bound = self._bounds(p)  # (N, M)
         close = bound <= exact_within_m
         if radii is None:
             if not close.any():
@@ -103,6 +98,27 @@ class ContourField:
         if rows.size:
             out[rows, cols] = self._exact(p, rows, cols)
         return out
+
+    def _bounds(self, p: Array) -> Array:
+        """norm2(p[:, None, :] - centre[None, :, :]) - reach: (N, 2) -> (N, M), the same operations element by
+        element, one obstacle at a time over contiguous (N,) rows (several times faster than the (N, M)
+        broadcast at 100,000 agents: each pass stays in cache). The result is the transpose of an (M, N)
+        array (column-major): equal values, a different memory layout."""
+        cx, cy, _ = self._derived()
+        n = p.shape[0]
+        out = np.empty((self.n_obstacles, n))
+        x, y = np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1])
+        u = np.empty(n)
+        for m in range(self.n_obstacles):
+            t = out[m]
+            np.subtract(x, cx[m], out=t)
+            t *= t
+            np.subtract(y, cy[m], out=u)
+            u *= u
+            t += u
+            np.sqrt(t, out=t)
+            t -= self.reach[m]
+        return out.T
 
     def _exact_all(self, p: Array) -> Array:
         """Exact signed distance from every head point to every obstacle: (N, 2) -> (N, M)."""
