@@ -17,6 +17,7 @@ from reconswarm.geometry.plane import convex_hull, merge_hull, rows_where
 Array = NDArray[np.float64]
 Ints = NDArray[np.int64]
 _NONE = np.zeros(0, dtype=np.int64)
+_ZERO = np.zeros(1, dtype=np.int64)
 
 
 class SwarmKnowledge:
@@ -165,16 +166,17 @@ class SwarmKnowledge:
         fresh = None if new is None or not new.any() else np.concatenate([new, new])
         # What share needs from the bits before sensing: dirty columns over every link, all over new ones.
         todo: list[tuple[int, Ints, Ints, NDArray[np.uint8]]] = []
-        for l in range(self.count.size):
-            r = self.row[src, l]
+        rows_src = self.row[src]  # (2E, M) each link source's row of every obstacle
+        carries = rows_src >= 0  # (2E, M)
+        for l in np.flatnonzero(carries.any(axis=0)).tolist():  # obstacles some link's source knows
+            r, c = rows_src[:, l], carries[:, l]
             dirty = self._dirty.get(l, _NONE)
             if dirty.size:
-                has = np.flatnonzero(r >= 0)
-                if has.size:
-                    todo.append((l, dirty, dst[has], self.blocks[l][r[has]][:, dirty]))
+                has = np.flatnonzero(c)
+                todo.append((l, dirty, dst[has], self.blocks[l][r[has]][:, dirty]))
             if fresh is not None:
                 known = self.union_prev[self.b0[l]:self.b1[l]].nonzero()[0]  # what sharing can bring
-                has = np.flatnonzero(fresh & (r >= 0))
+                has = np.flatnonzero(fresh & c)
                 if known.size and has.size:
                     todo.append((l, known, dst[has], self.blocks[l][r[has]][:, known]))
         changed = self._sense(agents, samples)
@@ -214,18 +216,25 @@ class SwarmKnowledge:
 
         cols (C,) byte columns of l's block, dst (Q,), vals (Q, C).
         """
-        order = np.argsort(dst, kind="stable")
-        d = dst[order]
-        firsts = np.flatnonzero(np.r_[True, d[1:] != d[:-1]])
-        acc = np.bitwise_or.reduceat(vals[order], firsts, axis=0)  # (U, C)
-        who = d[firsts]  # (U,) distinct agents
+        if dst.size == 1:
+            acc, who = vals, dst
+        else:
+            order = np.argsort(dst, kind="stable")
+            d = dst[order]
+            firsts = np.flatnonzero(d[1:] != d[:-1]) + 1
+            firsts = np.concatenate([_ZERO, firsts]) if firsts.size else _ZERO
+            acc = np.bitwise_or.reduceat(vals[order], firsts, axis=0)  # (U, C)
+            who = d[firsts]  # (U,) distinct agents
         cur = self._get(l, who)[:, cols]
         gain = acc & ~cur
         learn = np.flatnonzero(gain.any(axis=1))
         if learn.size == 0:
             return _NONE
         rows = self._rows(l, who[learn])
-        self.blocks[l][rows[:, None], cols[None, :]] = cur[learn] | acc[learn]
+        if cols.size == self.blocks[l].shape[1]:  # every column (a new link shares them all)
+            self.blocks[l][rows] = cur[learn] | acc[learn]
+        else:
+            self.blocks[l][rows[:, None], cols[None, :]] = cur[learn] | acc[learn]
         self._touched(who[learn], l)
         return cols[gain[learn].any(axis=0)]
 

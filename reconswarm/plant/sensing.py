@@ -83,11 +83,12 @@ class ContourField:
         gap = bound - radii[:, None]
         out = bound  # (fresh: filled in place from here on)
         if not close.any():  # all far: exact for the pair(s) that can hold the minimum gap, bounds elsewhere
-            i, j = divmod(int(gap.argmin()), m)
+            gap_t = gap.T  # (M, N), contiguous: the same entries read row by row
+            i, j = _first_min(gap_t, m)
             out[i, j] = float(self._exact(p, np.array([i]), np.array([j]))[0])
-            below = gap < out[i, j] - radii[i]
-            below[i, j] = False  # exact already
-            rows, cols = np.divmod(below.ravel().nonzero()[0], m)
+            below_t = gap_t < out[i, j] - radii[i]
+            below_t[j, i] = False  # exact already
+            cols, rows = below_t.nonzero()
             if rows.size:
                 out[rows, cols] = self._exact(p, rows, cols)
             return out
@@ -203,3 +204,14 @@ class ContourField:
                 self._idx.clear()
             got = self._idx[key] = (idx, self.samples[idx, 0].copy(), self.samples[idx, 1].copy())
         return got
+
+
+def _first_min(gap_t: Array, m: int) -> tuple[int, int]:
+    """divmod(gap.argmin(), m) of gap = gap_t.T (N, M) without reordering gap_t: the (i, j) of the smallest
+    entry, the first in gap's row-major order among equal ones (or the first NaN, as argmin)."""
+    v = gap_t.min()
+    if np.isnan(v):
+        return divmod(int(np.ascontiguousarray(gap_t.T).argmin()), m)
+    js, is_ = (gap_t == v).nonzero()
+    first = int(np.argmin(is_ * m + js))
+    return int(is_[first]), int(js[first])
