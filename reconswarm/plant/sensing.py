@@ -209,9 +209,11 @@ class ContourField:
 def _first_min(gap_t: Array, m: int) -> tuple[int, int]:
     """divmod(gap.argmin(), m) of gap = gap_t.T (N, M) without reordering gap_t: the (i, j) of the smallest
     entry, the first in gap's row-major order among equal ones (or the first NaN, as argmin)."""
-    v = gap_t.min()
+    at = gap_t.argmin(axis=1)  # (M,) each obstacle's first smallest (or first NaN), one contiguous pass each
+    low = gap_t[np.arange(gap_t.shape[0]), at]  # (M,)
+    v = low.min()
     if np.isnan(v):
         return divmod(int(np.ascontiguousarray(gap_t.T).argmin()), m)
-    js, is_ = (gap_t == v).nonzero()
-    first = int(np.argmin(is_ * m + js))
-    return int(is_[first]), int(js[first])
+    js = (low == v).nonzero()[0]
+    first = int(np.argmin(at[js] * m + js))
+    return int(at[js[first]]), int(js[first])
