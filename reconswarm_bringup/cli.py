@@ -42,13 +42,18 @@ def sim(
     planner: Annotated[str | None, typer.Option("--planner", help="reconfigurable | virtual-leader")] = None,
     seed: Annotated[int | None, typer.Option("--seed", help="Override the scenario's seed.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    record_period: Annotated[float | None, typer.Option(
+        "--record-period", metavar="S", help="Record positions every S seconds of simulated time (a multiple of "
+        "dt_s) instead of every tick; a recorded tick costs 25 bytes per agent. Minimum gaps, events and the "
+        "last tick stay exact.")] = None,
 ) -> None:
     """Run the mission in one process, vectorized (same math as the distributed deployment)."""
+    from reconswarm.record.decimate import BYTES_PER_AGENT_TICK, record_bytes
     from reconswarm.scenario.model import load, warnings
     from reconswarm_bringup import engine
 
     try:
-        s = load(scenario)
+        s = load(scenario, wire=False)  # (one process: the wire's limits do not apply)
         if planner is not None:
             s = s.with_planner(planner)
         if seed is not None:
@@ -62,7 +67,13 @@ def sim(
             name = f"{scenario.stem}-{s.planner.kind.value}" + ("" if seed is None else f"-seed{seed}")
             out = DEFAULT_SIM_ROOT / name
         outputs.writable_dir("-o", out)
-        summary = engine.run(engine.SimConfig(s, out, progress=not as_json))
+        every = _record_every(record_period, s.meta.dt_s)
+        rows = round(s.meta.duration_s / s.meta.dt_s) // every + 2
+        if record_bytes(len(s.agents), rows) > 1 << 30:
+            typer.echo(f"note: the record may hold {record_bytes(len(s.agents), rows) / 2**30:.3g} GiB of positions "
+                       f"({BYTES_PER_AGENT_TICK} bytes per agent per recorded tick, {len(s.agents)} agents, up to "
+                       f"{rows:,} recorded ticks); --record-period S records one tick every S seconds", err=True)
+        summary = engine.run(engine.SimConfig(s, out, progress=not as_json, record_every=every))
     except (ReconswarmError, OSError) as exc:
         fail(exc)
         return
@@ -74,10 +85,24 @@ def sim(
         from reconswarm.record.summary import render
 
         Console().print(render(summary))
-        typer.echo(f"record: {out / 'run.db'}")
+        db = out / "run.db"
+        typer.echo(f"record size: {db.stat().st_size / 2**20:,.1f} MiB ({summary.get('ticks', '?')} ticks recorded, "
+                   f"{BYTES_PER_AGENT_TICK} bytes per agent per recorded tick)")
+        typer.echo(f"record: {db}")
     for line in unconverged_reason(summary, warns):
         typer.echo(line, err=True)
     raise typer.Exit(mission_exit_code(summary))
+
+
+def _record_every(period_s: float | None, dt_s: float) -> int:
+    """--record-period in ticks: a positive multiple of dt_s (BadInput otherwise)."""
+    if period_s is None:
+        return 1
+    every = round(period_s / dt_s) if period_s > 0 and period_s == period_s and period_s != float("inf") else 0
+    if every < 1 or abs(every * dt_s - period_s) > 1e-9 * max(period_s, 1.0):
+        raise BadInput(f"--record-period: must be a positive multiple of the scenario's dt_s ({dt_s:g} s), "
+                       f"got {period_s:g}")
+    return every
 
 
 @scenario_app.command("generate")
@@ -109,19 +134,22 @@ def scenario_generate(
 
 
 @scenario_app.command("check")
-def scenario_check(file: Annotated[Path, typer.Argument(help="Scenario TOML file.")]) -> None:
+def scenario_check(file: Annotated[Path, typer.Argument(help="Scenario TOML file.")],
+                   sim_only: Annotated[bool, typer.Option("--sim", help="Check for `reconswarm sim` only: the wire's "
+                                                          "limits (launch, distributed runs) do not apply.")] = False
+                   ) -> None:
     """Validate a scenario: exit 0, or one line naming the file and field and exit 2."""
     from reconswarm.scenario.model import check
 
     try:
-        s, warns = check(file)
+        s, warns = check(file, wire=not sim_only)
     except ReconswarmError as exc:
         fail(exc)
         return
     for w in warns:
         typer.echo(f"warning: {w}", err=True)
     typer.echo(f"{file}: ok ({plural(len(s.agents), 'agent')}, {plural(len(s.obstacles), 'obstacle')}, "
-               f"planner {s.planner.kind.value})")
+               f"planner {s.planner.kind.value}{', for sim' if sim_only else ''})")
 
 
 def _register() -> None:

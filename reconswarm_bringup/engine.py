@@ -30,14 +30,15 @@ from numpy.typing import NDArray
 
 from reconswarm.geometry.pairs import NearPairs
 from reconswarm.geometry.plane import Edges, rows_where
-from reconswarm.paper.deadlock import StallState, generator, stall_step, window_ticks
+from reconswarm.paper.deadlock import Generators, StallState, stall_step, window_ticks
 from reconswarm.paper.knowledge import SwarmKnowledge, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
 from reconswarm.paper.link import HYSTERESIS_M, linked
 from reconswarm.paper.planner import NeighbourTables, ObstacleView, command, errors, repulsion
 from reconswarm.plant import unicycle
 from reconswarm.plant.sensing import ContourField
-from reconswarm.record.recorder import Recorder
+from reconswarm.record.decimate import EveryNth
+from reconswarm.record.recorder import Recorder, Rows
 from reconswarm.record.store import RunRecord, RunWriter
 from reconswarm.record.summary import summarize
 from reconswarm.scenario.model import PlannerKind, Scenario
@@ -55,6 +56,7 @@ class SimConfig:
     out_dir: Path
     progress: bool = False
     record: bool = True
+    record_every: int = 1  # a tick row every this many ticks (and the last): reconswarm/record/decimate.py
 
 
 class Engine:
@@ -74,7 +76,7 @@ class Engine:
         self.field = ContourField.from_scenario(s)
         self.know = SwarmKnowledge(self.field.samples, self.field.start, self.field.count, self.n)
         w = window_ticks(self.cfg.stall_window_s, s.meta.dt_s)
-        self.stall = StallState.create(self.n, w, [generator(s.meta.seed, int(i)) for i in self.ids])
+        self.stall = StallState.create(self.n, w, Generators(s.meta.seed, self.ids.tolist()))
         self.leader = VirtualLeader(s) if self.cfg.kind == PlannerKind.VIRTUAL_LEADER else None
         self.rmax = float(self.r.max())
         self.true_d = np.zeros((self.n, self.field.n_obstacles))
@@ -185,11 +187,15 @@ def _run(cfg: SimConfig) -> dict[str, Any]:
     s = cfg.scenario
     db = cfg.out_dir / "run.db"
     writer = RunWriter(db, s, ENGINE_MODE) if cfg.record else None
+    rows: Rows | None = writer
+    if writer is not None and cfg.record_every > 1:
+        rows = EveryNth(writer, cfg.record_every)
+        writer.set_meta(record_every_ticks=str(cfg.record_every))
     eng = Engine(s)
-    rec = Recorder(s, writer)
+    rec = Recorder(s, rows)
     alive = np.ones(eng.n, dtype=bool)
     n_ticks = round(s.meta.duration_s / s.meta.dt_s)
-    wall0 = time.perf_counter()
+    wall0, cpu0 = time.perf_counter(), time.process_time()
     progress = _progress(cfg.progress, n_ticks)
     k = 0
     for k in range(n_ticks + 1):
@@ -201,15 +207,18 @@ def _run(cfg: SimConfig) -> dict[str, Any]:
         if rec.converged() or k == n_ticks:
             break
         eng.advance(u)
-    wall = time.perf_counter() - wall0
+    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     if progress is not None:
         progress(-1, rec.max_error_m)
     extra = {"stalls": int(eng.stall.stalls.sum()),
-             "agent_steps_per_s": round(eng.n * (k + 1) / wall, 1) if wall > 0 else None}
+             "agent_steps_per_s": round(eng.n * (k + 1) / wall, 1) if wall > 0 else None,
+             "mission_cpu_s": round(cpu, 3)}  # the loop's CPU time (wall_time_s counts other processes' load too)
     if writer is None:
         return {"ticks": k + 1, "wall_time_s": wall, "converged": rec.converged(), **extra}
+    if isinstance(rows, EveryNth):
+        rows.finish()
     writer.close(wall_time_s=f"{wall:.6f}", finished="1", extra=extra)
-    record = RunRecord(db)
+    record = RunRecord(db, s)
     try:
         return summarize(record)
     finally:

@@ -103,7 +103,8 @@ class JobPlan:
         self.seeds = seeds
         self.files: list[tuple[str, str, Scenario]] = []  # (label, record name, scenario)
         for path, name in zip(paths, record_names(paths), strict=True):
-            self.files.append((str(path), name, load(path)))  # BadInput naming the file and field
+            # BadInput naming the file and field (the engine uses no wire)
+            self.files.append((str(path), name, load(path, wire=False)))
         self.planners = planners
 
     def __len__(self) -> int:

@@ -234,7 +234,9 @@ class RunRecord:
     value of the wrong shape) is a BadInput naming the file and what is wrong: reading never tracebacks.
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, scenario: Scenario | None = None) -> None:
+        """scenario: the record's own, when its writer holds it (not parsed again from the record: at 100,000
+        agents that takes seconds)."""
         p = Path(path)
         if not p.is_file():
             raise BadInput(f"{path}: no such run record")
@@ -250,7 +252,8 @@ class RunRecord:
             raise BadInput(f"{path}: not a reconswarm run record (meta.scenario_toml missing)")
         if not all(isinstance(v, str) for v in self.meta.values()):
             raise self._bad("meta: values must be text")
-        self.scenario = parse(self.meta["scenario_toml"], str(p))
+        # (a record of sim has no wire's limits)
+        self.scenario = scenario if scenario is not None else parse(self.meta["scenario_toml"], str(p), wire=False)
         ids = self.meta_json("agent_ids")
         if ids != [a.id for a in self.scenario.agents]:
             raise self._bad("meta.agent_ids: not the ids of the record's scenario")

@@ -2,15 +2,19 @@
 
 Refusals (the loader raises them as `FILE: field.path: what is wrong`, exit 2), each for a reason:
 
-- **The wire must carry every message the run can produce.** Counts, lengths and ids against the wire's
-  limits (reconswarm/scenario/wire_limits.py, which reconswarm/net/wire.py's decoders enforce), and the encoded
-  size of the largest message of each kind this scenario can produce (tests check these sizes against
-  the wire's own encoder, byte for byte): whatever the wire would drop in the distributed run is refused
-  here first.
-- **Magnitudes that make the program fail**: float64 arithmetic that overflows or loses the resolution
-  the geometry relies on, and memory that grows with the scenario (contour samples, the knowledge
-  tables, the stall detector's history).
+- **Magnitudes that make the program fail** (`problems`, every mode): float64 arithmetic that overflows or
+  loses the resolution the geometry relies on, and memory fixed by the scenario's size (contour samples,
+  the tables of every agent against every obstacle, the stall detector's history).
 - **Discrete-time stability** of the control law, where a violation makes positions grow without bound.
+- **The wire must carry every message the run can produce** (`wire_problems`, only where a wire is used: the
+  distributed run's processes and `launch`; the in-process `sim` has none). Counts, lengths and ids against the
+  wire's limits (reconswarm/scenario/wire_limits.py, which reconswarm/net/wire.py's decoders enforce), and the
+  encoded size of the largest message of each kind this scenario can produce (tests check these sizes against
+  the wire's own encoder, byte for byte): whatever the wire would drop in the distributed run is refused
+  there first.
+
+Obstacle knowledge is not refused up front: it grows with what the agents know (a block of bits per agent
+and obstacle it knows, reconswarm/paper/swarm_knowledge.py), at most a bit per contour sample per agent.
 
 Warnings (`physics_warnings`): conditions derived from the control law (docs/paper.md, eqs. 9 and 11) that
 a collision-free run needs. The run goes on without them, but contacts are to be expected.
@@ -50,12 +54,15 @@ COORD_MAX_M = 1e6
 # No speed may carry a robot farther than the whole coordinate range in one step: the next step's
 # distances would be meaningless (and, a few steps on, not finite).
 STEP_MAX_M = COORD_MAX_M
-# Memory of the tables that grow with the scenario, each (knowledge bits, stall history): 1 GiB.
+# Memory of the tables that grow with the scenario, each (agent x obstacle tables, stall history): 1 GiB.
 TABLE_BUDGET_BYTES = 1 << 30
 # Contour samples of all obstacles (every one is a candidate in every scan): 24 bytes each in the world,
-# and a bit per agent in the knowledge tables. 200,000 samples = 200 km of obstacle boundary.
+# and at most a bit per agent in the knowledge tables. 200,000 samples = 200 km of obstacle boundary.
 MAX_CONTOUR_SAMPLES = 200_000
 _STALL_BYTES_PER_TICK = 3 * 8  # deadlock.StallState: a position (2 float64) and an error norm per tick
+# Per agent and obstacle, the in-process engine keeps: its true distance (float64), its row in the knowledge
+# blocks (int32), whether it knows it (bool), its cached hull (an object reference), and the reach mask (bool).
+_AGENT_OBSTACLE_BYTES = 8 + 4 + 1 + 8 + 1
 
 Problem = tuple[str, str]  # (field path, what is wrong)
 
@@ -67,13 +74,17 @@ def check_point(where: str, k: int, value: float, fail: Callable[[str, str], Exc
 
 
 def problems(s: Scenario, agent_path: dict[int, str], obstacle_path: dict[str, str]) -> Iterator[Problem]:
-    """What is wrong with a parsed scenario, cheapest checks first (the loader reports the first).
+    """What is wrong with a parsed scenario in any mode, cheapest checks first (the loader reports the first).
 
     agent_path / obstacle_path: id -> its table's path in the file (`agents[3]`, `obstacles[0]`).
     """
     yield from _magnitudes(s, agent_path)
     yield from _stability(s)
     yield from _memory(s, obstacle_path)
+
+
+def wire_problems(s: Scenario, obstacle_path: dict[str, str]) -> Iterator[Problem]:
+    """What the wire cannot carry of this scenario (where a wire is used: the distributed run, launch)."""
     yield from _wire(s, obstacle_path)
 
 
@@ -142,11 +153,11 @@ def _memory(s: Scenario, obstacle_path: dict[str, str]) -> Iterator[Problem]:
                 f"the obstacles' contours, sampled every {SAMPLE_SPACING_M:g} m, reach {total} points here, more "
                 f"than {MAX_CONTOUR_SAMPLES} (obstacle boundaries longer than {MAX_CONTOUR_SAMPLES:,} m in all)")
             return
-    # The knowledge tables: one bit per contour sample per agent, twice (this tick and the last).
-    need = 2 * len(s.agents) * sum((sum(edge_sample_counts(_verts(o))) + 7) // 8 for o in s.obstacles)
+    # The tables of every agent against every obstacle (distances, knowledge rows, hulls).
+    need = len(s.agents) * len(s.obstacles) * _AGENT_OBSTACLE_BYTES
     if need > TABLE_BUDGET_BYTES:
-        yield "obstacles", (f"{len(s.agents)} agents x {total} contour samples need {_size(need)} of knowledge "
-                            f"tables, over {_size(TABLE_BUDGET_BYTES)}")
+        yield "obstacles", (f"{len(s.agents)} agents x {len(s.obstacles)} obstacles need {_size(need)} of "
+                            f"per-agent obstacle tables, over {_size(TABLE_BUDGET_BYTES)}")
 
 
 # ------------------------------------------------------------------------------------------------ wire

@@ -144,8 +144,10 @@ class Scenario:
 # ---------------------------------------------------------------------------------------------- loading
 
 
-def load(path: str | Path) -> Scenario:
-    """Read and validate a scenario file; raise BadInput naming the file and field on any problem."""
+def load(path: str | Path, wire: bool = True) -> Scenario:
+    """Read and validate a scenario file; raise BadInput naming the file and field on any problem.
+
+    wire: also refuse what the wire cannot carry (False only where no wire is used: the in-process engine)."""
     p = Path(path)
     src = str(path)
     try:
@@ -154,25 +156,25 @@ def load(path: str | Path) -> Scenario:
         raise BadInput(f"{src}: file not found") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise BadInput(f"{src}: cannot read: {exc}") from None
-    return parse(text, src)
+    return parse(text, src, wire)
 
 
-def parse(text: str, source: str = "<scenario>") -> Scenario:
+def parse(text: str, source: str = "<scenario>", wire: bool = True) -> Scenario:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise BadInput(f"{source}: not valid TOML: {exc}") from None
-    scenario, _ = _build(data, source)
+    scenario, _ = _build(data, source, wire)
     return scenario
 
 
-def check(path: str | Path) -> tuple[Scenario, list[str]]:
+def check(path: str | Path, wire: bool = True) -> tuple[Scenario, list[str]]:
     """Validate a file, returning the scenario and its warnings (e.g. Assumption 4.1 violations)."""
-    scen = load(path)
+    scen = load(path, wire)
     return scen, warnings(scen)
 
 
-def _build(data: dict[str, Any], src: str) -> tuple[Scenario, None]:
+def _build(data: dict[str, Any], src: str, wire: bool = True) -> tuple[Scenario, None]:
     r = TableReader(src)
     r.keys(data, "", {"scenario", "planner", "target", "agents"}, {"world", "obstacles"})
 
@@ -232,11 +234,14 @@ def _build(data: dict[str, Any], src: str) -> tuple[Scenario, None]:
     agents = _agents(r, data["agents"])
     obstacles = _obstacles(r, data.get("obstacles", []))
     scen = Scenario(meta, planner, world, target, agents, obstacles, source=src)
-    # Magnitudes, stability, memory and what the wire can carry (reconswarm/scenario/limits.py), first problem found.
+    # Magnitudes, stability, memory and, where a wire is used, what it can carry (reconswarm/scenario/limits.py),
+    # first problem found.
     agent_path = {int(a["id"]): f"agents[{k}]" for k, a in enumerate(data["agents"])}
     obstacle_path = {str(o["id"]): f"obstacles[{k}]" for k, o in enumerate(data.get("obstacles", []))}
     for path, msg in limits.problems(scen, agent_path, obstacle_path):
         raise r.fail(path, msg)
+    for path, msg in limits.wire_problems(scen, obstacle_path) if wire else ():
+        raise r.fail(path, f"{msg} (a limit of the distributed run: `reconswarm sim` has no wire)")
     _check_placement(r, scen, data)
     return scen, None
 

@@ -24,6 +24,7 @@ from reconswarm.paper.events import Event, EventKind
 from reconswarm.paper.knowledge import KnownObstacles
 from reconswarm.plant.sensing import ContourField
 from reconswarm.scenario import limits, wire_limits
+from reconswarm.scenario.generate import generate
 from reconswarm.scenario.model import load, parse, warnings
 from reconswarm.scenario.wire_limits import (
     MAX_AGENT_ID,
@@ -80,11 +81,13 @@ def test_obstacle_id_longer_than_the_wire_allows_is_refused_by_check(tmp_path):
     assert r.returncode == 2 and r.stdout == "" and "Traceback" not in r.stderr
     lines = r.stderr.splitlines()
     assert len(lines) == 1 and f"{f}: obstacles[0].id: 200 characters" in lines[0], r.stderr
-    assert str(MAX_STR) in lines[0]
-    # The same through sim: refused before anything runs.
+    assert str(MAX_STR) in lines[0] and "`reconswarm sim` has no wire" in lines[0]
+    # sim has no wire: it takes the id (and `scenario check --sim` says so).
+    r = cli("scenario", "check", "--sim", str(f))
+    assert r.returncode == 0 and r.stdout.strip().endswith("for sim)"), r.stderr
     r = cli("sim", str(f), "-o", str(tmp_path / "run"), "--json")
-    assert r.returncode == 2 and len(r.stderr.splitlines()) == 1 and "obstacles[0].id" in r.stderr
-    assert not (tmp_path / "run" / "run.db").exists()
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["convergence_time_s"] == 222.25
 
 
 def test_obstacle_id_at_the_wire_limit_is_accepted_and_its_scans_decode():
@@ -122,6 +125,7 @@ def test_agent_count_follows_the_truth_message_size():
     assert wire.truth_from_wire(truth).ids[-1] == ok_n
     msg = refused(grid_scenario(big_n), "agents")
     assert "truth" in msg and f"{MAX_PAYLOAD_BYTES:,}" in msg
+    assert len(parse(grid_scenario(big_n), wire=False).agents) == big_n  # no wire, no truth message
     cols = [tuple(rng.normal(0, 1e5, big_n).tolist()) for _ in range(5)]
     with pytest.raises(WireError):
         wire.truth_from_wire(wire.truth_to_wire(wire.Truth(6000, 300.0, tuple(range(1, big_n + 1)), *cols)))
@@ -249,6 +253,17 @@ def test_scan_and_hull_bounds_hold_for_the_real_sensing_and_knowledge(sensing_ra
         assert hull.shape[0] <= bound_hull[name], (name, hull.shape[0], bound_hull[name])
     sets = {name: tuple(map(tuple, h.tolist())) for name, h in know.hulls.items()}
     assert wire.obstacles_from_wire(wire.obstacles_to_wire(wire.ObstacleSet(7, 6001, 99, sets))).obstacles == sets
+
+
+def test_a_generated_100k_swarm_is_refused_only_by_the_wire():
+    """The issue's case: 100,000 agents and 20 obstacles. The in-process engine's limits (memory, magnitudes)
+    take it; only the wire, which `sim` does not use, refuses it (its truth message)."""
+    s = generate(100_000, 20, 0)
+    agent_path = {a.id: f"agents[{k}]" for k, a in enumerate(s.agents)}
+    obstacle_path = {o.id: f"obstacles[{k}]" for k, o in enumerate(s.obstacles)}
+    assert list(limits.problems(s, agent_path, obstacle_path)) == []
+    wire_refusals = list(limits.wire_problems(s, obstacle_path))
+    assert wire_refusals and wire_refusals[0][0] == "agents" and "truth" in wire_refusals[0][1]
 
 
 # ----------------------------------------------------------------------- magnitudes that broke `sim`

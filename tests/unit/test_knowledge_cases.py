@@ -176,3 +176,25 @@ def test_known_after_share_includes_what_was_shared():
     sk.share(sk.bits.copy(), np.array([[0, 1]]))
     assert sk.known[:, 0].tolist() == [True, True, False]
     assert np.array_equal(sk.hulls(np.array([0, 1]), 0)[1], FIELD.samples[[s0]])
+
+
+def test_memory_grows_with_what_agents_know_not_with_agents_times_samples():
+    """A large swarm over a long contour holds no bit for agents that know nothing: building the tables and a
+    tick where two agents learn an obstacle allocate far less than a bit per contour sample per agent."""
+    import tracemalloc
+
+    n = 200_000
+    pts = np.stack([np.arange(40_000, dtype=np.float64), np.zeros(40_000)], axis=1)
+    pts[::2, 1] = 1.0  # (a zigzag: the samples are not collinear)
+    dense = n * 40_000 // 8  # 1 GB
+    tracemalloc.start()
+    try:
+        sk = SwarmKnowledge(pts, np.array([0, 20_000]), np.array([20_000, 20_000]), n)
+        sk.update(np.array([5]), np.array([20_003]), NO_LINKS)
+        sk.update(NOTHING, NOTHING, np.array([[5, 6]]))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert sk.known[:, 1].sum() == 2 and not sk.known[:, 0].any()
+    assert np.array_equal(sk.hull(6, 1), pts[[20_003]])
+    assert peak < dense / 20, peak
