@@ -25,6 +25,7 @@ from reconswarm.cli import outputs
 from reconswarm.errors import BadInput
 from reconswarm.net.session import DEFAULT_ROUTER
 from reconswarm.net.timing import TIMING
+from reconswarm.planners import registry
 from reconswarm.scenario.generate import generate
 from reconswarm.scenario.model import Scenario, load, parse, to_toml, warnings
 from reconswarm_bringup import chaos, netns, outcome, outdir, packing, runid, validate
@@ -58,7 +59,9 @@ def prepare_scenario(cfg: LaunchConfig) -> Scenario:
     for w in warnings(s):
         log.warning("warning: %s", w)
     validate.fault_targets(cfg.faults, {a.id for a in s.agents})
-    return s if cfg.planner is None else s.with_planner(cfg.planner)
+    s = s if cfg.planner is None else s.with_planner(cfg.planner)
+    registry.require(s)  # (an optional dependency the planner needs: refused here, not in every agent)
+    return s
 
 
 def run(cfg: LaunchConfig) -> int:
