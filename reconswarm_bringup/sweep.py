@@ -26,11 +26,13 @@ from typing import Any
 import numpy as np
 
 from reconswarm.errors import BadInput
+from reconswarm.planners import registry
 from reconswarm.scenario.model import PLANNERS, Scenario, load
 from reconswarm_bringup import engine
 
 COLUMNS = ("scenario", "planner", "seed", "converged", "convergence_time_s", "final_max_error_m", "collisions",
-           "safety_violations", "min_agent_gap_m", "min_obstacle_gap_m", "splits", "merges", "wall_time_s")
+           "safety_violations", "min_agent_gap_m", "min_obstacle_gap_m", "splits", "merges", "path_length_mean_m",
+           "wall_time_s")
 STATS = ("runs", "converged", "convergence_median_s", "convergence_p90_s", "contacts")
 
 Row = dict[str, Any]
@@ -91,6 +93,8 @@ class JobPlan:
             if stems[stem] > 1:
                 stem = f"{stem}-{stems[stem]}"
             self.files.append((str(path), stem, base))
+            for kind in planners or (base.planner.kind,):  # an optional dependency missing: refused up front
+                registry.require(base.with_planner(kind))
         self.planners = planners
 
     def __len__(self) -> int:
@@ -114,7 +118,9 @@ def make_jobs(paths: Sequence[Path], seeds: range | None, planners: Sequence[str
 def run_one(job: Job) -> Row:
     """Run one job with the in-process engine and return its results row (the COLUMNS)."""
     summary = engine.run(engine.SimConfig(job.scenario, Path(job.out_dir), progress=False))
-    row = {k: summary[k] for k in COLUMNS}
+    row = {k: summary[k] for k in COLUMNS if k in summary}
+    paths = list(summary["path_length_m"].values())  # metres each agent's head point travelled
+    row["path_length_mean_m"] = round(sum(paths) / len(paths), 2) if paths else 0.0
     row["scenario"] = job.label
     row["planner"] = job.scenario.planner.kind
     row["seed"] = job.scenario.meta.seed
