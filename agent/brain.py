@@ -260,8 +260,8 @@ def law(plans: Sequence[Plan]) -> Array:
     is asked by each agent's own planner, one row each. The agents must share one scenario (a host's do) and tick k."""
     one, n = plans[0], len(plans)
     if not one.brain.planner.needs_tables:
-        return np.concatenate([_tick(x, x.pos, x.brain.r, x.brain.offset, x.center, x.lead_vel, x.brain.stall)
-                               for x in plans]).reshape(n, 2)
+        return np.concatenate([x.brain.planner.command(_tick(x, x.pos, x.brain.r, x.brain.offset, x.center,
+                                                             x.lead_vel, x.brain.stall)) for x in plans])
     if n == 1:  # (one agent: its own arrays)
         return one.brain.planner.command(_tick(one, one.pos, one.brain.r, one.brain.offset, one.center,
                                                one.lead_vel, one.brain.stall))

@@ -5,12 +5,15 @@ its velocity, the peers heard within link range as `core.Neighbor` discs (at res
 not velocities), every hull it knows as line obstacles (one `core.LineSegment` per edge, a point hull as a
 zero-length segment), and its slot p* + Δ_i as a `core.Target.Point`. The head point is holonomic (eq. 3), so
 the kinematics are `Omni` with the scenario's speed bound; `compute_cmd(dt)`'s velocity, in the world frame,
-is u. Set beyond navground's defaults, each for a reason:
+is u. A behaviour keeps state between calls (its last command): each row gets one `compute_cmd` per tick.
+Set beyond navground's defaults, each for a reason:
 
 - optimal speed = max speed = the scenario's speed bound (`seam.cruise_speed_mps`): the paper's cruise speed;
 - radius = the agent's radius, safety margin = the scenario's d_safe (the paper's clearance);
 - horizon = the larger of link and sensing range (navground's 5 m would leave out most of what the agent knows);
-- target tolerance = converge_tol / 2 (a behaviour stops once within it; the mission needs every |e_i| <= tol).
+- target tolerance = converge_tol / 2 (a behaviour stops once within it; the mission needs every |e_i| <= tol);
+- orientation 0 (the head point has no heading of its own): the behaviour's frame is the world's, whatever the
+  robot's heading (navground computes in single precision, so a rotation would round).
 
 navground is an optional extra: without it, making one of these planners is one line naming the extra (exit 2).
 """
@@ -75,7 +78,6 @@ class NavgroundPlanner:
                 b.target = core.Target.Point(goal[i], self.tolerance)
                 self.goal[i] = goal[i]
             b.position = t.p[i]
-            b.orientation = float(t.theta[i])
             b.velocity = self.velocity[i]
             state = b.environment_state
             neighbours = []
