@@ -108,17 +108,20 @@ class NavgroundPlanner:
         return edges
 
 
+BEHAVIOURS = {"orca": "ORCA", "hrvo": "HRVO", "hl": "HL", "social-force": "SocialForce"}  # name -> navground's
+
+
 def orca(s: Scenario, ids: Sequence[int] | None = None) -> NavgroundPlanner:
-    return NavgroundPlanner(s, ids, "ORCA", "orca")
+    return NavgroundPlanner(s, ids, BEHAVIOURS["orca"], "orca")
 
 
 def hrvo(s: Scenario, ids: Sequence[int] | None = None) -> NavgroundPlanner:
-    return NavgroundPlanner(s, ids, "HRVO", "hrvo")
+    return NavgroundPlanner(s, ids, BEHAVIOURS["hrvo"], "hrvo")
 
 
 def hl(s: Scenario, ids: Sequence[int] | None = None) -> NavgroundPlanner:
-    return NavgroundPlanner(s, ids, "HL", "hl")
+    return NavgroundPlanner(s, ids, BEHAVIOURS["hl"], "hl")
 
 
 def social_force(s: Scenario, ids: Sequence[int] | None = None) -> NavgroundPlanner:
-    return NavgroundPlanner(s, ids, "SocialForce", "social-force")
+    return NavgroundPlanner(s, ids, BEHAVIOURS["social-force"], "social-force")
