@@ -119,12 +119,17 @@ def run_one(job: Job) -> Row:
     """Run one job with the in-process engine and return its results row (the COLUMNS)."""
     summary = engine.run(engine.SimConfig(job.scenario, Path(job.out_dir), progress=False))
     row = {k: summary[k] for k in COLUMNS if k in summary}
-    paths = list(summary["path_length_m"].values())  # metres each agent's head point travelled
-    row["path_length_mean_m"] = round(sum(paths) / len(paths), 2) if paths else 0.0
+    row["path_length_mean_m"] = path_length_mean_m(summary)
     row["scenario"] = job.label
     row["planner"] = job.scenario.planner.kind
     row["seed"] = job.scenario.meta.seed
     return row
+
+
+def path_length_mean_m(summary: dict[str, Any]) -> float:
+    """The metres each agent's head point travelled (the summary's path_length_m), averaged over the agents."""
+    paths = list(summary["path_length_m"].values())
+    return round(sum(paths) / len(paths), 2) if paths else 0.0
 
 
 def stream(jobs: Iterable[Job], executor: Executor, window: int) -> Iterator[tuple[int, Job, Row]]:
