@@ -118,8 +118,7 @@ def make_jobs(paths: Sequence[Path], seeds: range | None, planners: Sequence[str
 def run_one(job: Job) -> Row:
     """Run one job with the in-process engine and return its results row (the COLUMNS)."""
     summary = engine.run(engine.SimConfig(job.scenario, Path(job.out_dir), progress=False))
-    row = {k: summary[k] for k in COLUMNS if k in summary}
-    row["path_length_mean_m"] = path_length_mean_m(summary)
+    row = {k: path_length_mean_m(summary) if k == "path_length_mean_m" else summary[k] for k in COLUMNS}
     row["scenario"] = job.label
     row["planner"] = job.scenario.planner.kind
     row["seed"] = job.scenario.meta.seed
