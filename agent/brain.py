@@ -16,10 +16,12 @@ from numpy.typing import NDArray
 
 from reconswarm.geometry.plane import Edges, norm2
 from reconswarm.paper.blocked import Group, inside, lost_groups, merged_hulls, pass_gap_m
-from reconswarm.paper.deadlock import StackedStalls, StallState, generator, stall_step, window_ticks
+from reconswarm.paper.deadlock import StackedStalls, StallState, generator, window_ticks
 from reconswarm.paper.knowledge import KnownObstacles, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
-from reconswarm.paper.planner import Neighbours, ObstacleView, command, errors, repulsion
+from reconswarm.paper.planner import Neighbours, ObstacleView
+from reconswarm.planners import registry
+from reconswarm.planners.seam import Tick
 from reconswarm.plant.unicycle import inputs
 from reconswarm.scenario.model import PlannerKind, Scenario
 
@@ -66,6 +68,8 @@ class Plan(NamedTuple):
     ob: ObstacleView  # (1, M) known hulls
     grew: bool  # the obstacle set grew at k
     theta: float  # heading at k (radians): the command goes out as the unicycle's (v, ω) there
+    heard: Neighbours | None = None  # peers within link range (planners that need hulls)
+    hulls: list[Array] | None = None  # the known hulls, in obstacle-id order (planners that need hulls)
 
 
 class AgentBrain:
@@ -95,6 +99,7 @@ class AgentBrain:
         w = window_ticks(self.cfg.stall_window_s, s.meta.dt_s)
         self.stall = StallState.create(1, w, [generator(s.meta.seed, agent_id)])
         self.leader = VirtualLeader(s) if self.cfg.kind == PlannerKind.VIRTUAL_LEADER else None
+        self.planner = registry.make(s, [agent_id])
 
     def inputs(self, u: Array, theta: float) -> tuple[float, float]:
         """The command u (2,) as the unicycle's own inputs (v, ω) at heading θ: eq. 3 inverted
@@ -149,13 +154,29 @@ class AgentBrain:
             grew |= self.known.merge_all(sets)
         if grew:
             self.rev += 1
-        if lost:  # robots whose agents are gone: obstacles where they block a passage (reconswarm.paper.blocked)
+        if not self.planner.needs_tables:
+            nb, ob = Neighbours.empty(1), ObstacleView.empty(1)
+        elif lost:  # robots whose agents are gone: obstacles where they block a passage (reconswarm.paper.blocked)
             ob, alone = self._obstacles_with_lost(pos, lost)
             nb = self._neighbours(pos, [*peers, *alone])
         else:
             nb = self._neighbours(pos, peers)
             ob = self._obstacles(pos)
-        return Plan(self, k, pos, center.reshape(1, 2), lead_vel, nb, ob, grew, theta)
+        plan = Plan(self, k, pos, center.reshape(1, 2), lead_vel, nb, ob, grew, theta)
+        if self.planner.needs_hulls:  # the lost robots as peers standing still
+            heard = self._heard(pos, [*peers, *lost])
+            plan = plan._replace(heard=heard, hulls=[h for _, h in self.known.sorted_items()])
+        return plan
+
+    def _heard(self, pos: Array, peers: Sequence[Body]) -> Neighbours:
+        """Peers within link range, in increasing id (the engine's pairs within link range)."""
+        by_id = {x.id: x for x in sorted(peers, key=lambda x: x.id)}
+        near = [by_id[a] for a in self.linked_at(pos[0], by_id)]
+        if not near:
+            return Neighbours.empty(1)
+        q = np.array([[x.px, x.py] for x in near], dtype=np.float64)
+        rr = np.array([x.radius for x in near], dtype=np.float64)
+        return Neighbours(q.reshape(1, -1, 2), rr.reshape(1, -1), np.ones((1, q.shape[0]), dtype=bool))
 
     def _neighbours(self, pos: Array, peers: Sequence[Body]) -> Neighbours:
         """Peers within d_max,ij, in increasing id (entries beyond it would add exact zeros)."""
@@ -230,33 +251,42 @@ _STALLS = StackedStalls()  # the stall rows of `law`'s last batch (a process's h
 
 
 def law(plans: Sequence[Plan]) -> Array:
-    """Eq. (7) and Remark 1's escape for several agents' ticks at once: their commands u (P, 2), row by row.
+    """The planner's commands u (P, 2) for several agents' ticks at once, row by row.
 
-    The rows are the planner's batched inputs stacked (neighbour and obstacle tables padded with invalid
-    columns, which add nothing), and each agent's stall history is its own row: every row is the same bit for
-    bit as one agent's alone (reconswarm/paper/planner.py sums column by column from zero; the in-process
-    engine computes everyone this way). The agents must share one scenario (a host's do) and tick k."""
+    The paper's law (reconswarm.planners.paper_law) takes the rows batched: its inputs stacked (neighbour and
+    obstacle tables padded with invalid columns, which add nothing), each agent's stall history its own row, so
+    every row is the same bit for bit as one agent's alone (reconswarm/paper/planner.py sums column by column
+    from zero; the in-process engine computes everyone this way). A planner with state per agent (navground's)
+    is asked by each agent's own planner, one row each. The agents must share one scenario (a host's do) and tick k."""
     one, n = plans[0], len(plans)
-    c, dt_s = one.brain.cfg, one.brain.s.meta.dt_s
+    if not one.brain.planner.needs_tables:
+        return np.concatenate([x.brain.planner.command(_tick(x, x.pos, x.brain.r, x.brain.offset, x.center,
+                                                             x.lead_vel, x.brain.stall)) for x in plans])
     if n == 1:  # (one agent: its own arrays)
-        pos, r, offset, center, lead = one.pos, one.brain.r, one.brain.offset, one.center, one.lead_vel
-        nb, ob, st = one.nb, one.ob, one.brain.stall
-    else:
-        pos = np.concatenate([x.pos for x in plans])  # (P, 2)
-        r = np.concatenate([x.brain.r for x in plans])  # (P,)
-        offset = np.concatenate([x.brain.offset for x in plans])  # (P, 2)
-        center = np.concatenate([x.center for x in plans])  # (P, 2)
-        lead = None if one.lead_vel is None else np.concatenate([x.lead_vel for x in plans if x.lead_vel is not None])
-        nb, ob = Neighbours.stack([x.nb for x in plans]), ObstacleView.stack([x.ob for x in plans])
-        st = _STALLS.take([x.brain.stall for x in plans])
-    e = errors(pos, center, offset)
-    rep = repulsion(c, pos, r, nb, ob)
-    push = rep[0] + rep[1]
-    pert = stall_step(st, one.k, pos, e, c.perturbation_mps, c.k_att, c.target_radius_m, c.converge_tol_m,
-                      dt_s, push)
-    if n > 1:
-        _STALLS.give_back(st, [x.brain.stall for x in plans])
-    return command(c, pos, r, offset, center, nb, ob, pert, lead, rep)
+        return one.brain.planner.command(_tick(one, one.pos, one.brain.r, one.brain.offset, one.center,
+                                               one.lead_vel, one.brain.stall))
+    pos = np.concatenate([x.pos for x in plans])  # (P, 2)
+    r = np.concatenate([x.brain.r for x in plans])  # (P,)
+    offset = np.concatenate([x.brain.offset for x in plans])  # (P, 2)
+    center = np.concatenate([x.center for x in plans])  # (P, 2)
+    lead = None if one.lead_vel is None else np.concatenate([x.lead_vel for x in plans if x.lead_vel is not None])
+    st = _STALLS.take([x.brain.stall for x in plans])
+    t = _tick(one, pos, r, offset, center, lead, st)
+    t.nb, t.ob = Neighbours.stack([x.nb for x in plans]), ObstacleView.stack([x.ob for x in plans])
+    u = one.brain.planner.command(t)
+    _STALLS.give_back(st, [x.brain.stall for x in plans])
+    return u
+
+
+def _tick(plan: Plan, pos: Array, r: Array, offset: Array, center: Array, lead: Array | None,
+          stall: StallState) -> Tick:
+    """The seam's tick for rows (one plan's own, or several stacked): tables from the plan when there is one row."""
+    b = plan.brain
+    if plan.brain.planner.needs_tables:
+        return Tick(plan.k, b.s.meta.dt_s, pos, np.array([plan.theta]), r, center, offset, lead, stall,
+                    nb=plan.nb, ob=plan.ob)
+    return Tick(plan.k, b.s.meta.dt_s, pos, np.array([plan.theta]), r, center, offset, lead, stall,
+                heard=plan.heard, hulls=[plan.hulls or []])
 
 
 def commands(plans: Sequence[Plan]) -> list[tuple[float, float]]:

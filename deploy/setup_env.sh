@@ -19,6 +19,6 @@ if [ ! -x "$venv/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; 
     echo "reconswarm: setting up $venv (first run: installing the project and its dependencies)..." >&2
     [ -x "$venv/bin/python" ] || "$py" -m venv "$venv"
     "$venv/bin/python" -m pip install --quiet --disable-pip-version-check --upgrade pip >&2
-    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -e "$root[dev,dask]" >&2
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -e "$root[dev,dask,navground]" >&2
     echo "$want" > "$stamp"
 fi

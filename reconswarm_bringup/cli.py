@@ -39,7 +39,8 @@ def sim(
     scenario: Annotated[Path, typer.Argument(help="Scenario TOML file.")],
     out: Annotated[Path | None, typer.Option("-o", "--out", metavar="DIR", help="Output directory for run.db "
                    "(default: runs/sim/SCENARIO-PLANNER, with -seedS if --seed is given).")] = None,
-    planner: Annotated[str | None, typer.Option("--planner", help="reconfigurable | virtual-leader")] = None,
+    planner: Annotated[str | None, typer.Option(
+        "--planner", help="reconfigurable | virtual-leader | orca | hrvo | hl | social-force")] = None,
     seed: Annotated[int | None, typer.Option("--seed", help="Override the scenario's seed.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
     record_period: Annotated[float | None, typer.Option(

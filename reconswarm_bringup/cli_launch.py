@@ -59,7 +59,8 @@ def launch_cmd(
     clock: Annotated[str | None, typer.Option("--clock", help="lockstep (default) | realtime")] = None,
     speed: Annotated[float | None, typer.Option("--speed",
         help="Realtime: simulated seconds per wall second (default 1, real time).")] = None,
-    planner: Annotated[str | None, typer.Option("--planner", help="reconfigurable | virtual-leader")] = None,
+    planner: Annotated[str | None, typer.Option(
+        "--planner", help="reconfigurable | virtual-leader | orca | hrvo | hl | social-force")] = None,
     router: Annotated[str | None, typer.Option("--router", metavar="EP",
         help="Router endpoint (default tcp/127.0.0.1:7447); one is started there unless one listens.")] = None,
     secure: Annotated[bool, typer.Option("--secure",
@@ -116,7 +117,7 @@ def launch_cmd(
         if clock not in ("lockstep", "realtime"):
             raise BadInput(f"--clock: expected lockstep or realtime, got {clock!r}")
         if planner is not None and planner not in PLANNERS:
-            raise BadInput(f"--planner: expected reconfigurable or virtual-leader, got {planner!r}")
+            raise BadInput(f"--planner: expected one of {', '.join(PLANNERS)}, got {planner!r}")
         if foxglove is not None and not 1 <= foxglove <= 65535:
             raise BadInput(f"--foxglove: port must be in 1..65535, got {foxglove}")
         per_process = packing.parse(agents_per_process)

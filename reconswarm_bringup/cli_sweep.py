@@ -51,13 +51,15 @@ def sweep_cmd(
              "side a stalled agent escapes by): where no agent stalls, every seed gives the same run, and the "
              "sweep says so.")] = None,
     planner: Annotated[str | None, typer.Option("--planner", metavar="P[,P...]",
-        help="reconfigurable, virtual-leader (default: each file's planner).")] = None,
+        help="reconfigurable, virtual-leader, orca, hrvo, hl, social-force (default: each file's planner).")] = None,
     jobs: Annotated[int | None, typer.Option("--jobs", "-j", metavar="J",
         help="Parallel processes (default: cores).")] = None,
     dask_address: Annotated[str | None, typer.Option("--dask", metavar="ADDRESS",
         help="Run on the Dask cluster whose scheduler is at ADDRESS (tcp://host:port) instead.")] = None,
     as_json: Annotated[bool, typer.Option("--json",
         help="Print the rows and the table (per scenario x planner) as JSON.")] = False,
+    plot: Annotated[Path | None, typer.Option("--plot", metavar="FILE.png",
+        help="Also draw success and convergence time by planner, one column per suite (scenario directory).")] = None,
 ) -> None:
     """Every scenario x seed x planner with the in-process engine, in parallel; results.csv and a table per
     scenario x planner."""
@@ -77,6 +79,8 @@ def sweep_cmd(
         for path in scenarios:
             if not path.is_file():
                 raise BadInput(f"{path}: no such scenario file")
+        if plot is not None and plot.suffix.lower() != ".png":
+            raise BadInput(f"--plot: expected a .png file, got {str(plot)!r}")
         plan = sw.JobPlan(scenarios, seed_range, kinds, out)
         total = len(plan)
         outputs.writable_dir("-o", out)
@@ -132,6 +136,15 @@ def sweep_cmd(
         return
     assert results is not None
     results.finish()
+    if plot is not None:
+        from reconswarm_bringup.sweep_plot import plot as draw
+
+        try:
+            draw(out / "results.csv", plot)
+        except (ReconswarmError, OSError) as exc:
+            fail(exc)
+            return
+        typer.echo(f"plot: {plot}", err=True)
     if as_json:
         print_json({"rows": [r for _, r in sorted(kept, key=lambda p: p[0])], "table": stats.result()})
     else:

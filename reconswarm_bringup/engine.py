@@ -30,11 +30,13 @@ from numpy.typing import NDArray
 
 from reconswarm.geometry.pairs import NearPairs
 from reconswarm.geometry.plane import Edges, rows_where
-from reconswarm.paper.deadlock import Generators, StallState, stall_step, window_ticks
+from reconswarm.paper.deadlock import Generators, StallState, window_ticks
 from reconswarm.paper.knowledge import SwarmKnowledge, obstacle_view
 from reconswarm.paper.leader import VirtualLeader
 from reconswarm.paper.link import HYSTERESIS_M, linked
-from reconswarm.paper.planner import NeighbourTables, ObstacleView, command, errors, repulsion
+from reconswarm.paper.planner import NeighbourTables, ObstacleView, errors
+from reconswarm.planners import registry
+from reconswarm.planners.seam import Tick
 from reconswarm.plant import unicycle
 from reconswarm.plant.sensing import ContourField
 from reconswarm.record.decimate import EveryNth
@@ -85,6 +87,8 @@ class Engine:
         self.pairs(self.p)  # (the first call of a large swarm builds the candidate list: not in the mission loop)
         self.near = np.zeros((0, 2), dtype=np.int64)
         self.tables = NeighbourTables()  # the neighbour tables' layout, kept while the neighbours stay
+        self.heard_tables = NeighbourTables()  # the same for the peers within link range (navground planners)
+        self.planner = registry.make(s)
         self.near_d = np.zeros(0)  # (E,) norm2 distance of each pair in self.near
         self.slot_error: Array | None = None
         # True distances matter up to the sensing range and the repulsion reach; beyond, a bound will do.
@@ -110,9 +114,6 @@ class Engine:
         self.near, self.near_d = self.pairs(p)
         self.know.update(qa, qs, rows_where(self.near, linked(self.near_d, c.link_range_m)))
 
-        nb = self.tables(p, self.r, self.near, c.d_max_m, self.near_d)
-        ob = self._known_obstacles() if near_any else self._no_obstacle
-
         if self.leader is not None:
             hulls = [h for h in (self.know.union_hull_before(m) for m in range(self.field.n_obstacles))
                      if h is not None]
@@ -124,10 +125,25 @@ class Engine:
         e_track = errors(p, center, self.offsets)
         # (N,) |p_i - (p* + Δ_i)|, the recorder's tracking error, when the centre is p* itself
         self.slot_error = e_track if self.leader is None else None
-        rep = repulsion(c, p, self.r, nb, ob)
-        pert = stall_step(self.stall, k, p, e_track, c.perturbation_mps, c.k_att, c.target_radius_m,
-                          c.converge_tol_m, self.s.meta.dt_s, rep[0] + rep[1])
-        return command(c, p, self.r, self.offsets, center, nb, ob, pert, lead_vel, rep)
+        t = Tick(k, self.s.meta.dt_s, p, self.theta, self.r, center, self.offsets, lead_vel, self.stall, e_track)
+        if self.planner.needs_tables:
+            t.nb = self.tables(p, self.r, self.near, c.d_max_m, self.near_d)
+            t.ob = self._known_obstacles() if near_any else self._no_obstacle
+        if self.planner.needs_hulls:
+            heard = self.near_d <= c.link_range_m  # (E,) the pairs within link range (agent/brain.py: linked_at)
+            t.heard = self.heard_tables(p, self.r, rows_where(self.near, heard), np.inf, self.near_d[heard])
+            t.hulls = self._known_hulls()
+        return self.planner.command(t)
+
+    def _known_hulls(self) -> list[list[Array]]:
+        """Every agent's known hulls, in obstacle-id order (what a navground planner is given)."""
+        rows: list[list[Array]] = [[] for _ in range(self.n)]
+        for m in range(self.field.n_obstacles):
+            who = self.know.known[:, m].nonzero()[0]
+            if who.size:
+                for i, h in zip(who.tolist(), self.know.hulls(who, m), strict=True):
+                    rows[i].append(h)
+        return rows
 
     def _known_obstacles(self) -> ObstacleView:
         """The planner's obstacle table: each agent's known hull of every obstacle within its reach.

@@ -27,6 +27,7 @@ from reconswarm.cli import outputs
 from reconswarm.errors import BadInput
 from reconswarm.net.session import DEFAULT_ROUTER
 from reconswarm.net.timing import TIMING
+from reconswarm.planners import registry
 from reconswarm.scenario.generate import generate
 from reconswarm.scenario.model import Scenario, load, parse, to_toml, warnings
 from reconswarm_bringup import chaos, netns, outcome, outdir, packing, runid, validate
@@ -60,7 +61,9 @@ def prepare_scenario(cfg: LaunchConfig) -> tuple[Scenario, list[str]]:
     for w in warns:
         log.warning("warning: %s", w)
     validate.fault_targets(cfg.faults, {a.id for a in s.agents})
-    return (s if cfg.planner is None else s.with_planner(cfg.planner)), warns
+    s = s if cfg.planner is None else s.with_planner(cfg.planner)
+    registry.require(s)  # (an optional dependency the planner needs: refused here, not in every agent)
+    return s, warns
 
 
 def run(cfg: LaunchConfig) -> int:

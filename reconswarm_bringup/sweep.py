@@ -26,11 +26,13 @@ from typing import Any
 import numpy as np
 
 from reconswarm.errors import BadInput
+from reconswarm.planners import registry
 from reconswarm.scenario.model import PLANNERS, Scenario, load
 from reconswarm_bringup import engine
 
 COLUMNS = ("scenario", "planner", "seed", "converged", "convergence_time_s", "final_max_error_m", "collisions",
-           "safety_violations", "min_agent_gap_m", "min_obstacle_gap_m", "splits", "merges", "wall_time_s")
+           "safety_violations", "min_agent_gap_m", "min_obstacle_gap_m", "splits", "merges", "path_length_mean_m",
+           "wall_time_s")
 STATS = ("runs", "converged", "convergence_median_s", "convergence_p90_s", "contacts")
 
 Row = dict[str, Any]
@@ -104,7 +106,10 @@ class JobPlan:
         self.files: list[tuple[str, str, Scenario]] = []  # (label, record name, scenario)
         for path, name in zip(paths, record_names(paths), strict=True):
             # BadInput naming the file and field (the engine uses no wire)
-            self.files.append((str(path), name, load(path, wire=False)))
+            base = load(path, wire=False)
+            self.files.append((str(path), name, base))
+            for kind in planners or (base.planner.kind,):  # an optional dependency missing: refused up front
+                registry.require(base.with_planner(kind))
         self.planners = planners
 
     def __len__(self) -> int:
@@ -128,11 +133,17 @@ def make_jobs(paths: Sequence[Path], seeds: range | None, planners: Sequence[str
 def run_one(job: Job) -> Row:
     """Run one job with the in-process engine and return its results row (the COLUMNS)."""
     summary = engine.run(engine.SimConfig(job.scenario, Path(job.out_dir), progress=False))
-    row = {k: summary[k] for k in COLUMNS}
+    row = {k: path_length_mean_m(summary) if k == "path_length_mean_m" else summary[k] for k in COLUMNS}
     row["scenario"] = job.label
     row["planner"] = job.scenario.planner.kind
     row["seed"] = job.scenario.meta.seed
     return row
+
+
+def path_length_mean_m(summary: dict[str, Any]) -> float:
+    """The metres each agent's head point travelled (the summary's path_length_m), averaged over the agents."""
+    paths = list(summary["path_length_m"].values())
+    return round(sum(paths) / len(paths), 2) if paths else 0.0
 
 
 def stream(jobs: Iterable[Job], executor: Executor, window: int, check: Callable[[], None] | None = None,

@@ -27,10 +27,15 @@ from reconswarm.scenario.wire_limits import MAX_AGENT_ID
 
 
 class PlannerKind(StrEnum):
-    """Which law the agents run: the paper's reconfigurable APF or the virtual-leader benchmark."""
+    """Which planner the agents run: the paper's reconfigurable APF, the virtual-leader benchmark, or one of
+    navground's behaviours (reconswarm.planners.registry maps each name to its module)."""
 
     RECONFIGURABLE = "reconfigurable"
     VIRTUAL_LEADER = "virtual-leader"
+    ORCA = "orca"
+    HRVO = "hrvo"
+    HL = "hl"
+    SOCIAL_FORCE = "social-force"
 
 
 PLANNERS = tuple(k.value for k in PlannerKind)

@@ -11,6 +11,7 @@ the engine's u row with `==`.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -136,3 +137,16 @@ def test_neighbours_are_the_planners_reach(p: tuple[float, float], peers: list[t
     got = brain._neighbours(pos, everyone)
     assert got.p.reshape(-1, 2).tolist() == [[b.px, b.py] for b in want]
     assert got.r.reshape(-1).tolist() == [b.radius for b in want]
+
+
+NAVGROUND_TICKS = 1100  # the swarm meets the diamond: hulls sensed, shared and given to the behaviours
+
+
+@pytest.mark.parametrize("kind", ["orca", "hrvo", "hl", "social-force"])
+def test_agent_brain_equals_the_engine_under_navground_planners(kind: str) -> None:
+    """navground's behaviours, one per agent: the brain gives its behaviour the peers heard within link range and
+    its known hulls in the engine's order, and the behaviour's state (its last command) evolves the same way."""
+    pytest.importorskip("navground.core")
+    s = load(PAPER).with_planner(kind)
+    _, _, obstacle_rows = side_by_side(s, NAVGROUND_TICKS)
+    assert obstacle_rows > 100
