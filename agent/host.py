@@ -44,9 +44,9 @@ from agent.neighbours import Cells
 from agent.tagged_inbox import ALL, Tag, TaggedInbox
 from reconswarm.net import trace, wire
 from reconswarm.net.admission import Intrusion
-from reconswarm.net.cells import Cell, chunk_cell
+from reconswarm.net.cells import Cell
 from reconswarm.net.inbox import Item
-from reconswarm.net.keys import Keys
+from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.lifecycle import Stopper
 from reconswarm.net.node import Exit, Invalid
 from reconswarm.net.runtime import Runtime
@@ -78,7 +78,6 @@ class AgentHost:
         # subscribers' history queries get back (zenoh does not filter a query's replies by the allowed origin).
         self.cached: dict[int, tuple[str, bytes]] = {}
         self.replay: list[tuple[int, Tag, Item]] = []  # (agent, tag, obstacle set) for that agent alone (replayed)
-        self._cells: dict[str, Cell | None] = {}  # key -> the cell in it (None: not a cell key)
         self._alive: tuple[int, ...] = ()  # the newest clock's live agents (one tuple while they stay the same)
         first = next(iter(links.values()))
         self.known = {a.id for a in first.node.s.agents}
@@ -157,16 +156,10 @@ class AgentHost:
 
     def _cell(self, key: str) -> Cell | None:
         """The cell a beacon or obstacle set was published in (None: a key without a valid one)."""
-        if key not in self._cells:
-            parts = key[len(self.keys.prefix) + 1:].split("/")
-            try:
-                got = chunk_cell(parts[1]) if len(parts) == 5 and parts[0] == "cell" else None
-            except ValueError:
-                got = None
-            if len(self._cells) >= 100_000:
-                self._cells.clear()
-            self._cells[key] = got
-        return self._cells[key]
+        try:
+            return self.keys.parsed(key).cell
+        except WireError:
+            return None
 
     # ---------------------------------------------------------------------------------------- input
 

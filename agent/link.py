@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any
+from typing import Any, cast
 
 import zenoh
 from zenoh import ext
@@ -23,10 +23,11 @@ from agent.ros2_io import AgentRos2
 from reconswarm.net import trace, wire
 from reconswarm.net.admission import Intrusion, IntrusionKind
 from reconswarm.net.cells import Cell
+from reconswarm.net.decode import AGENT, decode
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Rejections
 from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.node import Invalid, Role, RouterLink, Stop, Token
+from reconswarm.net.node import Invalid, RouterLink, Stop, Token
 from reconswarm.net.report import report_to_wire
 from reconswarm.net.session import Member
 
@@ -42,24 +43,7 @@ def decode_sample(keys: Keys, key: str, payload: bytes, kind: str) -> Decoded:
     """A sample as a node input, for any agent (who may take it is `AgentLink.take`'s question); a malformed one
     becomes Invalid."""
     try:
-        what, aid, leaf = keys.parse(key)
-        if what == "alive":
-            if leaf == "agent" and aid is not None:
-                return Token(Role.AGENT, kind != "DELETE", aid)
-            return Token(Role.WORLD, kind != "DELETE") if leaf == "simworld" else None
-        if what == "clock":
-            return wire.clock_from_wire(payload)
-        if what != "agent" or aid is None:
-            return None
-        if leaf == "state":
-            return wire.state_from_wire(payload, aid)
-        if leaf == "scan":
-            return wire.scan_from_wire(payload, aid)
-        if leaf == "beacon":
-            return wire.beacon_from_wire(payload, aid)
-        if leaf == "obstacles":
-            return wire.obstacles_from_wire(payload, aid)
-        return None
+        return cast(Decoded, decode(keys, AGENT, key, payload, kind))  # (AGENT's kinds: what a node receives)
     except WireError as exc:
         return Invalid(key, str(exc))
 

@@ -38,9 +38,7 @@ from monitor import scene
 from monitor.node import MonitorNode
 from reconswarm.errors import BadInput
 from reconswarm.net import wire
-from reconswarm.net.inbox import Inbox, Rejections
-from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.node import Invalid
+from reconswarm.net.keys import Keys
 from reconswarm.paper.events import Event
 from reconswarm.paper.topology import labels
 from reconswarm.scenario.model import Scenario
@@ -185,28 +183,14 @@ class LiveView:
 
 class LiveFeed:
     """The zenoh side of the live view: the agents' obstacle sets (an advanced subscriber: sets announced
-    before the monitor started come from the agents' caches), decoded on the monitor's loop."""
+    before the monitor started come from the agents' caches), into the monitor's inbox: decoded and admitted
+    by its port like every other sample (monitor/process.py), the admitted ones handed to the view."""
 
-    def __init__(self, view: LiveView, keys: Keys, session: Any, rej: Rejections) -> None:
-        self.view, self.keys, self.rej = view, keys, rej
+    def __init__(self, view: LiveView, keys: Keys, session: Any, handler: Any) -> None:
+        self.view = view
         self.k = -1  # the newest tick sent
-        self.inbox = Inbox()
-        self.sub = ext.declare_advanced_subscriber(session, keys.cell_agents(None, "obstacles"), self.inbox.handler(),
+        self.sub = ext.declare_advanced_subscriber(session, keys.cell_agents(None, "obstacles"), handler,
                                                    history=ext.HistoryConfig(detect_late_publishers=True))
-
-    def poll(self) -> list[Invalid]:
-        """Take the sets that came; the malformed ones (logged) for the monitor's node to count."""
-        bad = []
-        for key, payload, _kind, _source, _at in self.inbox.drain():
-            try:
-                _, aid, _ = self.keys.parse(key)
-                if aid is None or aid not in self.view.index:
-                    raise WireError(f"agent {aid} is not in the scenario")
-                self.view.obstacle_set(wire.obstacles_from_wire(payload, aid))
-            except WireError as exc:
-                self.rej.reject(key, str(exc))
-                bad.append(Invalid(key, str(exc)))
-        return bad
 
     def follow(self, n: MonitorNode, now_s: float) -> None:
         """A scene of the newest tick the node recorded, if it is new and one is due."""

@@ -31,12 +31,13 @@ from monitor.rows import Close, Commit, Resume, write
 from reconswarm.errors import ProcessFailure
 from reconswarm.net import wire
 from reconswarm.net.admission import Intrusion, IntrusionKind
+from reconswarm.net.decode import LIVE_VIEW, MONITOR, decode
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Inbox, Item, Rejections
 from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.lifecycle import Stopper
-from reconswarm.net.node import Exit, Invalid, Role, Token
-from reconswarm.net.report import report_from_wire
+from reconswarm.net.node import Exit, Invalid, Token
+from reconswarm.net.report import Report
 from reconswarm.net.runtime import Runtime
 from reconswarm.net.session import Member, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
@@ -71,6 +72,7 @@ class MonitorPort(Member):
         self.committed_t = resume.t_s if resume else 0.0  # the record's last commit point (simulated s)
         self.rej = Rejections("monitor")  # (logs what is dropped; the node counts it)
         self.inbox = Inbox()
+        self.accepts = MONITOR  # (and the live view's obstacle sets while it is served: `serve`)
         self.feed: LiveFeed | None = None
         self.live: Any = None  # the rich table (--live)
         self.node: MonitorNode | None = None  # (read for the live views only)
@@ -93,28 +95,26 @@ class MonitorPort(Member):
     # ------------------------------------------------------------------------------------ route
 
     def route(self, items: Sequence[Item], now_s: float) -> dict[int, list[Input]]:
-        got = [m for m in (self.decode(*item) for item in items) if m is not None]
-        if self.feed is not None:
-            got += self.feed.poll()
-        return {0: got}
+        return {0: [m for m in (self.decode(*item) for item in items) if m is not None]}
 
     def decode(self, key: str, payload: bytes, kind: str, source: str, at_s: float) -> Input | None:
         """A sample as the node's input: admitted by the gate (else None, counted there), or Invalid."""
         try:
-            what, aid, leaf = self.keys.parse(key)
-            if what == "alive":
-                if leaf == "agent" and aid is not None:
-                    return Token(Role.AGENT, kind != "DELETE", aid)
-                return Token(Role.WORLD, kind != "DELETE") if leaf == "simworld" else None
-            if what == "clock":
-                c = wire.clock_from_wire(payload)
-                return ClockFrom(c, source) if self.gate.admit(c, source, key, at_s) else None
-            if what == "truth":
-                tr = wire.truth_from_wire(payload)
-                return tr if self.gate.admit(tr, source, key, at_s) else None
-            if what == "report":  # (from the session that speaks for that process; an agent's pinned by its first)
-                r = report_from_wire(payload, leaf)
-                return r if self.gate.admit(r, source, key, at_s) else None
+            if self.feed is not None and key.endswith("/obstacles") and not self.gate.admit_set_bytes(
+                    len(payload), source, key, at_s):  # (the live view's sets: their size, before decoding)
+                return None
+            m = decode(self.keys, self.accepts, key, payload, kind)
+            if m is None or isinstance(m, Token):
+                return m
+            # (a report: from the session that speaks for that process; an agent's pinned by its first)
+            if not self.gate.admit(m, source, key, at_s):
+                return None
+            if isinstance(m, wire.ObstacleSet) and self.feed is not None:  # the live view's, not the node's
+                self.feed.view.obstacle_set(m)
+            elif isinstance(m, wire.Clock):
+                return ClockFrom(m, source)
+            elif isinstance(m, wire.Truth | Report):
+                return m
             return None
         except WireError as exc:
             self.rej.reject(key, str(exc))
@@ -164,7 +164,8 @@ class MonitorPort(Member):
 
     def serve(self, view: LiveView) -> None:
         """Also serve the run live (--foxglove): the ticks recorded, the events, the agents' obstacle sets."""
-        self.feed = LiveFeed(view, self.keys, self.z, self.rej)
+        self.feed = LiveFeed(view, self.keys, self.z, self.inbox.handler())
+        self.accepts = MONITOR | LIVE_VIEW
 
     # ------------------------------------------------------------------------------------ the loop
 

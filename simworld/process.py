@@ -22,10 +22,12 @@ from zenoh import ext
 
 from reconswarm.errors import BadInput
 from reconswarm.net import ros2, trace, wire
+from reconswarm.net.decode import WORLD as ACCEPTS
+from reconswarm.net.decode import decode
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Inbox, Item, Rejections
 from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.node import Exit, Invalid, Role, Token
+from reconswarm.net.node import Exit, Invalid, Token
 from reconswarm.net.report import report_to_wire
 from reconswarm.net.runtime import Runtime
 from reconswarm.net.session import Member, ZenohOptions, serving
@@ -112,18 +114,13 @@ class WorldPort(Member):
                 if not self.gate.admit_twist(c, source, key, at_s):  # (first: a forger's timestamp is no excuse)
                     return None
                 return Command(self.ros2.dated(c, sent_ns), at_s)
-            what, aid, leaf = self.keys.parse(key)
-            if what == "alive":
-                if leaf == "monitor":
-                    return Token(Role.MONITOR, kind != "DELETE")
-                return Token(Role.AGENT, kind != "DELETE", aid) if leaf == "agent" and aid is not None else None
-            if what != "agent" or leaf != "cmd" or aid is None:
+            m = decode(self.keys, ACCEPTS, key, payload, kind)
+            if not isinstance(m, wire.Cmd):
+                return m if isinstance(m, Token) else None  # (the world's other kinds: liveliness tokens)
+            if not self.gate.admit(m, source, key, at_s):
                 return None
-            c = wire.cmd_from_wire(payload, aid)
-            if not self.gate.admit(c, source, key, at_s):
-                return None
-            trace.mark(trace.Mark.CMD_IN, c.k, c.id, at_s)
-            return Command(c, at_s)
+            trace.mark(trace.Mark.CMD_IN, m.k, m.id, at_s)
+            return Command(m, at_s)
         except (ros2.Ros2Error, WireError) as exc:
             return self._invalid(key, str(exc))
 

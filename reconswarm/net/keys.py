@@ -15,11 +15,22 @@ class WireError(ValueError):
 
 
 @dataclass(frozen=True)
+class ParsedKey:
+    """A key's kind ("agent", "clock", "event", "truth", "alive", "report"), agent id, leaf, and the cell it was
+    published under (`cell/<cx>_<cy>/agent/<id>/<leaf>`; None for every other key)."""
+
+    kind: str
+    agent_id: int | None
+    leaf: str
+    cell: Cell | None = None
+
+
+@dataclass(frozen=True)
 class Keys:
     """All key expressions of one run (`swarm/<run>/...`)."""
 
     run: str
-    _parsed: dict[str, tuple[str, int | None, str]] = field(default_factory=dict, compare=False, repr=False)
+    _parsed: dict[str, ParsedKey] = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def prefix(self) -> str:
@@ -94,7 +105,12 @@ class Keys:
         ("clock", None, "") | ("event", None, "") | ("truth", None, "") |
         ("alive", id or None, "agent" | "simworld" | "monitor") |
         ("report", agent id or None, "agent-<id>" | "simworld").
-        Raises WireError for anything else."""
+        Raises WireError for anything else. `parsed` also gives a cell key's cell."""
+        p = self.parsed(key)
+        return p.kind, p.agent_id, p.leaf
+
+    def parsed(self, key: str) -> ParsedKey:
+        """The key's parse (as `parse`, with its cell); raises WireError for a key of none of the run's shapes."""
         hit = self._parsed.get(key)
         if hit is not None:
             return hit
@@ -103,33 +119,29 @@ class Keys:
             self._parsed[key] = out
         return out
 
-    def _parse(self, key: str) -> tuple[str, int | None, str]:
+    def _parse(self, key: str) -> ParsedKey:
         pre = self.prefix + "/"
         if not key.startswith(pre):
             raise WireError(f"key {key!r} outside {self.prefix}")
         parts = key[len(pre):].split("/")
-        if parts == ["clock"]:
-            return "clock", None, ""
-        if parts == ["event"]:
-            return "event", None, ""
-        if parts == ["truth"]:
-            return "truth", None, ""
+        if parts in (["clock"], ["event"], ["truth"]):
+            return ParsedKey(parts[0], None, "")
         if len(parts) == 3 and parts[0] == "agent":
-            return "agent", _key_id(parts[1], key), parts[2]
+            return ParsedKey("agent", _key_id(parts[1], key), parts[2])
         if len(parts) == 5 and parts[0] == "cell" and parts[2] == "agent" and parts[4] in CELL_LEAVES:
             try:
-                chunk_cell(parts[1])
+                cell = chunk_cell(parts[1])
             except ValueError:
                 raise WireError(f"bad cell in key {key!r}") from None
-            return "agent", _key_id(parts[3], key), parts[4]
+            return ParsedKey("agent", _key_id(parts[3], key), parts[4], cell)
         if len(parts) == 3 and parts[:2] == ["alive", "agent"]:
-            return "alive", _key_id(parts[2], key), "agent"
+            return ParsedKey("alive", _key_id(parts[2], key), "agent")
         if len(parts) == 2 and parts[0] == "report" and parts[1] == "simworld":
-            return "report", None, parts[1]
+            return ParsedKey("report", None, parts[1])
         if len(parts) == 2 and parts[0] == "report" and parts[1].startswith("agent-"):
-            return "report", _key_id(parts[1][6:], key), parts[1]
+            return ParsedKey("report", _key_id(parts[1][6:], key), parts[1])
         if len(parts) == 2 and parts[0] == "alive" and parts[1] in ("simworld", "monitor"):
-            return "alive", None, parts[1]
+            return ParsedKey("alive", None, parts[1])
         raise WireError(f"unexpected key {key!r}")
 
 

@@ -26,7 +26,6 @@ from hypothesis import strategies as st
 from agent.host import ALL, AgentHost, TaggedInbox
 from agent.link import AgentLink
 from agent.node import AgentNode
-from monitor.live import LiveFeed
 from monitor.node import MonitorNode
 from monitor.process import MonitorPort
 from reconswarm.net import wire
@@ -103,16 +102,8 @@ class View:
     def obstacle_set(self, m: wire.ObstacleSet) -> None:
         self.sets.append(m)
 
-
-class Given:
-    """An inbox that holds what the test gives it."""
-
-    def __init__(self) -> None:
-        self.items: list[Item] = []
-
-    def drain(self) -> list[Item]:
-        items, self.items = self.items, []
-        return items
+    def close(self) -> None:
+        pass
 
 
 @dataclass
@@ -121,9 +112,10 @@ class Roles:
     world_node: WorldNode
     monitor: MonitorPort
     monitor_node: MonitorNode
+    live: MonitorPort  # a monitor that serves the live view: its obstacle sets through the same port
+    live_node: MonitorNode
     host: AgentHost
     nodes: dict[int, AgentNode]
-    feed: LiveFeed
     clock: Iterator[float]
 
 
@@ -141,13 +133,13 @@ def roles(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Roles]:
     links = {a: AgentLink(nodes[a], KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"), None, zid)
              for a in HOSTED}
     host = AgentHost(z, KEYS, links, TaggedInbox())
-    feed = LiveFeed(View(), KEYS, z, monitor.rej)  # type: ignore[arg-type]
-    feed.inbox = Given()  # type: ignore[assignment]
+    live = MonitorPort(S, RUN, z, writer, None)
+    live.serve(View())  # type: ignore[arg-type]
     try:
-        yield Roles(world, world_node, monitor, MonitorNode(S), host, nodes, feed,
+        yield Roles(world, world_node, monitor, MonitorNode(S), live, MonitorNode(S), host, nodes,
                     itertools.count(t0, 0.01))
     finally:
-        feed.sub.undeclare()
+        live.close()
         host.close()
         monitor.close()
         world.close()
@@ -189,10 +181,11 @@ def test_any_key_and_payload_is_dropped_and_counted_or_taken_by_every_role(roles
     _counted(before, roles.monitor.rej.count, got_m)
     _own_keys(got_m, items)
     roles.monitor_node.step(got_m, now)
-    before = roles.monitor.rej.count
-    roles.feed.inbox.items = list(items)  # type: ignore[attr-defined]
-    got_v = roles.feed.poll()
-    _counted(before, roles.monitor.rej.count, got_v)
+    before = roles.live.rej.count
+    got_v = roles.live.route(items, now)[0]
+    _counted(before, roles.live.rej.count, got_v)
+    _own_keys(got_v, items)
+    roles.live_node.step(got_v, now)
     # an agent host of two agents: each sample through every subscription it may come through
     links = roles.host.active
     before = sum(lk.rej.count for lk in links.values())

@@ -1,0 +1,85 @@
+"""One decode table: a sample's key and payload to the typed message a port takes, in one place.
+
+`TABLE` maps a key's kind (`Kind`: the parsed key's kind and leaf; every report key is one kind) to its wire
+decoder and the type it returns. Each port declares the kinds it accepts (`AGENT`, `WORLD`, `MONITOR`,
+`LIVE_VIEW`) and calls `decode`: a kind it does not accept is None (not its), a key of none of the run's shapes
+or a malformed payload raises the one `WireError` every port counts. What the port then does with the message
+(its gate's admission, whom it is for) is the port's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+from reconswarm.net import wire
+from reconswarm.net.keys import Keys, ParsedKey, WireError
+from reconswarm.net.node import Role, Token
+from reconswarm.net.report import Report, report_from_wire
+
+Kind = tuple[str, str]  # (the key's kind, its leaf); a report key's leaf is ""
+Message = (wire.State | wire.Scan | wire.Beacon | wire.ObstacleSet | wire.Cmd | wire.Clock | wire.Truth | Report
+           | Token)
+
+STATE: Kind = ("agent", "state")
+SCAN: Kind = ("agent", "scan")
+BEACON: Kind = ("agent", "beacon")
+OBSTACLES: Kind = ("agent", "obstacles")
+CMD: Kind = ("agent", "cmd")
+CLOCK: Kind = ("clock", "")
+TRUTH: Kind = ("truth", "")
+REPORT: Kind = ("report", "")
+ALIVE_AGENT: Kind = ("alive", "agent")
+ALIVE_WORLD: Kind = ("alive", "simworld")
+ALIVE_MONITOR: Kind = ("alive", "monitor")
+
+
+class Entry(NamedTuple):
+    """A kind's decoder (payload, parsed key, whether the sample is a PUT) and the type it returns."""
+
+    decode: Callable[[bytes, ParsedKey, bool], Message]
+    type: type
+
+
+def _id(p: ParsedKey) -> int:
+    assert p.agent_id is not None  # (an agent key's id: the parse raised for any other)
+    return p.agent_id
+
+
+TABLE: dict[Kind, Entry] = {
+    STATE: Entry(lambda b, p, _put: wire.state_from_wire(b, _id(p)), wire.State),
+    SCAN: Entry(lambda b, p, _put: wire.scan_from_wire(b, _id(p)), wire.Scan),
+    BEACON: Entry(lambda b, p, _put: wire.beacon_from_wire(b, _id(p)), wire.Beacon),
+    OBSTACLES: Entry(lambda b, p, _put: wire.obstacles_from_wire(b, _id(p)), wire.ObstacleSet),
+    CMD: Entry(lambda b, p, _put: wire.cmd_from_wire(b, _id(p)), wire.Cmd),
+    CLOCK: Entry(lambda b, _p, _put: wire.clock_from_wire(b), wire.Clock),
+    TRUTH: Entry(lambda b, _p, _put: wire.truth_from_wire(b), wire.Truth),
+    REPORT: Entry(lambda b, p, _put: report_from_wire(b, p.leaf), Report),
+    ALIVE_AGENT: Entry(lambda _b, p, put: Token(Role.AGENT, put, _id(p)), Token),
+    ALIVE_WORLD: Entry(lambda _b, _p, put: Token(Role.WORLD, put), Token),
+    ALIVE_MONITOR: Entry(lambda _b, _p, put: Token(Role.MONITOR, put), Token),
+}
+
+# What each port accepts (the rest of the run's keys are not its).
+AGENT = frozenset({STATE, SCAN, BEACON, OBSTACLES, CLOCK, ALIVE_AGENT, ALIVE_WORLD})
+WORLD = frozenset({CMD, ALIVE_AGENT, ALIVE_MONITOR})
+MONITOR = frozenset({CLOCK, TRUTH, REPORT, ALIVE_AGENT, ALIVE_WORLD})
+LIVE_VIEW = frozenset({OBSTACLES})  # the monitor's, while it serves the live view
+
+
+def kind_of(p: ParsedKey) -> Kind:
+    return (p.kind, "") if p.kind == "report" else (p.kind, p.leaf)
+
+
+def decode(keys: Keys, accepts: frozenset[Kind], key: str, payload: bytes, sample_kind: str) -> Message | None:
+    """The message a sample carries for a port that accepts `accepts` (None: a kind it does not); raises WireError
+    for a key of none of the run's shapes or a malformed payload. sample_kind: zenoh's "PUT" or "DELETE" (a
+    liveliness token's)."""
+    p = keys.parsed(key)
+    kind = kind_of(p)
+    if kind not in accepts:
+        return None
+    return TABLE[kind].decode(payload, p, sample_kind != "DELETE")
+
+
+__all__ = ["TABLE", "WireError", "decode", "kind_of"]
