@@ -1,0 +1,113 @@
+"""The one decode table (reconswarm/net/decode.py): each kind's decoder gives its type, a port takes only the kinds
+it accepts, a cell key's cell comes from the key's one parse, and the live view's obstacle sets go through the
+monitor's port: decoded by the same table, admitted (or refused and counted) by the monitor's gate."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from monitor.process import MonitorPort
+from reconswarm.net import decode as dec
+from reconswarm.net import wire
+from reconswarm.net.keys import Keys, ParsedKey, WireError
+from reconswarm.net.node import Invalid, Role, Token
+from reconswarm.net.report import Report, report_to_wire
+from reconswarm.net.session import ZenohOptions
+from reconswarm.record.store import RunWriter
+from reconswarm.scenario.model import load
+from tests.support import PAPER, free_port
+
+K = Keys("t")
+S = load(PAPER)
+A = S.agents[0].id
+SAMPLES: dict[dec.Kind, tuple[str, bytes]] = {  # a well-formed sample of each kind
+    dec.STATE: (K.state(3), wire.state_to_wire(wire.State(3, 1, 0.05, 1.0, 2.0, 0.0, 1.0, 2.0))),
+    dec.SCAN: (K.scan(3), wire.scan_to_wire(wire.Scan(3, 1, 0.05, ()))),
+    dec.BEACON: (K.beacon((1, -2), 3), wire.beacon_to_wire(wire.Beacon(3, 1, 0.05, 1.0, 2.0, 0.5))),
+    dec.OBSTACLES: (K.obstacles((0, 0), 3), wire.obstacles_to_wire(wire.ObstacleSet(3, 1, 0))),
+    dec.CMD: (K.cmd(3), wire.cmd_to_wire(wire.Cmd(3, 1, 0.5, 0.1))),
+    dec.CLOCK: (K.clock, wire.clock_to_wire(wire.Clock(1, 0.05, (3,)))),
+    dec.TRUTH: (K.truth, wire.truth_to_wire(wire.Truth(1, 0.05, (3,), (1.0,), (2.0,), (0.0,), (1.0,), (2.0,)))),
+    dec.REPORT: (K.report("agent-3"), report_to_wire(Report("agent-3", None, 2))),
+    dec.ALIVE_AGENT: (K.alive_agent(3), b""),
+    dec.ALIVE_WORLD: (K.alive_simworld, b""),
+    dec.ALIVE_MONITOR: (K.alive_monitor, b""),
+}
+EVERY = frozenset(dec.TABLE)
+
+
+def test_every_kind_decodes_to_its_type_and_a_port_takes_only_what_it_accepts() -> None:
+    assert SAMPLES.keys() == dec.TABLE.keys()
+    for kind, (key, payload) in SAMPLES.items():
+        m = dec.decode(K, EVERY, key, payload, "PUT")
+        assert isinstance(m, dec.TABLE[kind].type), (kind, m)
+        for accepts in (dec.AGENT, dec.WORLD, dec.MONITOR, dec.LIVE_VIEW):
+            got = dec.decode(K, accepts, key, payload, "PUT")
+            assert (got is None) == (kind not in accepts), (kind, accepts)
+
+
+def test_tokens_carry_their_role_id_and_whether_they_came_or_went() -> None:
+    assert dec.decode(K, EVERY, K.alive_agent(4), b"", "DELETE") == Token(Role.AGENT, False, 4)
+    assert dec.decode(K, EVERY, K.alive_simworld, b"", "PUT") == Token(Role.WORLD, True)
+    assert dec.decode(K, EVERY, K.alive_monitor, b"", "DELETE") == Token(Role.MONITOR, False)
+
+
+def test_a_bad_key_or_payload_raises_the_one_wire_error_whatever_the_port_accepts() -> None:
+    for accepts, key, payload in ((frozenset(), "swarm/other/clock", b""),
+                                  (frozenset(), K.prefix + "/agent/03/state", b""),
+                                  (frozenset(), K.prefix + "/cell/01_0/agent/3/beacon", b""),
+                                  (dec.AGENT, K.state(3), b"\x00")):
+        with pytest.raises(WireError):
+            dec.decode(K, accepts, key, payload, "PUT")
+
+
+def test_a_cell_key_gives_its_cell_from_the_one_parse() -> None:
+    assert K.parsed(K.beacon((-3, 4), 1)) == ParsedKey("agent", 1, "beacon", (-3, 4))
+    assert K.parsed(K.obstacles((0, 12), 2)).cell == (0, 12)
+    assert K.parsed(K.state(2)).cell is None and K.parsed(K.clock).cell is None
+    assert K.parse(K.beacon((-3, 4), 1)) == ("agent", 1, "beacon")
+
+
+@dataclass
+class View:
+    sets: list[wire.ObstacleSet] = field(default_factory=list)
+
+    def obstacle_set(self, m: wire.ObstacleSet) -> None:
+        self.sets.append(m)
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.fixture
+def served(tmp_path: Path) -> Iterator[tuple[MonitorPort, View]]:
+    z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{free_port()}",), "peer").config())  # alone
+    writer = RunWriter(tmp_path / "run.db", S, "lockstep")
+    port, view = MonitorPort(S, "t", z, writer, None), View()
+    port.serve(view)  # type: ignore[arg-type]
+    try:
+        yield port, view
+    finally:
+        port.close()
+        writer.close()
+        z.close()
+
+
+def test_the_live_views_sets_are_admitted_or_refused_and_counted_by_the_monitors_gate(
+        served: tuple[MonitorPort, View]) -> None:
+    port, view = served
+    good = wire.ObstacleSet(A, 1, 0)
+    unknown_agent = wire.ObstacleSet(9999, 1, 0)
+    unknown_obstacle = wire.ObstacleSet(A, 1, 1, {"no-such": ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))})
+    items = [(K.obstacles((0, 0), m.id), wire.obstacles_to_wire(m), "PUT", "s1", 0.0)
+             for m in (good, unknown_agent, unknown_obstacle)]
+    items.append((K.obstacles((0, 0), A), b"\x00garbage", "PUT", "s1", 0.0))
+    got = port.route(items, 0.0)[0]
+    assert view.sets == [good]  # (the view's, never the node's)
+    assert port.gate.count == 2  # the unknown agent and the unknown obstacle: the monitor's intrusions
+    assert len(got) == 1 and isinstance(got[0], Invalid) and port.rej.count == 1  # the malformed one
