@@ -3,9 +3,8 @@ peers' beacons and each peer's newest, when each peer was last heard, and who is
 
 "Alive" is decided here once (`living`, by the agent's rule in reconswarm/net/membership.py): by its token; once a
 clock says, counted by the world's clock and not seen going by its token. Not the tokens alone there: the world saw
-a token whose news to us may come after the clock (zenoh-python runs each subscriber's callbacks on a thread of its
-own, so no order holds between the liveliness and the data subscribers), and a forged token does not fool the
-world's clock.
+a token whose news to us may come after the clock (a token's declaration and the world's data need not come in
+the order the world saw them), and a forged token does not fool the world's clock.
 """
 
 from __future__ import annotations

@@ -18,9 +18,10 @@ Tag = tuple[str, Any]  # ALL | ("own", agent id) | ("cell", cell or None): the s
 
 
 class TaggedInbox:
-    """Samples from zenoh with the subscription they came through, held raw until the loop takes them all at
-    once (inbox.Inbox's rules: `want` of them, or the hosted agents' states, wake the loop; nothing blocks or
-    calls zenoh in a callback); counted in inbox.Inbox's process totals.
+    """Samples from zenoh with the subscription they came through, in the order they came over the session's
+    link (`handler`), held raw until the loop takes them all at once (inbox.Inbox's rules: `want` of them, or
+    the hosted agents' states, wake the loop; nothing blocks or calls zenoh in a callback); counted in
+    inbox.Inbox's process totals.
 
     The world publishes every robot's state of a tick in one burst: the loop wakes once the states of all the
     hosted agents that wait for one are in (`urgent` of them), or `LINGER_S` after the first, so that one
@@ -42,7 +43,13 @@ class TaggedInbox:
         return cb
 
     def handler(self, tag: Tag, urgent: bool = False) -> Any:
-        return zenoh.handlers.Callback(self.callback(tag, urgent))
+        """A zenoh handler that appends to this inbox on the thread that received the sample (`indirect=False`):
+        the samples of every subscription come in the order of the session's link. Lockstep needs that order:
+        a peer's beacon of tick k-1 comes before the world's state of k (the world waits for the peer's command
+        of k-1, put after that beacon), and the wait set of k is built from the beacons of k-1 in with the state
+        (agent/neighbours.py). zenoh-python's default runs each subscription's callbacks on a Python thread of
+        its own, and then a swamped cell subscription handed a beacon of k-1 over after the state of k."""
+        return zenoh.handlers.Callback(self.callback(tag, urgent), indirect=False)
 
     def _states(self) -> tuple[int, float]:
         """How many hosted agents' urgent samples wait, and when the first came (inf: none)."""
