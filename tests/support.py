@@ -212,6 +212,18 @@ def assert_all_gone(out: Path, grace_s: float = 5.0) -> None:
     assert not left, f"processes outlived the run: {left}"
 
 
+def end_launch(proc: subprocess.Popen[Any], out: Path, *sessions: Any) -> None:
+    """A launch's test is over (passed or not): close its outside sessions (None: never opened), kill the launcher
+    if it still runs, and check that every process the run started has exited."""
+    for z in sessions:
+        if z is not None:
+            z.close()
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
+    assert_all_gone(out)
+
+
 def scenario_with(tmp: Path, name: str, text: str, **replace: str) -> Path:
     for old, new in replace.items():
         assert old in text

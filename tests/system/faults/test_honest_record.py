@@ -28,7 +28,7 @@ from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions
 from tests.support import (
     ROOT,
-    assert_all_gone,
+    end_launch,
     free_port,
     launcher_cmd,
     paper_with,
@@ -115,12 +115,7 @@ def test_the_record_does_not_lie_about_commands_ends_or_the_dead(tmp_path: Path)
         token.undeclare()
         stdout, _ = proc.communicate(timeout=300)
     finally:
-        if a is not None:
-            a.close()
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        assert_all_gone(out)
+        end_launch(proc, out, a)
     assert proc.returncode in (0, 1) and stdout.strip(), err.read_text()[-3000:]
     s = json.loads(stdout)
     print("sent:", sent, "summary:", {k: s.get(k) for k in (

@@ -24,7 +24,7 @@ from reconswarm.net.session import ZenohOptions
 from reconswarm.scenario.model import load
 from tests.support import (
     ROOT,
-    assert_all_gone,
+    end_launch,
     free_port,
     launcher_cmd,
     paper_with,
@@ -100,12 +100,7 @@ def test_keys_with_unicode_digits_or_aliased_ids_kill_nobody_and_lose_no_agent(t
         _wait_ticks(db, 10, proc)
         stdout, _ = proc.communicate(timeout=300)
     finally:
-        if a is not None:
-            a.close()
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        assert_all_gone(out)
+        end_launch(proc, out, a)
     logs = {p.name: p.read_text(errors="replace") for p in (out / "logs").glob("*.log")}
     assert proc.returncode in (0, 1) and stdout.strip(), err.read_text()[-3000:]
     assert not [n for n, text in logs.items() if "Traceback" in text], {n: t[-1500:] for n, t in logs.items()

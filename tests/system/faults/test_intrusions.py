@@ -34,7 +34,7 @@ from reconswarm.scenario.model import load
 from tests.support import (
     PAPER,
     ROOT,
-    assert_all_gone,
+    end_launch,
     events,
     free_port,
     launcher_cmd,
@@ -146,12 +146,7 @@ def test_outside_client_cannot_steer_phantom_end_or_hide_a_death(tmp_path: Path)
         sent = _attack(attacker, KILL_AT_S + 20.0)  # from t ~ 1 s to 20 s past agent 3's death
         stdout, _ = proc.communicate(timeout=900)
     finally:
-        if attacker is not None:
-            attacker.close()
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        assert_all_gone(out)
+        end_launch(proc, out, attacker)
     assert proc.returncode == 0, err.read_text()[-3000:]
     s = json.loads(stdout)
     print("sent:", sent, "summary:", {k: s[k] for k in ("converged", "convergence_time_s", "collisions",

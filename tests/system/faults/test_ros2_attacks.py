@@ -26,7 +26,7 @@ from reconswarm.net.session import ZenohOptions
 from tests.support import (
     PAPER,
     ROOT,
-    assert_all_gone,
+    end_launch,
     free_port,
     launcher_cmd,
     paper_with,
@@ -169,12 +169,7 @@ def _run(tmp_path: Path, attack: str) -> tuple[dict[str, Any], Outsider, int]:
         ATTACKS[attack](o, time.monotonic() + ATTACK_WALL_S)
         stdout, _ = proc.communicate(timeout=180)
     finally:
-        if o is not None:
-            o.close()
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        assert_all_gone(out)
+        end_launch(proc, out, o)
     assert proc.returncode in (0, 1) and stdout.strip(), err.read_text()[-3000:]  # (1: not converged in 36 s)
     s = json.loads(stdout)
     print(attack, "sent:", o.sent, "summary:", {k: s.get(k) for k in (
