@@ -105,7 +105,8 @@ class SparseKnowledge(SwarmKnowledge):
     def update(self, agents: Ints, samples: Ints, links: Ints) -> None:
         """See SwarmKnowledge.update. Per obstacle l, only links whose source holds a block of l carry
         anything, and one OR step serves them all: over l's columns anyone knew when some new link carries
-        l (an old link's values there kept only in the columns that changed), else over the changed ones."""
+        l, else over the changed ones. (An old link may carry every known column too: outside the changed
+        ones, its source's bits are those the previous update already passed over it.)"""
         self.union_prev = self.union  # replaced, never modified in place, when sensing adds to it
         if self.union.size == 0:
             return
@@ -116,8 +117,9 @@ class SparseKnowledge(SwarmKnowledge):
             return
         new = self._new_links(links)
         dst = np.concatenate([links[:, 0], links[:, 1]])  # (2E,)
-        src = np.concatenate([links[:, 1], links[:, 0]])
-        fresh = None if new is None or not new.any() else np.concatenate([new, new])
+        order = np.argsort(dst, kind="stable")  # (once: every obstacle's links then come by destination)
+        dst, src = dst[order], np.concatenate([links[:, 1], links[:, 0]])[order]
+        fresh = None if new is None or not new.any() else np.concatenate([new, new])[order]
         # What share needs from the bits before sensing: dirty columns over every link, all over new ones.
         todo: list[tuple[int, Ints, Ints, NDArray[np.uint8]]] = []
         rows_src = self.row[src]  # (2E, M) each link source's row of every obstacle
@@ -132,16 +134,13 @@ class SparseKnowledge(SwarmKnowledge):
                     known = self.union_prev[self.b0[l]:self.b1[l]].nonzero()[0]  # what sharing can bring
             if known.size:
                 has = np.flatnonzero(c if dirty.size else fc)
-                vals = self.blocks[l][r[has]][:, known]
-                if dirty.size and dirty.size < known.size:  # old links: the changed columns only
-                    vals[np.ix_(~fc[has], ~np.isin(known, dirty))] = 0
-                todo.append((l, known, dst[has], vals))
+                todo.append((l, known, dst[has], self.blocks[l][r[has]][:, known]))
             elif dirty.size:
                 has = np.flatnonzero(c)
                 todo.append((l, dirty, dst[has], self.blocks[l][r[has]][:, dirty]))
         changed = self._sense(agents, samples)
         for l, cols, d, vals in todo:
-            got = self._or_in(l, cols, d, vals)
+            got = self._or_in(l, cols, d, vals, ordered=True)
             if got.size:
                 changed[l] = np.union1d(changed[l], got) if l in changed else got
         self._dirty = changed
@@ -171,20 +170,21 @@ class SparseKnowledge(SwarmKnowledge):
             self._any_known = True
         return out
 
-    def _or_in(self, l: int, cols: Ints, dst: Ints, vals: NDArray[np.uint8]) -> Ints:
+    def _or_in(self, l: int, cols: Ints, dst: Ints, vals: NDArray[np.uint8], ordered: bool = False) -> Ints:
         """blocks of l at [dst, cols] |= vals row by row (dst may repeat); returns the columns that changed.
 
-        cols (C,) byte columns of l's block, dst (Q,), vals (Q, C).
+        cols (C,) byte columns of l's block, dst (Q,) (ordered: already sorted), vals (Q, C).
         """
         if dst.size == 1:
             acc, who = vals, dst
         else:
-            order = np.argsort(dst, kind="stable")
-            d = dst[order]
-            firsts = np.flatnonzero(d[1:] != d[:-1]) + 1
+            if not ordered:
+                order = np.argsort(dst, kind="stable")
+                dst, vals = dst[order], vals[order]
+            firsts = np.flatnonzero(dst[1:] != dst[:-1]) + 1
             firsts = np.concatenate([_ZERO, firsts]) if firsts.size else _ZERO
-            acc = np.bitwise_or.reduceat(vals[order], firsts, axis=0)  # (U, C)
-            who = d[firsts]  # (U,) distinct agents
+            acc = np.bitwise_or.reduceat(vals, firsts, axis=0)  # (U, C)
+            who = dst[firsts]  # (U,) distinct agents
         cur = self._get(l, who)[:, cols]
         gain = acc & ~cur
         learn = np.flatnonzero(gain.any(axis=1))
