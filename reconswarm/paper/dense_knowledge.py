@@ -1,5 +1,5 @@
-"""Every agent's obstacle knowledge in one (N, B) bit table (reconswarm/paper/swarm_knowledge.py: the interface
-and when this storage is chosen). Pure, no zenoh.
+"""Every agent's obstacle knowledge in one (N, B) bit table (reconswarm/paper/swarm_knowledge.py: when this
+storage is chosen). Pure, no zenoh.
 
 Bits of obstacle l occupy the byte columns b0[l]:b1[l] of every agent's row. A tick's sharing is two
 vectorized steps over all obstacles at once (the changed columns over every link, every known column over
@@ -12,10 +12,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from reconswarm.geometry.plane import rows_where
-from reconswarm.paper.swarm_knowledge import NONE, Array, Ints, SwarmKnowledge
+from reconswarm.paper.knowledge_bits import NONE, Array, Ints, SwarmKnowledge
 
 
-class DenseKnowledge(SwarmKnowledge):
+class DenseKnowledge(SwarmKnowledge, dense=True):
     """SwarmKnowledge over a dense (N, B) bit table."""
 
     def __init__(self, samples: Array, start: Ints, count: Ints, n_agents: int, dense: bool | None = None):

@@ -1,5 +1,5 @@
 """Every agent's obstacle knowledge, a block of bits per (agent, obstacle) it knows (reconswarm/paper/
-swarm_knowledge.py: the interface and when this storage is chosen). Pure, no zenoh.
+swarm_knowledge.py: when this storage is chosen). Pure, no zenoh.
 
 Only agents that know something of obstacle l hold a block of l: a table (N, M) gives each agent's row in
 l's block array, or -1. Memory grows with what the agents know, at most one block per (agent, obstacle)
@@ -11,13 +11,13 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.paper.swarm_knowledge import NONE, Array, Ints, SwarmKnowledge
+from reconswarm.paper.knowledge_bits import NONE, Array, Ints, SwarmKnowledge
 
 _NONE = NONE
 _ZERO = np.zeros(1, dtype=np.int64)
 
 
-class SparseKnowledge(SwarmKnowledge):
+class SparseKnowledge(SwarmKnowledge, dense=False):
     """SwarmKnowledge over per-obstacle block arrays (`bits`, the dense table, is built on demand)."""
 
     def __init__(self, samples: Array, start: Ints, count: Ints, n_agents: int, dense: bool | None = None):

@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from reconswarm.geometry.plane import convex_hull
-from reconswarm.paper import swarm_knowledge
+from reconswarm.paper import knowledge_bits
 from reconswarm.paper.knowledge import KnownObstacles, SwarmKnowledge
 from tests.unit.test_sensing_knowledge import FIELD, swarm_for
 
@@ -24,10 +24,10 @@ NOTHING = np.zeros(0, dtype=np.int64)  # no agents, no samples
 @pytest.fixture(autouse=True, scope="module", params=["dense", "sparse"])
 def storage(request: pytest.FixtureRequest) -> Iterator[str]:
     """Every case runs over both storages of SwarmKnowledge (the size rule made to pick each)."""
-    old = swarm_knowledge.DENSE_MAX_BYTES
-    swarm_knowledge.DENSE_MAX_BYTES = 2**62 if request.param == "dense" else -1
+    old = knowledge_bits.DENSE_MAX_BYTES
+    knowledge_bits.DENSE_MAX_BYTES = 2**62 if request.param == "dense" else -1
     yield request.param
-    swarm_knowledge.DENSE_MAX_BYTES = old
+    knowledge_bits.DENSE_MAX_BYTES = old
 
 
 def square_field(n_agents: int) -> SwarmKnowledge:

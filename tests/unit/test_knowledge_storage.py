@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reconswarm.paper import swarm_knowledge
+from reconswarm.paper import knowledge_bits
 from reconswarm.paper.dense_knowledge import DenseKnowledge
 from reconswarm.paper.knowledge import SwarmKnowledge
 from reconswarm.paper.sparse_knowledge import SparseKnowledge
@@ -26,7 +26,7 @@ def test_a_small_table_is_dense_a_large_one_sparse_and_either_can_be_asked_for()
     pts, start, count = zigzag(800), np.array([0, 400]), np.array([400, 400])  # 100 bytes an agent
     assert type(SwarmKnowledge(pts, start, count, 300)) is DenseKnowledge
     assert type(SwarmKnowledge(pts, start, count, 300, dense=False)) is SparseKnowledge
-    at_limit = swarm_knowledge.DENSE_MAX_BYTES // 100
+    at_limit = knowledge_bits.DENSE_MAX_BYTES // 100
     assert type(SwarmKnowledge(pts, start, count, at_limit)) is DenseKnowledge
     assert type(SwarmKnowledge(pts, start, count, at_limit + 1)) is SparseKnowledge  # (N x B over 64 MiB)
     assert type(SwarmKnowledge(pts, start, count, 2, dense=True)) is DenseKnowledge
@@ -36,9 +36,9 @@ def test_a_small_table_is_dense_a_large_one_sparse_and_either_can_be_asked_for()
 def storages(monkeypatch: pytest.MonkeyPatch) -> tuple[Engine, Engine]:
     """Engines over generate(16, 4, 3) (agents meet several obstacles, links come and go), dense then sparse."""
     s = generate(16, 4, 3)
-    monkeypatch.setattr(swarm_knowledge, "DENSE_MAX_BYTES", 2**62)
+    monkeypatch.setattr(knowledge_bits, "DENSE_MAX_BYTES", 2**62)
     dense = Engine(s)
-    monkeypatch.setattr(swarm_knowledge, "DENSE_MAX_BYTES", -1)
+    monkeypatch.setattr(knowledge_bits, "DENSE_MAX_BYTES", -1)
     sparse = Engine(s)
     assert type(dense.know) is DenseKnowledge and type(sparse.know) is SparseKnowledge
     return dense, sparse
