@@ -5,16 +5,29 @@ of step, the incremental `update` survives a restart by `add`/`share`, narrow fi
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from reconswarm.geometry.plane import convex_hull
+from reconswarm.paper import knowledge_bits
 from reconswarm.paper.knowledge import KnownObstacles, SwarmKnowledge
 from tests.unit.test_sensing_knowledge import FIELD, swarm_for
 
 NO_LINKS = np.zeros((0, 2), dtype=np.int64)
 NOTHING = np.zeros(0, dtype=np.int64)  # no agents, no samples
+
+
+@pytest.fixture(autouse=True, scope="module", params=["dense", "sparse"])
+def storage(request: pytest.FixtureRequest) -> Iterator[str]:
+    """Every case runs over both storages of SwarmKnowledge (the size rule made to pick each)."""
+    old = knowledge_bits.DENSE_MAX_BYTES
+    knowledge_bits.DENSE_MAX_BYTES = 2**62 if request.param == "dense" else -1
+    yield request.param
+    knowledge_bits.DENSE_MAX_BYTES = old
 
 
 def square_field(n_agents: int) -> SwarmKnowledge:
@@ -189,7 +202,7 @@ def test_memory_grows_with_what_agents_know_not_with_agents_times_samples():
     dense = n * 40_000 // 8  # 1 GB
     tracemalloc.start()
     try:
-        sk = SwarmKnowledge(pts, np.array([0, 20_000]), np.array([20_000, 20_000]), n)
+        sk = SwarmKnowledge(pts, np.array([0, 20_000]), np.array([20_000, 20_000]), n, dense=False)
         sk.update(np.array([5]), np.array([20_003]), NO_LINKS)
         sk.update(NOTHING, NOTHING, np.array([[5, 6]]))
         peak = tracemalloc.get_traced_memory()[1]

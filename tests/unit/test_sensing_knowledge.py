@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from hypothesis import strategies as st
 from shapely.geometry import Point, Polygon
 
 from reconswarm.geometry.plane import convex_hull, merge_hull
+from reconswarm.paper import knowledge_bits
 from reconswarm.paper.knowledge import KnownObstacles, SwarmKnowledge
 from reconswarm.plant.sensing import ContourField
 from reconswarm.scenario.model import (
@@ -25,6 +27,15 @@ from reconswarm.scenario.model import (
 )
 
 SETTINGS = settings(max_examples=60, deadline=None)
+
+
+@pytest.fixture(autouse=True, scope="module", params=["dense", "sparse"])
+def storage(request: pytest.FixtureRequest) -> Iterator[str]:
+    """Every case runs over both storages of SwarmKnowledge (the size rule made to pick each)."""
+    old = knowledge_bits.DENSE_MAX_BYTES
+    knowledge_bits.DENSE_MAX_BYTES = 2**62 if request.param == "dense" else -1
+    yield request.param
+    knowledge_bits.DENSE_MAX_BYTES = old
 
 
 def polygon(centre: tuple[float, float], size: float, k: int, rot: float, aspect: float = 0.7) -> np.ndarray:
