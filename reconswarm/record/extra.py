@@ -37,6 +37,7 @@ OWN: dict[str, str] = {
     "determinism_lost_at_s": "s?",
     "stalls": "count",
     "agent_steps_per_s": "s?",
+    "mission_cpu_s": "s",  # (the in-process engine's mission loop, CPU seconds)
 }
 
 

@@ -138,3 +138,12 @@ def test_generated_scenario_with_obstacles_converges():
     s = generate(10, 3, 0)
     out = run(SimConfig(s, Path("/nonexistent-not-written"), record=False))
     assert out["converged"]
+
+
+def test_the_summary_of_a_sim_run_keeps_the_engines_own_figures(tmp_path):
+    """What the engine writes in the record's extra (its stalls, speed and mission CPU) reaches the summary: only the
+    wire's statistics are filtered, never the writer's own (bench/bench_scale.py reads mission_cpu_s)."""
+    base = load(PAPER)
+    s = parse(to_toml(replace(base, meta=replace(base.meta, duration_s=2.0))))
+    summary = run(SimConfig(s, tmp_path))
+    assert summary["mission_cpu_s"] > 0 and summary["agent_steps_per_s"] > 0 and summary["stalls"] == 0
