@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """`reconswarm sim` at scale: a generated scenario (`reconswarm scenario generate --agents N --obstacles M`) cut to
 a few simulated seconds, run by the command itself in a child process, one child per size. Per size it prints
 the simulated time over the mission's wall time (>= 1: faster than real time), the mission loop's CPU time,
@@ -11,6 +12,9 @@ else ran (load averages, the busiest other processes): the machine may be shared
 
 from __future__ import annotations
 
+import _venv  # noqa: F401  (first: the project's .venv, re-run there if this Python lacks it)
+
+# isort: split
 import argparse
 import json
 import os
