@@ -278,7 +278,7 @@ class AgentHost:
         nodes = {aid: link.node for aid, link in self.links.items()}
         poll_s = min(n.timing.agent_poll_s for n in nodes.values())
         rt = Runtime(self.z, who, stop, self.inbox, poll_s)
-        exits = rt.run(nodes, self, started=lambda: any(n.started for n in nodes.values()))
+        exits = rt.run(nodes, self, started=lambda: any(n.started for n in nodes.values()), cohosting=self)
         if rt.interrupted:  # (plans of the interrupted round: their commands, before this session goes)
             now = time.monotonic()
             for aid, inputs in self.answers(now).items():

@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from zenoh import ext
 
 from monitor import scene
-from monitor.node import MonitorNode
+from monitor.messages import Scene
 from reconswarm.errors import BadInput
 from reconswarm.net import wire
 from reconswarm.net.keys import Keys
@@ -192,25 +192,25 @@ class LiveFeed:
         self.sub = ext.declare_advanced_subscriber(session, keys.cell_agents(None, "obstacles"), handler,
                                                    history=ext.HistoryConfig(detect_late_publishers=True))
 
-    def follow(self, n: MonitorNode, now_s: float) -> None:
-        """A scene of the newest tick the node recorded, if it is new and one is due."""
-        if n.written >= 0 and n.written != self.k and self.view.due(now_s):
-            self.k = n.written
-            self.view.tick(now_s, n.t, n.p, n.theta, n.alive, n.rec.topology.edges, n.rec.max_error_m,
-                           *n.rec.gaps_m)
+    def follow(self, sc: Scene, now_s: float) -> None:
+        """The scene of the newest tick the node recorded, if it is new and one is due."""
+        if sc.k != self.k and self.view.due(now_s):
+            self.k = sc.k
+            self.view.tick(now_s, sc.t_s, sc.p, sc.theta, sc.alive, sc.edges, sc.max_error_m, *sc.gaps_m)
 
     def close(self) -> None:
         self.sub.undeclare()
         self.view.close()
 
 
-def status_table(n: MonitorNode, run: str) -> Any:
-    """The terminal's live table (`monitor record --live`)."""
+def status_table(sc: Scene | None, run: str) -> Any:
+    """The terminal's live table (`monitor record --live`): the newest tick recorded (None: none yet)."""
     from rich.table import Table
 
     table = Table(title=f"reconswarm monitor — run {run}")
     for col in ("t (s)", "groups", "smallest gap (m)", "agents alive", "max |e| (m)", "rejected"):
         table.add_column(col)
-    table.add_row(f"{n.t:.2f}", str(n.rec.topology.n_groups), f"{n.min_gap:.2f}", f"{int(n.alive.sum())}/{len(n.ids)}",
-                  f"{n.rec.max_error_m:.2f}", str(sum(v for p, v in n.counts.items() if p != "monitor") + n.invalid))
+    if sc is not None:
+        table.add_row(f"{sc.t_s:.2f}", str(sc.n_groups), f"{sc.min_gap_m:.2f}",
+                      f"{int(sc.alive.sum())}/{len(sc.alive)}", f"{sc.max_error_m:.2f}", str(sc.rejected))
     return table

@@ -4,12 +4,16 @@ Inputs: the admitted wire messages it reads (the world's truth, the world's cloc
 from, another process's report), plus the runtime's: a process's token (Token with Role.AGENT and its id, or
 Role.WORLD), a message dropped as invalid (counted), our own router link, a signal.
 Outputs: events (recorded, then published on `swarm/<run>/event`, in order), rows for the record
-(monitor/rows.py), ends refused (for the process's gate to count as intrusions), and Exit.
+(monitor/rows.py), ends refused (for the process's gate to count as intrusions), the scene of the newest tick
+recorded (for the live views: the Foxglove view, the terminal's table), and Exit.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
 
 from monitor.rows import Record
 from reconswarm.net import wire
@@ -41,4 +45,21 @@ class RefusedEnd:
     why: str
 
 
-Output = Event | Record | RefusedEnd | Exit
+@dataclass(frozen=True)
+class Scene:
+    """The newest tick a step recorded, as the live views show it (arrays in scenario order, copies)."""
+
+    k: int
+    t_s: float
+    p: NDArray[np.float64]  # (N, 2) head points
+    theta: NDArray[np.float64]  # (N,) headings
+    alive: NDArray[np.bool_]  # (N,) alive as recorded
+    edges: NDArray[np.int64]  # (E, 2) the swarm graph's index pairs
+    n_groups: int
+    max_error_m: float
+    gaps_m: tuple[float, float]  # this tick's smallest agent and obstacle gaps
+    min_gap_m: float  # the smallest agent gap of the run so far
+    rejected: int  # messages the run's other processes and this one dropped
+
+
+Output = Event | Record | RefusedEnd | Scene | Exit

@@ -22,7 +22,7 @@ import logging
 from collections.abc import Iterable
 from typing import Any
 
-from monitor.messages import ClockFrom, Input, Output, RefusedEnd
+from monitor.messages import ClockFrom, Input, Output, RefusedEnd, Scene
 from monitor.presence import Presence
 from monitor.rows import Close, Commit, Counters, Gap, Intrusions, Meta, Resume, RowSink
 from reconswarm.net import wire
@@ -86,7 +86,10 @@ class MonitorNode:
             else:
                 self._take(m, now_s)
         self._sync(now_s)
+        written = self.written
         done = self._poll(now_s)
+        if self.written != written:
+            self.rows.out.append(self._scene())
         if done or stop:
             self._ended()  # (stopped with an end pending: the record must not claim it either)
             self._finish(now_s)
@@ -124,6 +127,13 @@ class MonitorNode:
             self.presence.members.link(m.up, now_s, self.t)
         elif isinstance(m, Invalid):
             self.invalid += 1
+
+    def _scene(self) -> Scene:
+        rec = self.rec
+        rejected = sum(v for p, v in self.counts.items() if p != "monitor") + self.invalid
+        return Scene(self.written, self.t, self.p.copy(), self.theta.copy(), self.alive.copy(),
+                     rec.topology.edges.copy(), rec.topology.n_groups, rec.max_error_m, rec.gaps_m, self.min_gap,
+                     rejected)
 
     def _put(self, out: Output) -> None:
         self.rows.out.append(out)

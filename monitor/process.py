@@ -25,7 +25,7 @@ import zenoh
 from zenoh import ext
 
 from monitor.live import LiveFeed, LiveView, status_table
-from monitor.messages import ClockFrom, Input, Output, RefusedEnd
+from monitor.messages import ClockFrom, Input, Output, RefusedEnd, Scene
 from monitor.node import MonitorNode
 from monitor.rows import Close, Commit, Resume, write
 from reconswarm.errors import ProcessFailure
@@ -75,7 +75,7 @@ class MonitorPort(Member):
         self.accepts = MONITOR  # (and the live view's obstacle sets while it is served: `serve`)
         self.feed: LiveFeed | None = None
         self.live: Any = None  # the rich table (--live)
-        self.node: MonitorNode | None = None  # (read for the live views only)
+        self.scene: Scene | None = None  # the newest tick recorded, for the live views (the node's output)
         self.chores_at = time.monotonic()
         k = self.keys
         self.pub_event = session.declare_publisher(k.event, congestion_control=zenoh.CongestionControl.BLOCK)
@@ -130,6 +130,8 @@ class MonitorPort(Member):
                 self.feed.view.event(out)
         elif isinstance(out, RefusedEnd):  # an end the world did not decide: an intrusion
             self.gate.refuse(Intrusion(IntrusionKind.END, out.source, self.keys.clock, out.why), now_s)
+        elif isinstance(out, Scene):  # (for the live views: `idle`)
+            self.scene = out
         elif not isinstance(out, Exit):
             if isinstance(out, Close):
                 self.writer.intrusions("monitor", self.gate.tally.as_rows())
@@ -140,25 +142,17 @@ class MonitorPort(Member):
 
     def idle(self, who: int, now_s: float) -> None:
         """The live view; every `commit_wall_s`: our own tally, a commit, the rich table."""
-        node = self.node
-        assert node is not None
-        if self.feed is not None:
-            self.feed.follow(node, now_s)
+        if self.feed is not None and self.scene is not None:
+            self.feed.follow(self.scene, now_s)
         if now_s - self.chores_at > TIMING.commit_wall_s:
             self.chores_at = now_s
             self.writer.intrusions("monitor", self.gate.tally.as_rows())
             self.writer.maybe_commit()
             if self.live is not None:
-                self.live.update(status_table(node, self.keys.run))
+                self.live.update(status_table(self.scene, self.keys.run))
 
     def exited(self, who: int, code: Exit, now_s: float) -> None:
         log.info("monitor: %s", code.reason)
-
-    def pending(self) -> dict[Any, int]:
-        return {}
-
-    def answers(self, now_s: float) -> dict[Any, list[Any]]:
-        return {}
 
     # ------------------------------------------------------------------------------------ views
 
@@ -171,11 +165,10 @@ class MonitorPort(Member):
 
     def run(self, node: MonitorNode, stop: Stopper, live_on: bool) -> int:
         """The runtime around the node until it exits; a full disk: the record keeps what was committed."""
-        self.node = node
         if live_on:
             from rich.live import Live
 
-            self.live = Live(status_table(node, self.keys.run), refresh_per_second=4, transient=False)
+            self.live = Live(status_table(self.scene, self.keys.run), refresh_per_second=4, transient=False)
             self.live.start()
         try:
             rt = Runtime(self.z, "monitor", stop, self.inbox, node.timing.monitor_wake_s)
@@ -188,7 +181,7 @@ class MonitorPort(Member):
                                  f"what was committed, up to t = {self.committed_t:.2f} s") from None
         finally:
             if self.live is not None:
-                self.live.update(status_table(node, self.keys.run))
+                self.live.update(status_table(self.scene, self.keys.run))
                 self.live.stop()
         return exits[0].code if 0 in exits else 0
 

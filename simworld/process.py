@@ -1,11 +1,11 @@
 """`reconswarm simworld`: the world process, its node (simworld/world.WorldNode) on the runtime.
 
 The process is the runtime's loop (reconswarm/net/runtime.py) around one node and `WorldPort`, the world's
-declarations: it subscribes to every agent's commands (in ROS 2 mode each robot's cmd_vel) and to every
-liveliness token; `route` turns each sample into the node's input (a token, a command its gate admitted, or
-Invalid, counted); `act` puts what the node returns: clock, truth, and each agent's state with its scan in one
-message (in ROS 2 mode the state as odometry and the scan on its own key). Every rule (membership, the
-barrier, the clocks, stalls) is the node's.
+declarations: the clock, the truth, its reports and token, every liveliness token, and the robot interface chosen
+once for the process (simworld/robot_io.py: the project's keys, or ROS 2 topics); `route` turns each sample into
+the node's input (a token, a command its gate admitted, or Invalid, counted); `act` puts what the node returns:
+clock, truth, and each robot's state through the robot interface. Every rule (membership, the barrier, the
+clocks, stalls) is the node's.
 """
 
 from __future__ import annotations
@@ -15,27 +15,26 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import zenoh
 from zenoh import ext
 
 from reconswarm.errors import BadInput
 from reconswarm.net import ros2, trace, wire
-from reconswarm.net.decode import WORLD as ACCEPTS
-from reconswarm.net.decode import decode
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Inbox, Item, Rejections
 from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.node import Exit, Invalid, Token
+from reconswarm.net.node import Exit, Invalid
 from reconswarm.net.report import report_to_wire
 from reconswarm.net.runtime import Runtime
 from reconswarm.net.session import Member, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
 from reconswarm.net.wire import ClockMode
 from reconswarm.scenario.model import load
-from simworld.ros2_io import Ros2World, WorldRos2
-from simworld.world import Command, WorldInput, WorldNode, WorldOutput
+from simworld.robot_io import KeysIO, RobotIO
+from simworld.ros2_io import Ros2IO, Ros2Robots, ros2_world
+from simworld.world import WorldInput, WorldNode, WorldOutput
 
 log = logging.getLogger("reconswarm.simworld")
 WORLD = 0  # the one node the process hosts
@@ -56,49 +55,38 @@ class SimworldConfig:
 
 
 class WorldPort(Member):
-    """The world's subscriptions, publishers, gate and token around its node (the runtime's Port)."""
+    """The world's subscriptions, publishers, gate and token around its node (the runtime's Port); its robots are
+    reached through `io` (simworld/robot_io.py), given by `robot_io`."""
 
-    def __init__(self, node: WorldNode, run: str, session: zenoh.Session, ros2_domain_id: int | None = None) -> None:
+    def __init__(self, node: WorldNode, run: str, session: zenoh.Session, io: RobotIOFactory | None = None) -> None:
         self.keys = k = Keys(run)
         self.inbox = Inbox()
         self.rej = Rejections("simworld")
         block = zenoh.CongestionControl.BLOCK
-        z, ids, timing = session, node.ids, node.timing
-        self.ros2 = None
-        if ros2_domain_id is not None and isinstance(node, Ros2World):
-            self.ros2 = WorldRos2(z, ros2_domain_id, node.base, self.inbox.callback, node.s.meta.dt_s / node.speed,
-                                  timing)
+        z, timing = session, node.timing
+        # Admission: commands (in ROS 2 mode cmd_vel) only from each agent's own session, bounded, for ticks we
+        # published (the newest clock put, `act`), one per agent and tick.
+        self.gate = Gate(node.s, "simworld")
+        self.io = (io or _keys_io)(z, k, node, self.gate, self.inbox)
         self.pub_clock = z.declare_publisher(k.clock, congestion_control=block)
         # The record's input: kept and numbered, so the monitor recovers a truth that was lost (advanced pub/sub).
         self.pub_truth = ext.declare_advanced_publisher(
             z, k.truth, congestion_control=block, cache=ext.CacheConfig(max_samples=timing.truth_cache_ticks),
             sample_miss_detection=ext.MissDetectionConfig(heartbeat=None,
                                                           sporadic_heartbeat=timing.truth_heartbeat_s))
-        self.pub_state = {} if self.ros2 else {a: z.declare_publisher(k.state(a), congestion_control=block)
-                                                for a in ids}
-        self.pub_scan = {} if not self.ros2 else {a: z.declare_publisher(k.scan(a), congestion_control=block)
-                                                   for a in ids}
-        # Admission: commands (in ROS 2 mode cmd_vel) only from each agent's own session, bounded, for ticks we
-        # published (the newest clock put, `act`), one per agent and tick.
-        self.gate = Gate(node.s, "simworld")
         self.pub_report = z.declare_publisher(k.report("simworld"))
-        self.subs = [*([] if self.ros2 else [z.declare_subscriber(k.all_agents("cmd"), self.inbox.handler())]),
-                     z.liveliness().declare_subscriber(k.alive_all, self.inbox.handler(), history=True)]
+        self.subs = [z.liveliness().declare_subscriber(k.alive_all, self.inbox.handler(), history=True)]
         self.token = z.liveliness().declare_token(k.alive_simworld)
 
     def close(self) -> None:
-        if self.ros2 is not None:
-            self.ros2.close()
+        self.io.close()
         super().close()
 
     # ------------------------------------------------------------------------------------------ in
 
     def route(self, items: Sequence[Item], now_s: float) -> dict[int, list[WorldInput]]:
         """The node's inputs from a batch of samples, in order of arrival."""
-        got: list[WorldInput] = []
-        if self.ros2 is not None:
-            for _ in range(self.ros2.new_bad_attachments()):
-                got.append(self._invalid("/robot_<i>/cmd_vel", "a sample without a valid rmw_zenoh attachment"))
+        got: list[WorldInput] = [self._invalid(key, reason) for key, reason in self.io.dropped()]
         for item in items:
             m = self.decode(*item)
             if m is not None:
@@ -109,18 +97,7 @@ class WorldPort(Member):
         """A sample as the node's input (None: not the world's, or refused by the gate, which counts and logs it);
         a malformed one is Invalid (counted)."""
         try:
-            if self.ros2 is not None and self.ros2.owns(key):
-                c, sent_ns = self.ros2.decode(key, payload, self.gate.world_k)
-                if not self.gate.admit_twist(c, source, key, at_s):  # (first: a forger's timestamp is no excuse)
-                    return None
-                return Command(self.ros2.dated(c, sent_ns), at_s)
-            m = decode(self.keys, ACCEPTS, key, payload, kind)
-            if not isinstance(m, wire.Cmd):
-                return m if isinstance(m, Token) else None  # (the world's other kinds: liveliness tokens)
-            if not self.gate.admit(m, source, key, at_s):
-                return None
-            trace.mark(trace.Mark.CMD_IN, m.k, m.id, at_s)
-            return Command(m, at_s)
+            return self.io.decode(key, payload, kind, source, at_s)
         except (ros2.Ros2Error, WireError) as exc:
             return self._invalid(key, str(exc))
 
@@ -139,13 +116,7 @@ class WorldPort(Member):
         elif isinstance(out, wire.Truth):
             self.pub_truth.put(wire.truth_to_wire(out))
         elif isinstance(out, wire.State):
-            if self.ros2 is None:
-                self.pub_state[out.id].put(wire.state_to_wire(out))
-                trace.mark(trace.Mark.STATE_PUT, out.k, out.id)
-            else:
-                self.ros2.publish(out)
-                if out.scan is not None:
-                    self.pub_scan[out.id].put(wire.scan_to_wire(out.scan))
+            self.io.put_state(out)
         return False
 
     def idle(self, who: Any, now_s: float) -> None:
@@ -154,16 +125,35 @@ class WorldPort(Member):
     def exited(self, who: Any, code: Exit, now_s: float) -> None:
         self.report(final=True)
 
-    def pending(self) -> dict[Any, int]:
-        return {}
-
-    def answers(self, now_s: float) -> dict[Any, list[Any]]:
-        return {}
-
     def report(self, final: bool = False) -> None:
         r = self.gate.report(time.monotonic(), final)
         if r is not None:
             self.pub_report.put(report_to_wire(r))
+
+
+class RobotIOFactory(Protocol):
+    """Makes the world's robot interface on its session (the port's inbox takes what it subscribes to)."""
+
+    def __call__(self, session: zenoh.Session, keys: Keys, node: WorldNode, gate: Gate, inbox: Inbox) -> RobotIO: ...
+
+
+def _keys_io(session: zenoh.Session, keys: Keys, node: WorldNode, gate: Gate, inbox: Inbox) -> RobotIO:
+    return KeysIO(session, keys, node.ids, gate, inbox.handler())
+
+
+def robot_io(ros2_domain_id: int | None) -> RobotIOFactory:
+    """The robot interface of this process: the project's keys, or ROS 2 topics in that domain (the node's plant
+    then a `Ros2Robots`)."""
+    if ros2_domain_id is None:
+        return _keys_io
+
+    def make(session: zenoh.Session, keys: Keys, node: WorldNode, gate: Gate, inbox: Inbox) -> RobotIO:
+        if not isinstance(node.robots, Ros2Robots):
+            raise TypeError("ROS 2 mode: the world's plant is a robot base (Ros2Robots)")
+        return Ros2IO(session, keys, gate, ros2_domain_id, node.robots, inbox.callback,
+                      node.s.meta.dt_s / node.speed, node.timing)
+
+    return make
 
 
 def run(cfg: SimworldConfig) -> int:
@@ -174,10 +164,9 @@ def run(cfg: SimworldConfig) -> int:
     timing = replace(TIMING, start_timeout_s=cfg.start_timeout_s)
     if cfg.ros2_domain_id is not None and clock != ClockMode.REALTIME:
         raise BadInput("--ros2: runs on the realtime clock only (ROS 2 topics carry no tick), not --clock lockstep")
-    node = (WorldNode(s, clock, cfg.speed, timing) if cfg.ros2_domain_id is None
-            else Ros2World(s, cfg.speed, timing=timing))
+    node = WorldNode(s, clock, cfg.speed, timing) if cfg.ros2_domain_id is None else ros2_world(s, cfg.speed, timing)
     with serving(cfg.zenoh, "simworld") as (session, stop):
-        port = WorldPort(node, cfg.run_id or s.meta.name, session, cfg.ros2_domain_id)
+        port = WorldPort(node, cfg.run_id or s.meta.name, session, robot_io(cfg.ros2_domain_id))
         log.info("simworld up (run %s, %s clock): waiting for %d agents and the monitor", port.keys.run,
                  clock, len(node.ids))
         wall0 = time.monotonic()

@@ -6,15 +6,17 @@ its state key, and takes `/robot_<i>/cmd_vel` (geometry_msgs/Twist: linear.x = v
 of the command key, as node `simworld` with rmw_zenoh's keys, attachments and liveliness tokens
 (reconswarm/net/ros2_node.py). Scans, clock and truth stay on the project's keys.
 
-`Ros2World` is the world's state machine (simworld/world.py) with the plant a robot base is (`Ros2Robots`): it
+In this mode the world's state machine (simworld/world.py) has the plant a robot base is (`Ros2Robots`): it
 holds the latest (v, ω) of each robot and moves the body on the exact arc (`unicycle.step_vw`, saturated to
 the scenario's limits). A Twist carries no tick: the port takes a cmd_vel as the command of the oldest tick
 whose odometry it published within `ros2_plan_age_periods` before the cmd_vel was sent (its attachment's
 source timestamp; an agent sends none planned from an older one, agent/ros2_io.py), and the plant holds it
 as the project's own mode holds a command of that tick: from where the robot stood then, a late one too,
 while the robot stays within d_safe / 2 of that point and for `hold_sim_s` from that tick.
-ROS 2 topics carry no tick, so ROS 2 mode is realtime only. `WorldRos2` is the transport: the node
-`simworld`'s odometry publishers and cmd_vel subscriptions (simworld/process.py's port uses it).
+ROS 2 topics carry no tick, so ROS 2 mode is realtime only. `Ros2IO` is the world's robot interface in
+this mode (simworld/robot_io.py `RobotIO`): the node `simworld`'s odometry publishers and cmd_vel subscriptions,
+and each robot's scan on the project's key. The world node is the same as in the project's own mode, with
+`Ros2Robots` as its plant.
 """
 
 from __future__ import annotations
@@ -24,15 +26,20 @@ import time
 from typing import Any
 
 import numpy as np
+import zenoh
 
 from reconswarm.net import ros2, wire
+from reconswarm.net.gate import Gate
+from reconswarm.net.keys import Keys
+from reconswarm.net.node import Token
 from reconswarm.net.ros2_node import Ros2Node
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.net.wire import ClockMode
 from reconswarm.plant import unicycle
 from reconswarm.scenario.model import Scenario
+from simworld.robot_io import token_or_cmd
 from simworld.robots import Robots
-from simworld.world import WorldNode
+from simworld.world import Command, WorldInput, WorldNode
 
 
 class Ros2Robots(Robots):
@@ -53,6 +60,11 @@ class Ros2Robots(Robots):
         self.vw = np.stack([v, om], axis=1)
 
 
+def ros2_world(s: Scenario, speed: float, timing: Timing = TIMING) -> WorldNode:
+    """The world node of ROS 2 mode: realtime, its plant a robot base (`Ros2Robots`)."""
+    return WorldNode(s, ClockMode.REALTIME, speed, timing, Ros2Robots(s, timing.hold_sim_s))
+
+
 def planned_tick(published_ns: dict[int, int], sent_ns: int, plan_age_ns: float) -> int:
     """The oldest tick whose odometry a cmd_vel sent at `sent_ns` can have been planned from: one published (tick ->
     when its odometries were out) at most `plan_age_ns` before it (agents send none planned from older:
@@ -70,25 +82,21 @@ def planned_tick(published_ns: dict[int, int], sent_ns: int, plan_age_ns: float)
     return min(got)
 
 
-class Ros2World(WorldNode):
-    """The world whose plant is a robot base (its commands: cmd_vels, each of the tick the port dates it to)."""
-
-    def __init__(self, s: Scenario, speed: float, timing: Timing = TIMING) -> None:
-        self.base = Ros2Robots(s, timing.hold_sim_s)
-        super().__init__(s, ClockMode.REALTIME, speed, timing, self.base)
-
-
-class WorldRos2:
-    """The node `simworld`: an odom publisher and a cmd_vel subscription per robot.
+class Ros2IO:
+    """The node `simworld`: an odom publisher and a cmd_vel subscription per robot; each robot's scan on the
+    project's key (the robot interface `RobotIO`, simworld/robot_io.py).
 
     period_s: the run's period (wall seconds a tick lasts at its speed)."""
 
-    def __init__(self, session: Any, domain_id: int, base: Ros2Robots, callback: Any, period_s: float,
-                 timing: Timing = TIMING) -> None:
-        """callback(sample): where cmd_vel samples go (the process's inbox)."""
-        self.base = base
+    def __init__(self, session: Any, keys: Keys, gate: Gate, domain_id: int, base: Ros2Robots, callback: Any,
+                 period_s: float, timing: Timing = TIMING) -> None:
+        """keys: the run's (scans go there); gate: the world's (admits each cmd_vel); callback(sample): where
+        cmd_vel samples go (the process's inbox)."""
+        self.base, self.keys, self.gate = base, keys, gate
         self.node = Ros2Node(session, domain_id, "simworld")
         self.odom = {a: self.node.publisher(ros2.odom_topic(a), ros2.ODOMETRY) for a in base.ids}
+        block = zenoh.CongestionControl.BLOCK
+        self.pub_scan = {a: session.declare_publisher(keys.scan(a), congestion_control=block) for a in base.ids}
         for a in base.ids:
             self.node.subscription(ros2.cmd_vel_topic(a), ros2.TWIST, callback)
         self.agent_of = {ros2.cmd_vel_key(domain_id, a): a for a in base.ids}
@@ -100,7 +108,18 @@ class WorldRos2:
     def owns(self, key: str) -> bool:
         return key in self.agent_of
 
-    def decode(self, key: str, payload: bytes, k: int) -> tuple[wire.Cmd, int | None]:
+    def decode(self, key: str, payload: bytes, kind: str, source: str, at_s: float) -> WorldInput | None:
+        """A cmd_vel as the command of the tick it was planned from, once the gate admitted it (first: a forger's
+        timestamp is no excuse); a token as itself (the project's keys: no command comes there in this mode)."""
+        if not self.owns(key):
+            m = token_or_cmd(self.keys, key, payload, kind)
+            return m if isinstance(m, Token) else None
+        c, sent_ns = self.twist(key, payload, self.gate.world_k)
+        if not self.gate.admit_twist(c, source, key, at_s):
+            return None
+        return Command(self.dated(c, sent_ns), at_s)
+
+    def twist(self, key: str, payload: bytes, k: int) -> tuple[wire.Cmd, int | None]:
         """A cmd_vel sample as robot i's command of tick k (the newest published), and when it was sent (its
         attachment's source timestamp; None: unnoted); Ros2Error when it must be dropped. The port admits it
         (bounded, from agent i's session), then has it `dated` before the node holds it."""
@@ -125,6 +144,12 @@ class WorldRos2:
         """c dated older than the plant holds any command (`keep_ticks` before the newest tick)."""
         return dataclasses.replace(c, k=c.k - self.keep_ticks)
 
+    def put_state(self, m: wire.State) -> None:
+        """A robot's state at this tick as its odometry, its scan on the project's key."""
+        self.publish(m)
+        if m.scan is not None:
+            self.pub_scan[m.id].put(wire.scan_to_wire(m.scan))
+
     def publish(self, m: wire.State) -> None:
         """A robot's state at this tick as its odometry (body pose; twist = the last step's (v, ω))."""
         v, om = self.base.vw[self.base.index[m.id]]
@@ -133,9 +158,12 @@ class WorldRos2:
         if len(self.published_ns) > self.keep_ticks:
             del self.published_ns[min(self.published_ns)]
 
-    def new_bad_attachments(self) -> int:
+    def dropped(self) -> list[tuple[str, str]]:
+        """A cmd_vel sample without a valid rmw_zenoh attachment, each: dropped by the node before `decode`."""
         n, self.counted = self.node.bad_attachments - self.counted, self.node.bad_attachments
-        return n
+        return [("/robot_<i>/cmd_vel", "a sample without a valid rmw_zenoh attachment")] * n
 
     def close(self) -> None:
         self.node.close()
+        for pub in self.pub_scan.values():
+            pub.undeclare()

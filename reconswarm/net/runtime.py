@@ -7,13 +7,14 @@ with admission and rejection counting: what a node is given is believed), `act` 
 (put a message on the wire under its key or ROS 2 topic, hand rows to the record). The runtime owns the rest:
 
 - one wake-up per batch: it sleeps until the nodes' count of what they still need is in (`awaiting`, less what
-  the port holds for each without a sample to come: what co-hosted nodes published), the urgent samples of
+  a co-hosting port holds for each without a sample to come: what co-hosted nodes published), the urgent samples of
   the nodes that need one to act came (an agent's state; the inbox may go on with some after a short while),
   the nearest node timer is due (`wake_at_s`), or `poll_s` passed; at once if what the port holds is all a
   node still needs;
 - a node is stepped when it has inputs, when its timer is due, or every `poll_s` (its timers);
-- after a round of steps the port may answer what the nodes asked in it, together (`answers`: an agent host's
-  law for all its agents' plans at once): those nodes are stepped with the answers at once, until none is left;
+- after a round of steps a port that hosts nodes talking to each other (`CoHosting`: an agent host) may answer
+  what the nodes asked in it, together (`answers`: its law for all its agents' plans at once): those nodes are
+  stepped with the answers at once, until none is left;
 - our own session's router link going or coming back reaches every node as `RouterLink` (net/uplink.py);
 - SIGINT/SIGTERM (the `Stopper`) reach every node as `Stop`: each winds down and says what happened (its
   `Exit`); a node's `Exit` takes it out of the loop, the others go on;
@@ -62,6 +63,10 @@ class Port(Protocol):
         """Node `who` left the loop with `code` (the others go on)."""
         ...
 
+
+class CoHosting(Protocol):
+    """What a port that hosts nodes which talk to each other adds to `Port` (an agent host: agent/host.py)."""
+
     def pending(self) -> Mapping[Any, int]:
         """How many inputs wait for each node that need no sample to arrive (what co-hosted nodes published): its
         next batch has them, whenever it comes."""
@@ -73,6 +78,16 @@ class Port(Protocol):
         ...
 
 
+class _Alone:
+    """A port's co-hosting when it has none (the world's, the monitor's): nothing held, nothing answered."""
+
+    def pending(self) -> Mapping[Any, int]:
+        return {}
+
+    def answers(self, now_s: float) -> Mapping[Any, list[Any]]:
+        return {}
+
+
 class Runtime:
     """The loop around the nodes of one process, on one session (see the module's notes)."""
 
@@ -82,16 +97,17 @@ class Runtime:
         self.exits: dict[Any, Exit] = {}  # node -> how it left
         self.interrupted = False  # a port's act asked the whole loop to stop
 
-    def run(self, nodes: Mapping[Any, Node[Any, Any]], port: Port,
-            started: Any = lambda: True) -> dict[Any, Exit]:
-        """Step the nodes until each has exited (or a port's `act` stops the loop); how each left."""
-        active = dict(nodes)
+    def run(self, nodes: Mapping[Any, Node[Any, Any]], port: Port, started: Any = lambda: True,
+            cohosting: CoHosting | None = None) -> dict[Any, Exit]:
+        """Step the nodes until each has exited (or a port's `act` stops the loop); how each left. cohosting: what
+        the port holds for and answers to nodes that talk to each other (none by default)."""
+        active, co = dict(nodes), cohosting or _Alone()
         stepped: dict[Any, float] = {}
         mark, stopping = StartMark(self.uplink.links), False
         while active:
             mark(started())
             now = time.monotonic()
-            held = port.pending()
+            held = co.pending()
             awaiting = [(who, n.awaiting(now)) for who, n in active.items()]
             needs = [w - held.get(who, 0) for who, w in awaiting if w is not None]
             wakes = [w for w in (n.wake_at_s() for n in active.values()) if w is not None]
@@ -110,7 +126,7 @@ class Runtime:
             batches = port.route(items, now)
             if self._round(list(active), active, port, batches, shared, stepped):
                 return self.exits
-            while answers := port.answers(time.monotonic()):  # (a node's answer may lead it to ask again)
+            while answers := co.answers(time.monotonic()):  # (a node's answer may lead it to ask again)
                 if self._round([w for w in active if w in answers], active, port, answers, [], stepped):
                     return self.exits
         return self.exits

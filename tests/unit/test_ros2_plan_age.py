@@ -19,14 +19,16 @@ from hypothesis import strategies as st
 
 from agent.ros2_io import KEEP_TICKS, AgentRos2, Odometry
 from reconswarm.net import ros2, wire
+from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Inbox
+from reconswarm.net.keys import Keys
 from reconswarm.net.node import Invalid
 from reconswarm.net.ros2_node import Ros2Publisher, SentTimes
 from reconswarm.net.session import ZenohOptions
 from reconswarm.plant import unicycle
 from reconswarm.scenario.model import load
-from simworld.process import WorldPort
-from simworld.ros2_io import Ros2Robots, Ros2World, WorldRos2, planned_tick
+from simworld.process import WorldPort, robot_io
+from simworld.ros2_io import Ros2IO, Ros2Robots, planned_tick, ros2_world
 from simworld.world import Command
 from tests.support import PAPER, free_port, wait_subscribed, wait_until
 from tests.unit.test_agent_host_sessions import two_sessions
@@ -91,7 +93,7 @@ def _wait(what: Any, n: int) -> list[Any]:
 def test_the_plant_dates_a_cmd_vel_by_its_attachments_source_timestamp() -> None:
     with two_sessions() as (z, out):
         inbox = Inbox()
-        world = WorldRos2(z, 0, Ros2Robots(S, 0.2), inbox.callback, PERIOD_S)
+        world = Ros2IO(z, Keys("plan-age"), Gate(S, "simworld"), 0, Ros2Robots(S, 0.2), inbox.callback, PERIOD_S)
         try:
             a = S.agents[0].id
             for k in range(4):  # ticks 0-3, a period apart
@@ -108,13 +110,13 @@ def test_the_plant_dates_a_cmd_vel_by_its_attachments_source_timestamp() -> None
             dated: list[wire.Cmd | str] = []
             for key, payload, *_rest in got:
                 try:
-                    dated.append(world.dated(*world.decode(key, payload, 3)))
+                    dated.append(world.dated(*world.twist(key, payload, 3)))
                 except ros2.Ros2Error as exc:
                     dated.append(str(exc))
             assert dated[:3] == [wire.Cmd(a, 1, 1.0, 0.0), wire.Cmd(a, 3, 1.0, 0.0), wire.Cmd(a, 0, 2.0, 0.0)]
             assert "clocks apart" in str(dated[3])
             # A cmd_vel whose time was never noted (none is delivered so): older than any tick a command holds from.
-            unnoted = world.decode(ros2.cmd_vel_key(0, a), ros2.twist_to_ros(0.5, -0.25), 3)
+            unnoted = world.twist(ros2.cmd_vel_key(0, a), ros2.twist_to_ros(0.5, -0.25), 3)
             assert unnoted == (wire.Cmd(a, 3, 0.5, -0.25), None)  # (as the gate judges it: of the newest tick)
             assert world.dated(*unnoted) == wire.Cmd(a, 3 - world.keep_ticks, 0.5, -0.25)
             # A stop sent after any odometry it may be planned from (an agent behind the clock, its hold over): stale,
@@ -125,7 +127,7 @@ def test_the_plant_dates_a_cmd_vel_by_its_attachments_source_timestamp() -> None
                 world.dated(wire.Cmd(a, 3, 0.0, 0.01), late)
             assert world.dated(wire.Cmd(a, 3, 0.0, 0.0), world.published_ns[2] + MS) == wire.Cmd(a, 2, 0.0, 0.0)
             world.node.bad_attachments = 2
-            assert (world.new_bad_attachments(), world.new_bad_attachments()) == (2, 0)
+            assert (len(world.dropped()), world.dropped()) == (2, [])
         finally:
             world.close()
 
@@ -134,7 +136,7 @@ def test_the_plant_publishes_each_robots_odometry_and_keeps_when_each_tick_was_o
     limited = dataclasses.replace(S, world=dataclasses.replace(S.world, max_speed_mps=1.0, max_turn_rate_radps=0.5))
     with two_sessions() as (z, out):
         base = Ros2Robots(limited, 0.2)
-        world = WorldRos2(z, 0, base, lambda _sample: None, PERIOD_S)
+        world = Ros2IO(z, Keys("plan-age"), Gate(S, "simworld"), 0, base, lambda _sample: None, PERIOD_S)
         a, i = S.agents[1].id, 1
         heard: list[Any] = []
         sub = out.declare_subscriber(ros2.odom_key(0, a), heard.append)
@@ -159,20 +161,20 @@ def test_the_plant_publishes_each_robots_odometry_and_keeps_when_each_tick_was_o
 
 def test_the_world_admits_a_cmd_vel_before_it_dates_it_so_a_forgers_timestamp_is_an_impersonation() -> None:
     z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{free_port()}",), "peer").config())
-    port = WorldPort(Ros2World(S, speed=1.0), "plan-age", z, 0)
+    port = WorldPort(ros2_world(S, speed=1.0), "plan-age", z, robot_io(0))
     try:
-        assert port.ros2 is not None
+        assert isinstance(port.io, Ros2IO)
         a = S.agents[0].id
-        port.ros2.publish(wire.State(a, 0, 0.0, 0.0, 0.0, 0.0, 0.5, 0.0))
+        port.io.publish(wire.State(a, 0, 0.0, 0.0, 0.0, 0.0, 0.5, 0.0))
         port.gate.world_k = 0  # (tick 0 out, as its clock says)
         key, genuine, forged = ros2.cmd_vel_key(0, a), ros2.twist_to_ros(1.0, 0.0), ros2.twist_to_ros(2.0, 0.0)
-        port.ros2.node.sent.note(genuine, port.ros2.published_ns[0] + MS)
+        port.io.node.sent.note(genuine, port.io.published_ns[0] + MS)
         assert port.decode(key, genuine, "PUT", "agent-session", 0.0) == Command(wire.Cmd(a, 0, 1.0, 0.0), 0.0)
-        port.ros2.node.sent.note(forged, port.ros2.published_ns[0] + 10**12)  # "sent" 1000 s on: no odometry so old
+        port.io.node.sent.note(forged, port.io.published_ns[0] + 10**12)  # "sent" 1000 s on: no odometry so old
         assert port.decode(key, forged, "PUT", "forger", 0.0) is None
         assert port.gate.count == 1 and set(port.gate.tally.rows) == {("impersonation", "forger")}
         assert port.rej.count == 0
-        port.ros2.node.sent.note(forged, port.ros2.published_ns[0] + 10**12)  # from the agent's own session: invalid
+        port.io.node.sent.note(forged, port.io.published_ns[0] + 10**12)  # from the agent's own session: invalid
         got = port.decode(key, forged, "PUT", "agent-session", 0.0)
         assert isinstance(got, Invalid) and "clocks apart" in got.reason and port.rej.count == 1
     finally:

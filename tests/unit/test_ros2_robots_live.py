@@ -1,4 +1,4 @@
-"""ROS 2 mode's plant (simworld/ros2_io.Ros2World) against the unicycle's equations, the live view's
+"""ROS 2 mode's plant (simworld/ros2_io.ros2_world) against the unicycle's equations, the live view's
 knowledge scene, and the launcher's optional `--foxglove` value. No zenoh."""
 
 from __future__ import annotations
@@ -18,16 +18,21 @@ from reconswarm.net.node import Role, Token
 from reconswarm.net.wire import ClockMode
 from reconswarm.scenario.model import load
 from reconswarm_bringup.cli_launch import FOXGLOVE_PORT, optional_values
-from simworld.ros2_io import Ros2World
-from simworld.world import Command
+from simworld.ros2_io import Ros2Robots, ros2_world
+from simworld.world import Command, WorldNode
 from tests.support import PAPER
 
 
-def _started(world: Ros2World) -> float:
+def _started(world: WorldNode) -> float:
     now = 100.0
     world.step([*(Token(Role.AGENT, True, a) for a in world.ids), Token(Role.MONITOR, True)], now)
     assert world.started  # the readiness barrier passed
     return now
+
+
+def _base(world: WorldNode) -> Ros2Robots:
+    assert isinstance(world.robots, Ros2Robots)  # (ROS 2 mode's plant: a robot base)
+    return world.robots
 
 
 def _twist(agent_id: int, v: float, w: float, at_s: float, k: int = 0) -> Command:
@@ -41,7 +46,7 @@ def _states(out: list) -> list[wire.State]:
 
 def test_twist_is_held_over_the_step_on_the_exact_arc():
     s = load(PAPER)
-    world = Ros2World(s, speed=10.0)
+    world = ros2_world(s, speed=10.0)
     assert world.clock == ClockMode.REALTIME
     now = _started(world)
     dt, l_m = s.meta.dt_s, s.head_offsets
@@ -63,7 +68,7 @@ def test_twist_is_held_over_the_step_on_the_exact_arc():
     assert abs(math.remainder(th1[2] - th0[2] - w * dt, 2 * math.pi)) < 1e-12
     others = [i for i in range(len(world.ids)) if i != 2]
     assert np.array_equal(s1[others], s0[others]) and np.array_equal(th1[others], th0[others])
-    assert tuple(world.base.vw[2]) == (v, w) and not world.base.vw[others].any()
+    assert tuple(_base(world).vw[2]) == (v, w) and not _base(world).vw[others].any()
     # the head point is the body point plus l [cos θ, sin θ]
     p1 = np.array([[m.px, m.py] for m in _states(out)])
     assert np.allclose(p1 - s1, l_m[:, None] * np.stack([np.cos(th1), np.sin(th1)], axis=1), atol=1e-12)
@@ -71,7 +76,7 @@ def test_twist_is_held_over_the_step_on_the_exact_arc():
 
 def test_a_robot_without_cmd_vel_for_hold_time_stops():
     s = load(PAPER)
-    world = Ros2World(s, speed=10.0)
+    world = ros2_world(s, speed=10.0)
     now = _started(world)
     world.step([], now)
     world.step([_twist(world.ids[0], 2.0, 0.0, now)], now)
@@ -81,12 +86,12 @@ def test_a_robot_without_cmd_vel_for_hold_time_stops():
         now += 0.01
         world.step([], now)  # apply tick k
         world.step([], now)  # publish tick k + 1
-        moving.append(bool(world.base.vw[0, 0]))
+        moving.append(bool(_base(world).vw[0, 0]))
     assert moving == [True] * (hold_ticks + 1) + [False] * 2  # held for hold_sim_s, then stopped
 
 
 def test_twist_from_an_unknown_robot_is_refused():
-    world = Ros2World(load(PAPER), speed=10.0)
+    world = ros2_world(load(PAPER), speed=10.0)
     now = _started(world)
     world.step([_twist(99, 1.0, 0.0, now)], now)
     assert world.rejected == 1 and not world.robots.cmds

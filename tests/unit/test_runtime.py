@@ -146,7 +146,7 @@ def test_each_node_gets_its_own_inputs_and_its_outputs_are_acted_in_order() -> N
     inbox = Inbox([[("to", 1, ("echo", "x")), ("to", 2, ("echo", "y")), ("to", 1, ("echo", "z"))],
                    [("to", 1, ("exit", 0)), ("to", 2, ("exit", 4))]])
     port = Port()
-    exits = runtime(inbox).run({1: a, 2: b}, port)
+    exits = runtime(inbox).run({1: a, 2: b}, port, cohosting=port)
     assert a.steps[0] == [("echo", "x"), ("echo", "z")] and b.steps[0] == [("echo", "y")]
     assert port.acted == [(1, ("say", "x")), (1, ("say", "z")), (2, ("say", "y"))]
     assert {w: e.code for w, e in exits.items()} == {1: 0, 2: 4} and port.gone == [(1, 0), (2, 4)]
@@ -189,7 +189,7 @@ def test_what_the_port_holds_for_a_node_counts_toward_what_it_needs() -> None:
     port = Port()
     port.local = {1: 2, 2: 1}  # (held for node 1: 2 of the 5 it needs; for node 2: 1 of its 4)
     inbox = Inbox([[("to", w, ("exit", 0)) for w in (1, 2)]])
-    runtime(inbox, poll_s=0.3).run({1: Node(need=5), 2: Node(need=4)}, port)
+    runtime(inbox, poll_s=0.3).run({1: Node(need=5), 2: Node(need=4)}, port, cohosting=port)
     assert inbox.asked == [(3, 0.3)]
 
 
@@ -197,7 +197,7 @@ def test_no_waiting_when_what_the_port_holds_is_all_a_node_needs() -> None:
     port = Port()
     port.local = {2: 3}
     inbox = Inbox([[("to", w, ("exit", 0)) for w in (1, 2)]])
-    runtime(inbox, poll_s=0.3).run({1: Node(need=5), 2: Node(need=3)}, port)
+    runtime(inbox, poll_s=0.3).run({1: Node(need=5), 2: Node(need=3)}, port, cohosting=port)
     assert inbox.asked == [(1, 0.0)]  # (node 2 steps now: nothing need arrive)
 
 
@@ -205,7 +205,7 @@ def test_what_the_port_holds_for_a_node_that_needs_its_own_state_first_is_no_rea
     port = Port()
     port.local = {1: 4}
     inbox = Inbox([[("to", 1, ("exit", 0))]])
-    runtime(inbox, poll_s=0.3).run({1: Node(need=None)}, port)
+    runtime(inbox, poll_s=0.3).run({1: Node(need=None)}, port, cohosting=port)
     assert inbox.asked == [(None, 0.3)]
 
 
@@ -218,7 +218,7 @@ def test_a_signal_reaches_every_node_once_as_stop() -> None:
 
     inbox = Inbox([[("to", 1, ("echo", 1))], []], on_take=signal_at)
     port = Port()
-    exits = runtime(inbox, stop).run({1: a, 2: b}, port)
+    exits = runtime(inbox, stop).run({1: a, 2: b}, port, cohosting=port)
     assert [sum(isinstance(m, Stop) for m in s) for s in a.steps] == [0, 1]
     assert [sum(isinstance(m, Stop) for m in s) for s in b.steps] == [0, 1]
     assert {w: (e.code, e.reason) for w, e in exits.items()} == {1: (0, "stopped"), 2: (0, "stopped")}
@@ -229,7 +229,7 @@ def test_a_port_can_stop_the_whole_loop() -> None:
     inbox = Inbox([[("to", 1, ("echo", "new session")), ("to", 2, ("echo", "later"))]])
     port = Port(stop_on=("say", "new session"))
     rt = runtime(inbox)
-    exits = rt.run({1: a, 2: b}, port)
+    exits = rt.run({1: a, 2: b}, port, cohosting=port)
     assert rt.interrupted and exits == {}
     assert port.acted == [(1, ("say", "new session"))] and b.steps == []  # nothing after the request
 
@@ -243,7 +243,7 @@ def test_what_nodes_ask_in_a_round_is_answered_together_before_the_next_take() -
     inbox = Inbox([[("to", 1, ("job", 5)), ("to", 2, ("job", -6))],
                    [("to", 1, ("exit", 0)), ("to", 2, ("exit", 0)), ("to", 3, ("exit", 0))]],
                   on_take=lambda n: takes.append(len(port.acted)))
-    runtime(inbox).run({1: a, 2: b, 3: c}, port)
+    runtime(inbox).run({1: a, 2: b, 3: c}, port, cohosting=port)
     assert a.steps[1] == [("answer", 5, 2)] and b.steps[1] == [("answer", -6, 2)]  # (asked together: 2)
     assert b.steps[2] == [("answer", 6, 1)]  # its second question, answered alone
     assert port.acted == [(1, ("say", (5, 2))), (2, ("say", (6, 1)))]

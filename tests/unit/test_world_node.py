@@ -17,7 +17,7 @@ from reconswarm.net.timing import Timing
 from reconswarm.net.wire import ClockMode
 from reconswarm.plant import unicycle
 from reconswarm.scenario.model import load
-from simworld.ros2_io import Ros2World
+from simworld.ros2_io import ros2_world
 from simworld.world import Command, Phase, WorldInput, WorldNode, WorldOutput
 from tests.support import PAPER
 
@@ -260,12 +260,12 @@ def test_a_token_that_goes_is_gone_once_confirmed_and_commands_alone_do_not_coun
 
 def test_in_ros2_mode_a_stop_dated_stale_keeps_its_agent_alive_and_moves_nothing() -> None:
     """An agent behind the clock sends no late plan, only a stop every 0.5 s, which the plant dates stale
-    (simworld/ros2_io.py `WorldRos2.dated`): the world still counts it alive and its robot stands; an agent that
+    (simworld/ros2_io.py `Ros2IO.dated`): the world still counts it alive and its robot stands; an agent that
     never sends anything is lost once the start's grace is over (10 s: `member_grace_s`), its robot held."""
-    node = Ros2World(S, speed=1.0, timing=T)
+    node = ros2_world(S, speed=1.0, timing=T)
     assert node.step([*tokens(), MONITOR], 0.0) == [] and node.started
     stopper, silent = IDS[0], IDS[1]
-    stale = 2 * node.base.hold_ticks + 4  # (WorldRos2.keep_ticks)
+    stale = 2 * node.robots.hold_ticks + 4  # (Ros2IO.keep_ticks)
     t, stood = 0.0, []
     while t < 11.0:
         t = round(t + 0.025, 3)
@@ -273,7 +273,7 @@ def test_in_ros2_mode_a_stop_dated_stale_keeps_its_agent_alive_and_moves_nothing
         if t % 0.5 == 0:
             inputs.append(Command(wire.Cmd(stopper, node.k - stale, 0.0, 0.0), t))
         node.step(inputs, t)
-        stood.append(node.base.p[IDS.index(stopper)].copy())
+        stood.append(node.robots.p[IDS.index(stopper)].copy())
         if t == 9.0:
             assert {stopper, silent} <= node.alive  # (the start's grace)
     assert node.k >= 200 and stopper in node.alive and silent not in node.alive
