@@ -95,10 +95,8 @@ class AgentHost:
             self.listen(aid, link.node.nb.current())
             # Our state starts a tick: it wakes the loop at once; the rest wakes it only once the nodes' count of
             # what they still need is in.
-            if link.ros2 is None:
-                self.subs.append(z.declare_subscriber(k.state(aid), inbox.handler(("own", aid), urgent=True)))
-            else:
-                self.subs.append(z.declare_subscriber(k.scan(aid), inbox.handler(("own", aid))))
+            self.subs += [z.declare_subscriber(key, inbox.handler(("own", aid), urgent=urgent))
+                          for key, urgent in link.robot.own_keys(k)]
         self.subs += [z.declare_subscriber(k.clock, inbox.handler(ALL)),
                       z.liveliness().declare_subscriber(k.alive_all, inbox.handler(ALL), history=True)]
         for link in links.values():  # declared last: a token tells the world its agent is ready to receive
@@ -183,8 +181,7 @@ class AgentHost:
                 seen.add(once)
             self._deliver(tag, item, batches, None)
         for aid, link in self.active.items():
-            if link.ros2 is not None:
-                batches[aid] += link.ros2.take_invalid()
+            batches[aid] += link.robot.dropped()
         return batches
 
     def _deliver(self, tag: Tag, item: Item, batches: dict[int, list[Input]], only: int | None,

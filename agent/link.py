@@ -1,7 +1,8 @@
 """One agent's identity on the wire, inside its process's session (agent/host.py holds the session).
 
-An `AgentLink` is what makes a hosted agent indistinguishable from a lone one: its own publishers (command,
-beacon and obstacle set under its home cell, report `agent-<id>`), its own liveliness token, its own gate
+An `AgentLink` is what makes a hosted agent indistinguishable from a lone one: its own robot interface (its
+state in, its command out: agent/robot_io.py), its own publishers (beacon and obstacle set under its home cell,
+report `agent-<id>`), its own liveliness token, its own gate
 (admission state and intrusion tally) and rejection count around its AgentNode. It does not subscribe: the
 host's shared subscriptions hand it the samples meant for it (`take` a message decoded once for everyone,
 or `decode` a raw sample for it alone), and it publishes what its node returns.
@@ -19,7 +20,7 @@ from zenoh import ext
 from agent.messages import Output, Received
 from agent.neighbours import Cells
 from agent.node import AgentNode
-from agent.ros2_io import AgentRos2
+from agent.robot_io import RobotFactory, keys_robot
 from reconswarm.net import trace, wire
 from reconswarm.net.admission import Intrusion, IntrusionKind
 from reconswarm.net.cells import Cell
@@ -57,7 +58,7 @@ class AgentLink(Member):
     """
 
     def __init__(self, node: AgentNode, keys: Keys, session: zenoh.Session, rej: Rejections, gate: Gate,
-                 ros2_domain_id: int | None = None, own_source: str | None = None,
+                 robot: RobotFactory | None = None, own_source: str | None = None,
                  odometry: Any = None) -> None:
         self.node, self.keys, self.z, self.rej, self.gate = node, keys, session, rej, gate
         self.id, self.own_source = node.id, own_source
@@ -65,11 +66,10 @@ class AgentLink(Member):
         self.pub_beacon: zenoh.Publisher
         self.pub_obs: ext.AdvancedPublisher
         l_m = float(node.s.head_offsets[node.s.agent_index(self.id)])
-        # ROS 2 mode: odometry in (to `odometry`, the host's callback for our own samples), cmd_vel out.
-        self.ros2 = None if ros2_domain_id is None else AgentRos2(
-            session, ros2_domain_id, self.id, l_m, node.s.meta.dt_s, odometry or (lambda _sample: None), node.timing)
-        block = zenoh.CongestionControl.BLOCK
-        self.pub_cmd = None if self.ros2 else session.declare_publisher(keys.cmd(self.id), congestion_control=block)
+        # Our robot: its state in, our command out (agent/robot_io.py; `odometry`: the host's callback for what the
+        # interface subscribes to itself, ROS 2 mode's odometry).
+        self.robot = (robot or keys_robot)(session, keys, self.id, l_m, node.s.meta.dt_s, node.timing,
+                                           odometry or (lambda _sample: None))
         self.pub_report = session.declare_publisher(keys.report(gate.process))
         self.cells(node.nb.current())
         self.token: Any = None  # declared by `announce`, once the host listens for us
@@ -79,8 +79,7 @@ class AgentLink(Member):
         self.token = self.z.liveliness().declare_token(self.keys.alive_agent(self.id))
 
     def close(self) -> None:
-        if self.ros2 is not None:
-            self.ros2.close()
+        self.robot.close()
         if self.token is not None:
             super().close()
 
@@ -101,16 +100,8 @@ class AgentLink(Member):
     def decode(self, key: str, payload: bytes, kind: str, source: str, _at_s: float = 0.0) -> Received | None:
         """A raw sample for this agent alone: the node input (None: not for us, or refused by admission, which
         counts and logs it); a malformed one becomes Invalid (and is counted)."""
-        if self.ros2 is not None and self.ros2.owns(key):
-            odom = self.ros2.decode(key, payload)
-            if isinstance(odom, Invalid):
-                self.rej.reject(key, odom.reason)
-                return odom
-            # The plant's (the world's session), a pose the robot can have reached: else refused and counted.
-            if not self.gate.admit_odometry(odom.state, source, key, time.monotonic()):
-                return None
-            self.ros2.keep(odom)
-            return odom.state
+        if self.robot.owns(key):
+            return self.robot.decode(key, payload, source, self.gate, self.rej)
         if key.endswith("/obstacles") and not self.admit_bytes(len(payload), source, key):
             return None
         return self.take(decode_sample(self.keys, key, payload, kind), key, source)
@@ -146,11 +137,7 @@ class AgentLink(Member):
     def publish(self, out: Output) -> tuple[str, bytes] | None:
         """Put what the node returned; a beacon or obstacle set: its key and payload (for co-hosted agents)."""
         if isinstance(out, wire.Cmd):
-            if self.ros2 is not None:
-                self.ros2.command(out, self.node.period_s)
-            elif self.pub_cmd is not None:
-                self.pub_cmd.put(wire.cmd_to_wire(out))
-                trace.mark(trace.Mark.CMD_PUT, out.k, out.id)
+            self.robot.command(out, self.node.period_s)
         elif isinstance(out, wire.Beacon):
             payload = wire.beacon_to_wire(out)
             self.pub_beacon.put(payload)

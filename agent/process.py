@@ -17,6 +17,8 @@ from pathlib import Path
 from agent.host import RECONNECT, AgentHost, TaggedInbox
 from agent.link import AgentLink
 from agent.node import AgentNode
+from agent.robot_io import keys_robot
+from agent.ros2_io import ros2_robot
 from reconswarm.errors import BadInput
 from reconswarm.net.admission import Admission
 from reconswarm.net.gate import Gate
@@ -85,13 +87,15 @@ def run(cfg: AgentConfig) -> int:
     rejs = {a: Rejections(f"agent {a}") for a in ids}
     keys = Keys(cfg.run_id or s.meta.name)
     who = _who(ids)
+    # Our robots' interface, chosen once: the project's keys, or ROS 2 topics (agent/robot_io.py).
+    robot = keys_robot if cfg.ros2_domain_id is None else ros2_robot(cfg.ros2_domain_id)
     zid: str | None = None  # our session's id, kept by the sessions that replace it
     while True:
         with serving(cfg.zenoh, who, cfg.timing.session_open_timeout_s, zid) as (session, stop):
             zid = str(session.info.zid())
             inbox = TaggedInbox()
             own = zid if len(ids) > 1 else None  # co-hosted agents hear us through it
-            links = {a: AgentLink(nodes[a], keys, session, rejs[a], gates[a], cfg.ros2_domain_id, own,
+            links = {a: AgentLink(nodes[a], keys, session, rejs[a], gates[a], robot, own,
                                   inbox.callback(("own", a), urgent=True)) for a in ids}
             host = AgentHost(session, keys, links, inbox)
             log.info("%s up (run %s)", who, keys.run)

@@ -24,10 +24,15 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from agent.messages import Received
 from reconswarm.net import ros2, wire
+from reconswarm.net.gate import Gate
+from reconswarm.net.inbox import Rejections
+from reconswarm.net.keys import Keys
 from reconswarm.net.node import Invalid
 from reconswarm.net.ros2_node import Ros2Node
 from reconswarm.net.timing import TIMING, Timing
@@ -46,6 +51,8 @@ class Odometry:
 
 
 class AgentRos2:
+    """An agent's robot as ROS 2 topics: the robot interface of ROS 2 mode (agent/robot_io.py `RobotIO`)."""
+
     def __init__(self, session: Any, domain_id: int, agent_id: int, head_offset_m: float, dt_s: float,
                  callback: Any, timing: Timing = TIMING) -> None:
         """callback(sample): where odometry samples go (the host's inbox)."""
@@ -62,10 +69,26 @@ class AgentRos2:
         self.stopping = False  # the last one was a stop
         self._told_s = -math.inf
 
+    def own_keys(self, keys: Keys) -> list[tuple[str, bool]]:
+        """The scan stays on the project's key (its odometry comes through our own subscription)."""
+        return [(keys.scan(self.id), False)]
+
     def owns(self, key: str) -> bool:
         return key == self.odom_key
 
-    def decode(self, key: str, payload: bytes) -> Odometry | Invalid:
+    def decode(self, key: str, payload: bytes, source: str, gate: Gate, rej: Rejections) -> Received | None:
+        """An odometry sample as the node's state, once the gate admitted it: the plant's (the world's session), a
+        pose the robot can have reached (else refused and counted); Invalid (counted) when malformed."""
+        odom = self.odometry(key, payload)
+        if isinstance(odom, Invalid):
+            rej.reject(key, odom.reason)
+            return odom
+        if not gate.admit_odometry(odom.state, source, key, time.monotonic()):
+            return None
+        self.keep(odom)
+        return odom.state
+
+    def odometry(self, key: str, payload: bytes) -> Odometry | Invalid:
         """An odometry sample as the node's state at tick round(t / dt), and when the plant published it."""
         try:
             o = ros2.odom_from_ros(payload, self.id)
@@ -84,7 +107,10 @@ class AgentRos2:
             if len(self.published_ns) > KEEP_TICKS:
                 del self.published_ns[min(self.published_ns)]
 
-    def command(self, c: wire.Cmd, period_s: float, now_ns: int | None = None) -> bool:
+    def command(self, c: wire.Cmd, period_s: float) -> None:
+        self.send(c, period_s)
+
+    def send(self, c: wire.Cmd, period_s: float, now_ns: int | None = None) -> bool:
         """The node's command as the Twist a robot base holds (`twist`), stamped `now_ns` (None: the wall clock's
         now), unless the odometry of its tick was published more than `ros2_plan_age_periods` of `period_s` (the
         run's period, wall s) before: False, not sent; a stop is sent instead once the last cmd_vel is older than
@@ -121,10 +147,21 @@ class AgentRos2:
         self.cmd_vel.put(ros2.twist_to_ros(v_mps, omega_radps), now_ns)
         self.sent_ns = now_ns
 
-    def take_invalid(self) -> list[Invalid]:
+    def dropped(self) -> list[Invalid]:
         """Samples dropped for their attachment since the last call (for the node to count)."""
         n, self.counted = self.node.bad_attachments - self.counted, self.node.bad_attachments
         return [Invalid(self.odom_key, "odometry without a valid rmw_zenoh attachment")] * n
 
     def close(self) -> None:
         self.node.close()
+
+
+def ros2_robot(domain_id: int) -> Callable[..., AgentRos2]:
+    """The robot interface of every agent of a process in ROS 2 mode, in that domain (agent/robot_io.py
+    `RobotFactory`)."""
+
+    def make(session: Any, keys: Keys, agent_id: int, l_m: float, dt_s: float, timing: Timing,
+             callback: Callable[[Any], None]) -> AgentRos2:
+        return AgentRos2(session, domain_id, agent_id, l_m, dt_s, callback, timing)
+
+    return make

@@ -1,6 +1,6 @@
 """ROS 2 mode's dating of a cmd_vel (a Twist has no tick): the plant takes it as planned from the oldest odometry it
 published within `ros2_plan_age_periods` before the cmd_vel was sent (simworld/ros2_io.planned_tick), and an agent
-sends none planned from an older one (agent/ros2_io.py, `AgentRos2.command`). The pure rule against its definition, then
+sends none planned from an older one (agent/ros2_io.py, `AgentRos2.send`). The pure rule against its definition, then
 both ends on real zenoh sessions (127.0.0.1), with the times carried in rmw_zenoh's attachments."""
 
 from __future__ import annotations
@@ -197,15 +197,15 @@ def test_an_agent_sends_no_command_planned_from_odometry_older_than_a_period() -
             plant.put(ros2.odom_to_ros(ros2.Odom(a, 5 * S.meta.dt_s, 0.0, 0.0, 0.0, 0.0, 0.0)), now - 10_000 * MS)
             plant.put(ros2.odom_to_ros(ros2.Odom(a, 6 * S.meta.dt_s, 0.0, 0.0, 0.0, 0.0, 0.0)), now)
             got = _wait(lambda: [samples.pop(0)] if samples else [], 2)
-            states = [agent.decode(str(s.key_expr), s.payload.to_bytes()) for s in got]
+            states = [agent.odometry(str(s.key_expr), s.payload.to_bytes()) for s in got]
             for o in states:
                 assert not isinstance(o, Invalid)
                 agent.keep(o)
             assert [o.state.k for o in states if not isinstance(o, Invalid)] == [5, 6]
             period_s = 2.0  # (--speed 0.025: room for this test's own delays)
-            assert not agent.command(wire.Cmd(a, 5, 1.0, 0.0), period_s)  # its odometry 10 s old: a stop instead
-            assert not agent.command(wire.Cmd(a, 7, 1.0, 0.0), period_s)  # no odometry of that tick (and a stop
-            assert agent.command(wire.Cmd(a, 6, 1.0, 0.0), period_s)  # went out less than a hold ago: nothing)
+            assert not agent.send(wire.Cmd(a, 5, 1.0, 0.0), period_s)  # its odometry 10 s old: a stop instead
+            assert not agent.send(wire.Cmd(a, 7, 1.0, 0.0), period_s)  # no odometry of that tick (and a stop
+            assert agent.send(wire.Cmd(a, 6, 1.0, 0.0), period_s)  # went out less than a hold ago: nothing)
             assert (agent.stale, agent.stops) == (2, 1)
             stop, sent = _wait(lambda: [cmd_vels.pop(0)] if cmd_vels else [], 2)
             assert ros2.twist_from_ros(stop.payload.to_bytes()) == (0.0, 0.0)
@@ -239,14 +239,14 @@ def odometry(agent: AgentRos2, k: int, sent_ns: int, x: float = 3.0, y: float = 
 
 def kept(agent: AgentRos2, payload: bytes) -> wire.State:
     """An odometry decoded and kept, as the agent's link keeps one its gate admitted."""
-    o = agent.decode(agent.odom_key, payload)
+    o = agent.odometry(agent.odom_key, payload)
     assert isinstance(o, Odometry)
     agent.keep(o)
     return o.state
 
 
 def test_an_odometry_is_the_state_of_its_tick_with_the_head_point_l_ahead_of_the_body(agent: AgentRos2) -> None:
-    o = agent.decode(agent.odom_key, odometry(agent, 7, 10**18))
+    o = agent.odometry(agent.odom_key, odometry(agent, 7, 10**18))
     assert isinstance(o, Odometry) and o.sent_ns == 10**18
     m = o.state
     assert (m.id, m.k, m.t, m.x, m.y, m.theta) == (1, 7, 7 * S.meta.dt_s, 3.0, -2.0, 0.7)
@@ -255,12 +255,12 @@ def test_an_odometry_is_the_state_of_its_tick_with_the_head_point_l_ahead_of_the
     agent.keep(o)
     assert agent.published_ns == {7: 10**18}
     other = ros2.odom_to_ros(ros2.Odom(2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))  # robot 2's frame on our topic
-    bad = agent.decode(agent.odom_key, other)
+    bad = agent.odometry(agent.odom_key, other)
     assert isinstance(bad, Invalid) and bad.key == agent.odom_key and "of agent 2 on the topic of agent 1" in bad.reason
     assert agent.published_ns == {7: 10**18}
     agent.node.bad_attachments = 2
-    assert agent.take_invalid() == [Invalid(agent.odom_key, "odometry without a valid rmw_zenoh attachment")] * 2
-    assert agent.take_invalid() == []
+    assert agent.dropped() == [Invalid(agent.odom_key, "odometry without a valid rmw_zenoh attachment")] * 2
+    assert agent.dropped() == []
 
 
 def test_the_newest_odometries_times_are_kept(agent: AgentRos2) -> None:
@@ -283,13 +283,13 @@ def test_a_command_goes_out_up_to_exactly_one_period_after_its_odometry_and_is_s
     kept(agent, odometry(agent, 3, t0))
     agent.sent_ns = t0  # (a cmd_vel went out then: the plant holds it for 0.2 s of simulated time, 50 ms here)
     with caplog.at_level("WARNING"):
-        assert not agent.command(wire.Cmd(1, 3, 1.0, 0.0), period_s, t0 + 12_500_001)
-        assert not agent.command(wire.Cmd(1, 4, 1.0, 0.0), period_s, t0)  # no odometry of tick 4 (yet)
+        assert not agent.send(wire.Cmd(1, 3, 1.0, 0.0), period_s, t0 + 12_500_001)
+        assert not agent.send(wire.Cmd(1, 4, 1.0, 0.0), period_s, t0)  # no odometry of tick 4 (yet)
     assert (agent.stale, agent.stops) == (2, 0) and stamps == []
     said = [r.getMessage() for r in caplog.records]
     assert said == ["agent 1: a command not sent: planned from odometry published 12.5 ms ago, more than 12.5 ms "
                     "(the machine is behind the clock) [total 1; 0 stops sent instead]"]  # (then one every 5 s)
-    assert agent.command(wire.Cmd(1, 3, 1.0, 0.0), period_s, t0 + 12_500_000)
+    assert agent.send(wire.Cmd(1, 3, 1.0, 0.0), period_s, t0 + 12_500_000)
     assert stamps == [t0 + 12_500_000] and agent.stale == 2  # (sent once, stamped when it was judged)
 
 
@@ -300,17 +300,17 @@ def test_an_agent_behind_the_clock_sends_a_stop_once_the_plants_hold_is_over_the
     agent.cmd_vel.put = lambda payload, now_ns=None: sent.append(  # type: ignore[method-assign]
         (now_ns, ros2.twist_from_ros(payload)))
     kept(agent, odometry(agent, 3, t0))
-    assert agent.command(wire.Cmd(1, 3, 0.8, 0.1), period_s, t0 + 5 * MS)  # a plan, in time
+    assert agent.send(wire.Cmd(1, 3, 0.8, 0.1), period_s, t0 + 5 * MS)  # a plan, in time
     late = [t0 + d * MS for d in (20, 54, 55, 70, 554, 555, 1055)]
-    assert not any(agent.command(wire.Cmd(1, 3, 0.8, 0.1), period_s, at) for at in late)  # (odometry 20+ ms old)
+    assert not any(agent.send(wire.Cmd(1, 3, 0.8, 0.1), period_s, at) for at in late)  # (odometry 20+ ms old)
     plan = agent.twist(wire.Cmd(1, 3, 0.8, 0.1))  # (the twist of that command: `test_..._exactly_u_dt`)
     assert sent == [(t0 + 5 * MS, plan), (t0 + 55 * MS, (0.0, 0.0)), (t0 + 555 * MS, (0.0, 0.0)),
                     (t0 + 1055 * MS, (0.0, 0.0))]
     kept(agent, odometry(agent, 4, t0 + 1100 * MS))
-    assert agent.command(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1101 * MS)  # in time again
-    assert not agent.command(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1150 * MS)  # (late, within the hold)
-    assert agent.command(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1105 * MS)
-    assert not agent.command(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1155 * MS)  # the hold over: a stop
+    assert agent.send(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1101 * MS)  # in time again
+    assert not agent.send(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1150 * MS)  # (late, within the hold)
+    assert agent.send(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1105 * MS)
+    assert not agent.send(wire.Cmd(1, 4, 0.5, 0.0), period_s, t0 + 1155 * MS)  # the hold over: a stop
     plan = agent.twist(wire.Cmd(1, 4, 0.5, 0.0))
     assert sent[4:] == [(t0 + 1101 * MS, plan), (t0 + 1105 * MS, plan), (t0 + 1155 * MS, (0.0, 0.0))]
     assert (agent.stale, agent.stops, agent.sent_ns) == (9, 4, t0 + 1155 * MS)
