@@ -39,7 +39,7 @@ def test_a_burst_of_beacons_on_a_cell_reaches_the_inbox_before_the_state_put_aft
                 for _ in range(BURST):
                     out.put(KEYS.host_beacons(home3, 3), burst)
                 out.put(KEYS.state(1), wire.state_to_wire(state(1, rounds)))
-                out.put(KEYS.host_beacons(home3, 3), marker)  # (once in, every beacon of the burst is: one subscription)
+                out.put(KEYS.host_beacons(home3, 3), marker)  # (once in, every one of the burst is: one subscription)
                 got: list[Any] = []
                 deadline = time.monotonic() + 60.0
                 while not any(it[1] == marker for _tag, it in got) and time.monotonic() < deadline:

@@ -71,7 +71,7 @@ def test_the_hosts_subscriptions_take_remote_samples_tagged_with_history_and_non
             pub.put(obstacle_set(3, home3)[1])
             wait_token(z, KEYS.alive_agent(3))
             h = make_host(z)
-            for key in (KEYS.state(1), KEYS.clock, KEYS.host_beacons(home3, 3)):  # (the host's declarations reach `out`)
+            for key in (KEYS.state(1), KEYS.clock, KEYS.host_beacons(home3, 3)):  # (the host's declarations reach it)
                 wait_subscribed(out, key)
             got: list[tuple[Any, Item]] = h.inbox.take(0, 0.0)  # (history: the token and the set)
             out.put(KEYS.state(1), wire.state_to_wire(state(1)))
@@ -80,7 +80,8 @@ def test_the_hosts_subscriptions_take_remote_samples_tagged_with_history_and_non
             z.put(KEYS.host_beacons(home3, 4), batch_to_wire(4, [at_start(4)]))  # our own session's: never taken
             z.put(*obstacle_set(4, home3)[:2])
             deadline = time.monotonic() + 10.0
-            want = {KEYS.state(1), KEYS.clock, KEYS.host_beacons(home3, 3), KEYS.alive_agent(3), KEYS.obstacles(home3, 3)}
+            want = {KEYS.state(1), KEYS.clock, KEYS.host_beacons(home3, 3), KEYS.alive_agent(3),
+                    KEYS.obstacles(home3, 3)}
             while time.monotonic() < deadline and not want <= {it[0] for _t, it in got}:
                 got += h.inbox.take(1, 0.5)
             tags: dict[str, set[Any]] = {}
@@ -106,7 +107,7 @@ def test_the_states_of_the_hosted_agents_wake_the_host_at_once_a_peers_beacon_do
         h = make_host(z)
         try:
             home3 = AgentNode(S, 3, 0.0).nb.home
-            for key in (KEYS.state(1), KEYS.state(2), KEYS.host_beacons(home3, 3)):  # (the host's declarations reach `out`)
+            for key in (KEYS.state(1), KEYS.state(2), KEYS.host_beacons(home3, 3)):  # (the declarations reach `out`)
                 wait_subscribed(out, key)
             take_own_tokens(h.inbox, (1, 2))
             out.put(KEYS.host_beacons(home3, 3), batch_to_wire(3, [at_start(3)]))  # (not urgent: the take waits it out)
