@@ -1,11 +1,13 @@
 """A host's beacons on the wire: one batch per cell and round out (reconswarm/net/batch.py), each batch's rows admitted
 one by one in (agent/host.py hands them to the agents listening to its cell).
 
-Out: the beacons the hosted agents returned in a round of the runtime, grouped by the cell each was published
-from (its home when it was returned), are put once the round is over (`flush`: before any command of the host
-goes out, so a peer's beacon of tick k still precedes its command of k), one message per cell under
-`cell/<cx>_<cy>/host/<hid>/beacons`. An agent returning two beacons in one round (a re-announce and a new tick)
-goes out with the newer. A lone agent is a host of one; a re-announce alone is a batch of one.
+Out: the beacons the hosted agents returned in a round of the runtime, grouped by the cell each was published from
+(its home when it was returned), are put once the round is over (`flush`: before any command of the host goes out,
+so a peer's beacon of tick k still precedes its command of k), one message per cell under
+`cell/<cx>_<cy>/host/<hid>/beacons`, with its row count as its attachment (4 bytes, little-endian: what a receiving
+host's inbox counts the sample for, as its nodes count the beacons they wait for). An agent returning two beacons in
+one round (a re-announce and a new tick) goes out with the newer. A lone agent is a host of one; a re-announce alone
+is a batch of one.
 
 In: `rows` takes a decoded batch apart, bounded by the scenario's agent count (a larger one is malformed).
 """
@@ -48,7 +50,7 @@ class BeaconOut:
                 pub = self.pubs[cell] = self.z.declare_publisher(self.keys.host_beacons(cell, self.hid),
                                                                  congestion_control=zenoh.CongestionControl.BLOCK)
             beacons = sorted(held.values(), key=lambda b: b.id)
-            pub.put(batch_to_wire(self.hid, beacons))
+            pub.put(batch_to_wire(self.hid, beacons), attachment=len(beacons).to_bytes(4, "little"))
             for b in beacons:
                 trace.mark(trace.Mark.BEACON_PUT, b.k, b.id)
         for cell in [c for c in self.pubs if c not in homes and c not in pending]:

@@ -127,7 +127,7 @@ class AgentHost:
         for cell in want - self.cell_subs.keys():
             tag, k = ("cell", cell), self.keys
             self.cell_subs[cell] = (
-                self.z.declare_subscriber(k.host_beacons(cell, None), self.inbox.handler(tag),
+                self.z.declare_subscriber(k.host_beacons(cell, None), self.inbox.handler(tag, rows=True),
                                           allowed_origin=self.locality),
                 ext.declare_advanced_subscriber(self.z, k.cell_agents(cell, "obstacles"), self.inbox.handler(tag),
                                                 allowed_origin=self.locality,
