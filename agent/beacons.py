@@ -9,19 +9,27 @@ host's inbox counts the sample for, as its nodes count the beacons they wait for
 one round (a re-announce and a new tick) goes out with the newer. A lone agent is a host of one; a re-announce alone
 is a batch of one.
 
-In: `rows` takes a decoded batch apart, bounded by the scenario's agent count (a larger one is malformed).
+In: `take_batch` takes a peer host's decoded batch apart for the agents listening to its cell: each row judged by
+the rules of a beacon, once for all of them (the host's one admission); a row in the name of an agent hosted here
+is forged; a batch of more rows than the scenario has agents is malformed (counted by each agent it was for).
 """
 
 from __future__ import annotations
 
-from typing import Any
+import time
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 
+from agent.messages import Input
 from reconswarm.net import trace, wire
 from reconswarm.net.batch import BeaconBatch, batch_to_wire
 from reconswarm.net.cells import Cell
-from reconswarm.net.keys import Keys, WireError
+from reconswarm.net.keys import Keys
+from reconswarm.net.node import Invalid
+
+if TYPE_CHECKING:
+    from agent.host import AgentHost
 
 
 class BeaconOut:
@@ -62,8 +70,31 @@ class BeaconOut:
         self.pubs.clear()
 
 
-def rows(batch: BeaconBatch, n_agents: int) -> tuple[wire.Beacon, ...]:
-    """A batch's beacons; raises WireError for one with more rows than the scenario has agents."""
-    if len(batch.beacons) > n_agents:
-        raise WireError(f"a batch of {len(batch.beacons)} beacons, the scenario has {n_agents} agents")
-    return batch.beacons
+def take_batch(host: AgentHost, m: BeaconBatch, key: str, source: str, who: list[int],
+               batches: dict[int, list[Input]], at_s: float) -> None:
+    """Hand a peer host's batch under `key` (from session `source`) to the hosted agents `who` listening to its
+    cell, appending to their `batches`."""
+    if len(m.beacons) > len(host.known):
+        bad = Invalid(key, f"a batch of {len(m.beacons)} beacons, the scenario has {len(host.known)} agents")
+        for aid in who:
+            if (got := host.active[aid].take(bad, key, source)) is not None:
+                batches[aid].append(got)
+        return
+    now = time.monotonic()
+    for b in m.beacons:
+        if b.id in host.active:  # (rare: each agent's own link says what it is)
+            for aid in who:
+                link = host.active[aid]
+                if aid != b.id:
+                    link.refuse_cohosted(b.id, key, source)
+                elif (mine := link.take(b, key, source)) is not None:
+                    batches[aid].append(mine)
+            continue
+        refused = host.gate.check(b, source, key, now)
+        if refused is not None:
+            for aid in who:
+                host.active[aid].gate.refuse(refused, now)
+            continue
+        for aid in who:
+            batches[aid].append(b)
+        trace.mark(trace.Mark.BEACON_IN, b.k, b.id, at_s)

@@ -34,7 +34,7 @@ from typing import Any
 import zenoh
 from zenoh import ext
 
-from agent.beacons import BeaconOut, rows
+from agent.beacons import BeaconOut, take_batch
 from agent.brain import Plan, commands
 from agent.link import OWN, PASSED, PEER_MESSAGES, AgentLink, Decoded, decode_sample
 from agent.messages import Input, Law, Reconnect
@@ -227,7 +227,7 @@ class AgentHost:
                 m = dataclasses.replace(m, alive=self._alive)
             self._alive = m.alive
         if isinstance(m, BeaconBatch):
-            self._batch(m, key, source, who, batches, at_s)
+            take_batch(self, m, key, source, who, batches, at_s)
             return
         if cohosted or m is None or isinstance(m, PASSED):
             if m is not None:
@@ -260,36 +260,6 @@ class AgentHost:
         # by `act`), never one that was refused (it would stand in for the genuine one).
         elif isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known and self._cell(key) is not None:
             self.sets[m.id] = (tag, item)
-
-    def _batch(self, m: BeaconBatch, key: str, source: str, who: list[int], batches: dict[int, list[Input]],
-               at_s: float) -> None:
-        """A peer host's beacons: each row judged by the rules of a beacon, once for every agent it is for (a row
-        in the name of an agent hosted here is forged); a batch of more rows than the scenario has agents is
-        malformed (counted by each agent it was for)."""
-        try:
-            got = rows(m, len(self.known))
-        except WireError as exc:
-            for aid in who:
-                if (bad := self.active[aid].take(Invalid(key, str(exc)), key, source)) is not None:
-                    batches[aid].append(bad)
-            return
-        now = time.monotonic()
-        for b in got:
-            if b.id in self.active:  # (rare: each agent's own link says what it is)
-                for aid in who:
-                    link = self.active[aid]
-                    if aid != b.id:
-                        link.refuse_cohosted(b.id, key, source)
-                    elif (mine := link.take(b, key, source)) is not None:
-                        batches[aid].append(mine)
-                continue
-            refused = self.gate.check(b, source, key, now)
-            if refused is not None:
-                self._refuse(who, refused)
-                continue
-            for aid in who:
-                batches[aid].append(b)
-            trace.mark(trace.Mark.BEACON_IN, b.k, b.id, at_s)
 
     def _refuse(self, who: list[int], bad: Intrusion) -> None:
         """A sample admission refused: counted (and logged) by each agent it was for."""
