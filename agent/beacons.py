@@ -17,19 +17,18 @@ is forged; a batch of more rows than the scenario has agents is malformed (count
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import zenoh
 
+from agent.link import AgentLink
 from agent.messages import Input
 from reconswarm.net import trace, wire
 from reconswarm.net.batch import BeaconBatch, batch_to_wire
 from reconswarm.net.cells import Cell
+from reconswarm.net.gate import Gate
 from reconswarm.net.keys import Keys
 from reconswarm.net.node import Invalid
-
-if TYPE_CHECKING:
-    from agent.host import AgentHost
 
 
 class BeaconOut:
@@ -70,30 +69,31 @@ class BeaconOut:
         self.pubs.clear()
 
 
-def take_batch(host: AgentHost, m: BeaconBatch, key: str, source: str, who: list[int],
-               batches: dict[int, list[Input]], at_s: float) -> None:
+def take_batch(m: BeaconBatch, key: str, source: str, who: list[int], batches: dict[int, list[Input]], at_s: float,
+               active: dict[int, AgentLink], gate: Gate, n_agents: int) -> None:
     """Hand a peer host's batch under `key` (from session `source`) to the hosted agents `who` listening to its
-    cell, appending to their `batches`."""
-    if len(m.beacons) > len(host.known):
-        bad = Invalid(key, f"a batch of {len(m.beacons)} beacons, the scenario has {len(host.known)} agents")
+    cell, appending to their `batches`; `active`: the hosted agents' links, `gate`: the host's one admission,
+    `n_agents`: the scenario's."""
+    if len(m.beacons) > n_agents:
+        bad = Invalid(key, f"a batch of {len(m.beacons)} beacons, the scenario has {n_agents} agents")
         for aid in who:
-            if (got := host.active[aid].take(bad, key, source)) is not None:
+            if (got := active[aid].take(bad, key, source)) is not None:
                 batches[aid].append(got)
         return
     now = time.monotonic()
     for b in m.beacons:
-        if b.id in host.active:  # (rare: each agent's own link says what it is)
+        if b.id in active:  # (rare: each agent's own link says what it is)
             for aid in who:
-                link = host.active[aid]
+                link = active[aid]
                 if aid != b.id:
                     link.refuse_cohosted(b.id, key, source)
                 elif (mine := link.take(b, key, source)) is not None:
                     batches[aid].append(mine)
             continue
-        refused = host.gate.check(b, source, key, now)
+        refused = gate.check(b, source, key, now)
         if refused is not None:
             for aid in who:
-                host.active[aid].gate.refuse(refused, now)
+                active[aid].gate.refuse(refused, now)
             continue
         for aid in who:
             batches[aid].append(b)

@@ -227,7 +227,7 @@ class AgentHost:
                 m = dataclasses.replace(m, alive=self._alive)
             self._alive = m.alive
         if isinstance(m, BeaconBatch):
-            take_batch(self, m, key, source, who, batches, at_s)
+            take_batch(m, key, source, who, batches, at_s, self.active, self.gate, len(self.known))
             return
         if cohosted or m is None or isinstance(m, PASSED):
             if m is not None:
