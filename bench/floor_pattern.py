@@ -7,7 +7,6 @@ import math
 from typing import Any
 
 import msgpack
-import numpy as np
 
 from reconswarm.net.cells import CellGrid
 from reconswarm.net.wire import VERSION
@@ -82,5 +81,7 @@ def batch_bytes(hid: int, beacons: list[tuple[int, int, float, XY, float]]) -> b
 
 
 def batch_rows(m: dict[str, Any]) -> list[tuple[int, int]]:
-    """(id, k) of each beacon of an unpacked batch (its columns read, as a receiver reads them)."""
-    return list(zip(np.frombuffer(m["id"], "<u4").tolist(), np.frombuffer(m["k"], "<i8").tolist(), strict=True))
+    """(id, k) of each beacon of an unpacked batch (its rows read, as a receiver reads them)."""
+    from reconswarm.net.batch import ROW
+
+    return [(r[0], r[1]) for r in ROW.iter_unpack(m["rows"])]

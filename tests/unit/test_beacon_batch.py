@@ -5,18 +5,18 @@ batch larger than the scenario's swarm as malformed, and a row in a co-hosted ag
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from typing import Any
 
 import msgpack
-import numpy as np
 import pytest
 import zenoh
 
 from agent.host import AgentHost
 from agent.neighbours import Cells
 from reconswarm.net import wire
-from reconswarm.net.batch import COLUMNS, batch_from_wire, batch_to_wire
+from reconswarm.net.batch import ROW, batch_from_wire, batch_to_wire
 from reconswarm.net.keys import WireError
 from reconswarm.net.session import ZenohOptions
 from tests.support import free_port, wait_until
@@ -41,11 +41,16 @@ def _b(aid: int, k: int = 3, px: float = 1.5, radius: float = 0.5) -> wire.Beaco
     return wire.Beacon(aid, k, k * 0.05, px, -2.25, radius, 7)
 
 
-def _raw(**over: Any) -> bytes:
-    o: dict[str, Any] = {"v": wire.VERSION, "host": 3, "n": 2}
-    o.update({name: np.array([3, 4] if name == "id" else [1, 2], dtype=dt).tobytes() for name, dt in COLUMNS})
+def _raw(beacons: list[tuple[Any, ...]] | None = None, **over: Any) -> bytes:
+    """A batch of host 3 with agents 3 and 4, or `beacons` (packed as ROW), with fields replaced by `over`."""
+    rows = beacons if beacons is not None else [(3, 1, 0.05, 1.0, 2.0, 0.5, 0), (4, 1, 0.05, 2.0, 2.0, 0.5, 0)]
+    o: dict[str, Any] = {"v": wire.VERSION, "host": 3, "n": len(rows), "rows": b"".join(ROW.pack(*r) for r in rows)}
     o.update(over)
     return msgpack.packb({k: v for k, v in o.items() if v is not None}, use_bin_type=True)
+
+
+def _row(aid: int = 4, k: int = 1, t: float = 0.05, px: float = 1.0, radius: float = 0.5) -> tuple[Any, ...]:
+    return (aid, k, t, px, 2.0, radius, 0)
 
 
 def test_a_batch_round_trips_bit_for_bit() -> None:
@@ -53,22 +58,22 @@ def test_a_batch_round_trips_bit_for_bit() -> None:
     got = batch_from_wire(batch_to_wire(3, sent), 3)
     assert got.host == 3 and got.beacons == sent
     assert all(type(b.px) is float and type(b.k) is int for b in got.beacons)
-    assert batch_from_wire(_raw(), 3).beacons[1].id == 4
+    assert batch_from_wire(_raw(), 3).beacons[1] == wire.Beacon(4, 1, 0.05, 2.0, 2.0, 0.5, 0)
 
 
 @pytest.mark.parametrize(("payload", "why"), [
     (_raw(host=4), "under the key of host 3"),
     (_raw(n=0), "field 'n'"),
-    (_raw(n=3), "expected 3 packed"),
-    (_raw(px=None), "field 'px'"),
-    (_raw(px=[1.0, 2.0]), "undecodable"),
-    (_raw(id=np.array([3, 3], "<u4").tobytes()), "twice"),
-    (_raw(id=np.array([2, 4], "<u4").tobytes()), "below its host's lowest id 3"),
-    (_raw(id=np.array([3, 2**31], "<u4").tobytes()), "out of range"),
-    (_raw(py=np.array([1.0, np.nan]).tobytes()), "not finite"),
-    (_raw(t=np.array([np.inf, 0.0]).tobytes()), "not finite"),
-    (_raw(radius=np.array([0.5, 0.0]).tobytes()), "radius"),
-    (_raw(k=np.array([1, -1], "<i8").tobytes()), "field 'k'"),
+    (_raw(n=3), "expected 3 packed rows"),
+    (_raw(rows=None), "field 'rows'"),
+    (_raw(rows=[1.0, 2.0]), "undecodable"),
+    (_raw([_row(3), _row(3)]), "twice"),
+    (_raw([_row(2), _row(4)]), "below its host's lowest id 3"),
+    (_raw([_row(3), _row(2**31)]), "out of range"),
+    (_raw([_row(3), _row(px=math.nan)]), "not finite"),
+    (_raw([_row(3, t=math.inf)]), "not finite"),
+    (_raw([_row(3), _row(radius=0.0)]), "radius"),
+    (_raw([_row(3), _row(k=-1)]), "out of range"),
     (_raw(v=2), "schema version"),
     (b"\x05", "not a map"),
     (b"\xc1", "undecodable"),

@@ -29,7 +29,8 @@ from agent.node import AgentNode
 from monitor.node import MonitorNode
 from monitor.process import MonitorPort
 from reconswarm.net import wire
-from reconswarm.net.batch import COLUMNS, batch_to_wire
+from reconswarm.net.batch import FIELDS as BATCH_FIELDS
+from reconswarm.net.batch import batch_to_wire
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Item, Rejections
 from reconswarm.net.keys import Keys, ParsedKey, WireError
@@ -94,8 +95,8 @@ ROWS = st.lists(st.tuples(AIDS, K, F, F, st.floats(0.1, 5.0)), min_size=1, max_s
 BATCHES = st.one_of(  # a host's batch of beacons: well formed (its ids maybe another host's), or any columns
     st.builds(lambda h, rows: batch_to_wire(h, [wire.Beacon(a, k, k * 0.05, x, y, r) for a, k, x, y, r in rows]),
               AIDS, ROWS),
-    st.dictionaries(st.sampled_from(["host", "n", *(name for name, _ in COLUMNS)]),
-                    st.one_of(VALUES, st.binary(max_size=40)), max_size=10).map(
+    st.dictionaries(st.sampled_from(["host", "n", "rows", *BATCH_FIELDS]),
+                    st.one_of(VALUES, st.binary(max_size=120)), max_size=10).map(
         lambda d: msgpack.packb({"v": wire.VERSION, **d}, use_bin_type=True)))
 PAYLOADS = st.one_of(st.binary(max_size=64), MESSAGES, BATCHES,
                      st.dictionaries(st.sampled_from(FIELDS), VALUES, max_size=10).map(
