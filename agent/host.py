@@ -4,26 +4,23 @@ Zenoh's guidance is one session per process, shared by its nodes (as rmw_zenoh g
 process one session). The host holds the session's subscriptions and hands each sample to the agents it
 is for, through one inbox and one loop that steps every hosted node (agent/node.py) with the wall time:
 
-- shared by all hosted agents: the clock, liveliness (every token, with history), and each cell's beacons
-  and obstacle sets (advanced subscriber: publishers' cached sets), declared while at least one hosted
+- shared by all hosted agents: the clock, liveliness (every token, with history), and each cell's beacon
+  batches and obstacle sets (advanced subscriber: publishers' cached sets), declared while at least one hosted
   agent listens to that cell (agent/neighbours.py) and handed to those that do; an agent that starts
-  listening to a cell the host already hears gets the newest set of each publisher there (what its own
-  advanced subscriber's history would have brought), from the host's copy;
+  listening to a cell the host already hears gets the newest set of each publisher there, from the host's copy;
 - per agent: its state (urgent: it starts a tick; in ROS 2 mode its odometry and its scan);
-- a sample is decoded and admitted once, whatever number of hosted agents it is for: a peer's beacon or set
-  and the clock are judged by the host's one admission (the hosted agents' gates share it) and the message is
-  appended to the batch of each agent that listens (a refusal is counted by each of them, as a lone agent
-  would); what concerns one agent alone (its state, a sample on its own key, a malformed one) goes through
-  its own link (agent/link.py: its gate, counters);
-- the law: each hosted agent's node returns its tick's plan (agent/brain.py `Plan`); once every node of a
-  round has been stepped, the plans of one tick are computed in one call of `law` (the planner batched over
-  them, each row the same bit for bit as the agent's alone) and each node takes its command back (`Law`).
+- a sample is decoded and admitted once, whatever number of hosted agents it is for: each beacon of a peer
+  host's batch, a set and the clock are judged by the host's one admission (the hosted agents' gates share it)
+  and appended to the batch of each agent that listens (a refusal is counted by each of them); what concerns
+  one agent alone (its state, a sample on its own key, a malformed one) goes through its own link;
+- the law: the plans of one tick that the hosted agents' nodes returned in a round are computed in one call of
+  `law` (each row the same bit for bit as the agent's alone) and each node takes its command back (`Law`);
+- beacons go out as one message per cell and round (agent/beacons.py), put before any command of the round.
 
 Co-hosted agents hear each other in the process: a beacon or set one of them publishes is handed to the others
-that listen to its cell, at once (a beacon as the message it was put from, which its bytes decode to; a set as
-the same bytes with the session as source); the subscriptions take remote samples only, so nobody's own puts
-wake a subscriber's thread. A node is stepped when it has input, a deadline, or every `agent_poll_s` (its
-timers).
+that listen to its cell, at once (a beacon as the message itself; a set as its bytes with the session as
+source); the subscriptions take remote samples only. A node is stepped when it has input, a deadline, or every
+`agent_poll_s` (its timers).
 """
 
 from __future__ import annotations
@@ -37,6 +34,7 @@ from typing import Any
 import zenoh
 from zenoh import ext
 
+from agent.beacons import BeaconOut, take_batch
 from agent.brain import Plan, commands
 from agent.link import OWN, PASSED, PEER_MESSAGES, AgentLink, Decoded, decode_sample
 from agent.messages import Input, Law, Reconnect
@@ -44,6 +42,7 @@ from agent.neighbours import Cells
 from agent.tagged_inbox import ALL, Tag, TaggedInbox
 from reconswarm.net import trace, wire
 from reconswarm.net.admission import Intrusion
+from reconswarm.net.batch import BeaconBatch
 from reconswarm.net.cells import Cell
 from reconswarm.net.inbox import Item
 from reconswarm.net.keys import Keys, WireError
@@ -81,6 +80,7 @@ class AgentHost:
         self._alive: tuple[int, ...] = ()  # the newest clock's live agents (one tuple while they stay the same)
         first = next(iter(links.values()))
         self.known = {a.id for a in first.node.s.agents}
+        self.out = BeaconOut(session, keys, min(links))  # our beacons: one batch per cell and round (agent/beacons.py)
         # The hosted agents' gates share one admission (agent/process.py): this one judges each sample once.
         self.gate = first.gate
         # The cells around the hosted agents' starts, declared with every cell's subscription: an agent that listens
@@ -125,7 +125,7 @@ class AgentHost:
         for cell in want - self.cell_subs.keys():
             tag, k = ("cell", cell), self.keys
             self.cell_subs[cell] = (
-                self.z.declare_subscriber(k.cell_agents(cell, "beacon"), self.inbox.handler(tag),
+                self.z.declare_subscriber(k.host_beacons(cell, None), self.inbox.handler(tag, rows=True),
                                           allowed_origin=self.locality),
                 ext.declare_advanced_subscriber(self.z, k.cell_agents(cell, "obstacles"), self.inbox.handler(tag),
                                                 allowed_origin=self.locality,
@@ -223,6 +223,9 @@ class AgentHost:
             if m.alive == self._alive:
                 m = dataclasses.replace(m, alive=self._alive)
             self._alive = m.alive
+        if isinstance(m, BeaconBatch):
+            take_batch(m, key, source, who, batches, at_s, self.active, self.gate, len(self.known))
+            return
         if cohosted or m is None or isinstance(m, PASSED):
             if m is not None:
                 for aid in who:
@@ -298,6 +301,7 @@ class AgentHost:
     def answers(self, now_s: float) -> dict[int, list[Input]]:
         """The law of every plan the hosted agents returned in this round, computed at once for those of one tick
         (agent/brain.py `commands`: each row the same bit for bit as the agent's alone)."""
+        self._flush()  # (the round's beacons, before any command of it)
         by_tick: dict[int, list[tuple[int, Plan]]] = {}
         for aid, plan in self.plans:
             by_tick.setdefault(plan.k, []).append((aid, plan))
@@ -329,7 +333,15 @@ class AgentHost:
             return True
         if isinstance(out, Cells):
             self.listen(aid, out)
-        put = self.links[aid].publish(out)
+        if isinstance(out, wire.Beacon):  # (put with the round's others: `_flush`)
+            home = self.links[aid].home
+            assert home is not None
+            self.out.add(home, out)
+            put: tuple[str, bytes] | None = (self.keys.beacon(home, aid), b"")  # (its label in the process)
+        else:
+            if isinstance(out, wire.Cmd):
+                self._flush()
+            put = self.links[aid].publish(out)
         if put is not None and isinstance(out, wire.ObstacleSet):
             self.cached[aid] = put
         if put is not None and len(self.links) > 1:
@@ -339,7 +351,12 @@ class AgentHost:
                 self.sets[aid] = (("local", aid), item)  # (for an agent that starts listening to its cell later)
         return False
 
+    def _flush(self) -> None:
+        self.out.flush({link.home for link in self.active.values() if link.home is not None})
+
     def close(self) -> None:
+        self._flush()
+        self.out.close()
         for link in self.links.values():
             link.close()
         for subs in self.cell_subs.values():

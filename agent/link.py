@@ -1,11 +1,11 @@
 """One agent's identity on the wire, inside its process's session (agent/host.py holds the session).
 
-An `AgentLink` is what makes a hosted agent indistinguishable from a lone one: its own robot interface (its
-state in, its command out: agent/robot_io.py), its own publishers (beacon and obstacle set under its home cell,
-report `agent-<id>`), its own liveliness token, its own gate
-(admission state and intrusion tally) and rejection count around its AgentNode. It does not subscribe: the
-host's shared subscriptions hand it the samples meant for it (`take` a message decoded once for everyone,
-or `decode` a raw sample for it alone), and it publishes what its node returns.
+An `AgentLink` is what makes a hosted agent indistinguishable from a lone one: its own robot interface (its state
+in, its command out: agent/robot_io.py), its own publishers (obstacle set under its home cell, report `agent-<id>`;
+its beacons go out in its host's batches, agent/beacons.py), its own liveliness token, its own gate (admission state
+and intrusion tally) and rejection count around its AgentNode. It does not subscribe: the host's shared
+subscriptions hand it the samples meant for it (`take` a message decoded once for everyone, or `decode` a raw sample
+for it alone), and it publishes what its node returns.
 """
 
 from __future__ import annotations
@@ -21,8 +21,9 @@ from agent.messages import Output, Received
 from agent.neighbours import Cells
 from agent.node import AgentNode
 from agent.robot_io import RobotFactory, keys_robot
-from reconswarm.net import trace, wire
+from reconswarm.net import wire
 from reconswarm.net.admission import Intrusion, IntrusionKind
+from reconswarm.net.batch import BeaconBatch
 from reconswarm.net.cells import Cell
 from reconswarm.net.decode import AGENT, decode
 from reconswarm.net.gate import Gate
@@ -37,7 +38,7 @@ log = logging.getLogger("reconswarm.agent")
 PASSED = (Token, RouterLink, Stop)  # taken as they are
 OWN = (wire.State, wire.Scan)  # for one agent: the others drop it
 PEER_MESSAGES = (wire.Beacon, wire.ObstacleSet)  # a peer's: never in our own name from another session
-Decoded = Received | None  # what a sample decodes to (None: a key no agent reads)
+Decoded = Received | BeaconBatch | None  # what a sample decodes to (None: a key no agent reads)
 
 
 def decode_sample(keys: Keys, key: str, payload: bytes, kind: str) -> Decoded:
@@ -63,7 +64,6 @@ class AgentLink(Member):
         self.node, self.keys, self.z, self.rej, self.gate = node, keys, session, rej, gate
         self.id, self.own_source = node.id, own_source
         self.home: Cell | None = None  # the cell we publish from (none declared yet)
-        self.pub_beacon: zenoh.Publisher
         self.pub_obs: ext.AdvancedPublisher
         l_m = float(node.s.head_offsets[node.s.agent_index(self.id)])
         # Our robot: its state in, our command out (agent/robot_io.py; `odometry`: the host's callback for what the
@@ -89,11 +89,9 @@ class AgentLink(Member):
         if c.home == self.home:
             return
         if self.home is not None:
-            self.pub_beacon.undeclare()
             self.pub_obs.undeclare()
         self.home = c.home
-        k, block = self.keys, zenoh.CongestionControl.BLOCK
-        self.pub_beacon = self.z.declare_publisher(k.beacon(c.home, self.id), congestion_control=block)
+        k = self.keys
         self.pub_obs = ext.declare_advanced_publisher(self.z, k.obstacles(c.home, self.id),
                                                       cache=ext.CacheConfig(max_samples=1))
 
@@ -112,7 +110,9 @@ class AgentLink(Member):
 
     def take(self, m: Decoded, key: str, source: str) -> Received | None:
         """A decoded sample, as this agent takes it: ours to act on, counted as invalid, or refused."""
-        if m is None or isinstance(m, PASSED):
+        if m is None or isinstance(m, BeaconBatch):  # (a batch of beacons: the host's, agent/host.py)
+            return None
+        if isinstance(m, PASSED):
             return m
         if isinstance(m, Invalid):
             self.rej.reject(key, m.reason)
@@ -135,15 +135,10 @@ class AgentLink(Member):
         self.gate.refuse(Intrusion(IntrusionKind.IMPERSONATION, source, key, why), time.monotonic())
 
     def publish(self, out: Output) -> tuple[str, bytes] | None:
-        """Put what the node returned; a beacon or obstacle set: its key and payload (for co-hosted agents)."""
+        """Put what the node returned (not a beacon: agent/beacons.py); an obstacle set: its key and payload (for
+        co-hosted agents)."""
         if isinstance(out, wire.Cmd):
             self.robot.command(out, self.node.period_s)
-        elif isinstance(out, wire.Beacon):
-            payload = wire.beacon_to_wire(out)
-            self.pub_beacon.put(payload)
-            trace.mark(trace.Mark.BEACON_PUT, out.k, out.id)
-            assert self.home is not None
-            return self.keys.beacon(self.home, self.id), payload
         elif isinstance(out, wire.ObstacleSet):
             payload = wire.obstacles_to_wire(out)
             self.pub_obs.put(payload)

@@ -28,28 +28,38 @@ class TaggedInbox:
     round, not several, takes the burst."""
 
     LINGER_S = 0.002  # how long the rest of a burst of states may take after its first
+    MAX_ROWS = 4096  # the most a batch's attachment may count for
 
     def __init__(self) -> None:
         self._samples: deque[tuple[Tag, Any, float, bool]] = deque()
         self._ready = threading.Event()
         self._want: float = 1
+        self._lock = threading.Lock()
+        self._count = 0  # what the samples waiting count for: one each, a batch of beacons its rows (`rows`)
 
-    def callback(self, tag: Tag, urgent: bool = False) -> Callable[[Any], None]:
+    def callback(self, tag: Tag, urgent: bool = False, rows: bool = False) -> Callable[[Any], None]:
+        """rows: a host's batch of beacons counts for the beacons it carries, as its attachment says (the nodes count
+        the beacons they wait for); a wrong count only wakes the loop early, or at its poll."""
         def cb(sample: Any) -> None:
-            self._samples.append((tag, sample, time.monotonic(), urgent))
-            if urgent or len(self._samples) >= self._want:
+            n = 1
+            if rows and (att := sample.attachment) is not None:
+                n = min(self.MAX_ROWS, max(1, int.from_bytes(att.to_bytes()[:4], "little")))
+            with self._lock:
+                self._samples.append((tag, sample, time.monotonic(), urgent))
+                self._count += n
+            if urgent or self._count >= self._want:
                 self._ready.set()
 
         return cb
 
-    def handler(self, tag: Tag, urgent: bool = False) -> Any:
+    def handler(self, tag: Tag, urgent: bool = False, rows: bool = False) -> Any:
         """A zenoh handler that appends to this inbox on the thread that received the sample (`indirect=False`):
         the samples of every subscription come in the order of the session's link. Lockstep needs that order:
         a peer's beacon of tick k-1 comes before the world's state of k (the world waits for the peer's command
         of k-1, put after that beacon), and the wait set of k is built from the beacons of k-1 in with the state
         (agent/neighbours.py). zenoh-python's default runs each subscription's callbacks on a Python thread of
         its own, and then a swamped cell subscription handed a beacon of k-1 over after the state of k."""
-        return zenoh.handlers.Callback(self.callback(tag, urgent), indirect=False)
+        return zenoh.handlers.Callback(self.callback(tag, urgent, rows), indirect=False)
 
     def _states(self) -> tuple[int, float]:
         """How many hosted agents' urgent samples wait, and when the first came (inf: none)."""
@@ -63,7 +73,7 @@ class TaggedInbox:
         end = math.inf if timeout is None else time.monotonic() + timeout
         while timeout != 0:
             self._ready.clear()  # (before looking: a sample that comes after the look sets it again)
-            if len(self._samples) >= self._want:
+            if self._count >= self._want:
                 break
             states, first = self._states()
             until = min(end, first + self.LINGER_S)
@@ -74,8 +84,10 @@ class TaggedInbox:
         if timeout != 0:  # (a round that only hands over what co-hosted agents published does not count)
             Inbox.wakeups += 1
         out = []
-        while self._samples:
-            tag, sample, at, _urgent = self._samples.popleft()
+        with self._lock:
+            got, self._count = list(self._samples), 0
+            self._samples.clear()
+        for tag, sample, at, _urgent in got:
             item = to_item(sample, at)
             if item is not None:
                 out.append((tag, item))

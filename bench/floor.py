@@ -15,7 +15,10 @@ scenario file's (`--scenario`). Per tick:
   `cells`: the beacon under its head point's cell (`swarm/<run>/cell/<cx>_<cy>/agent/<id>/beacon`), heard
   from the cells CellGrid.listen_cells names around it; it waits for every beacon of those cells, as the
   real agent does (its wait set plus the peers it hears anyway, agent/neighbours.py);
-  `all`: every beacon to everyone (`swarm/<run>/agent/<id>/beacon`, heard as `swarm/<run>/agent/*/beacon`).
+  `all`: every beacon to everyone (`swarm/<run>/agent/<id>/beacon`, heard as `swarm/<run>/agent/*/beacon`);
+  `batch`: the cells of `cells`, one message per process and cell carrying the beacons of its agents whose
+  state came in that round (`swarm/<run>/cell/<cx>_<cy>/host/<hid>/beacons`, the protocol in force:
+  reconswarm/net/batch.py), heard as `cell/<c>/host/*/beacons`.
 
 CPU per tick is measured over a window of ticks after a warm-up (start-up does not count): each agent and
 the world read their own rusage (CPU, context switches: every thread of the process) at the window's
@@ -45,6 +48,7 @@ from typing import Any
 import msgpack
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import floor_pattern as fp
 from _common import machine, median
 from floor_pattern import beacon_bytes, clock_bytes, cmd_bytes, head_points, heard, state_bytes
 from grid import grid_scenario
@@ -56,7 +60,7 @@ from reconswarm.net.session import ZenohOptions, open_session
 from reconswarm.scenario.model import Scenario, load
 
 ROOT = Path(__file__).resolve().parent.parent
-PATTERNS = ("cells", "all")
+PATTERNS = ("cells", "all", "batch")
 STALL_S = 60.0  # a process that makes no progress this long gives up (exit 1): the run is reported failed
 
 
@@ -82,7 +86,8 @@ def scenario_of(n: int, path: str | None) -> Scenario:
     return grid_scenario(n, 10.0) if not path else load(Path(path))
 
 
-def agent_main(port: int, run: str, s: Scenario, ids: list[int], pattern: str, start: int, end: int) -> int:
+def agent_main(port: int, run: str, s: Scenario, ids: list[int], pattern: str, start: int, end: int,
+               per_process: int = 1) -> int:
     """One process hosting the agents `ids` (one session, each agent its own keys and token, as an agent host):
     what a co-hosted agent publishes is counted by the others in the process, not sent back through zenoh."""
     import zenoh
@@ -91,12 +96,19 @@ def agent_main(port: int, run: str, s: Scenario, ids: list[int], pattern: str, s
 
     keys, pts, dt = Keys(run), head_points(s), s.meta.dt_s
     radius = {a: float(s.radii[s.agent_index(a)]) for a in ids}
-    hear = {a: heard(s, a, pattern)[0] for a in ids}
+    hear = {a: heard(s, a, "cells" if pattern == "batch" else pattern)[0] for a in ids}
+    n_src = {a: fp.sources(s, a, per_process) for a in ids}  # (batch: the samples a tick brings each agent)
     z = session(port)
     block, remote = zenoh.CongestionControl.BLOCK, zenoh.Locality.REMOTE
     inbox = TaggedInbox()
-    if pattern == "cells":
-        grid = CellGrid.for_scenario(s)
+    grid = CellGrid.for_scenario(s)
+    home, hid = {a: grid.cell_of(*pts[a]) for a in ids}, fp.host_of(ids[0], per_process)
+    if pattern == "batch":
+        pub_batch = {c: z.declare_publisher(keys.host_beacons(c, hid), congestion_control=block) for c in home.values()}
+        cells = sorted(set().union(*(grid.listen_cells(*pts[a]) for a in ids)))
+        subs = [z.declare_subscriber(keys.host_beacons(c, None), inbox.handler(("cell", c)), allowed_origin=remote)
+                for c in cells]
+    elif pattern == "cells":
         pub_beacon = {a: z.declare_publisher(keys.beacon(grid.cell_of(*pts[a]), a), congestion_control=block)
                       for a in ids}
         cells = sorted(set().union(*(grid.listen_cells(*pts[a]) for a in ids)))
@@ -111,6 +123,7 @@ def agent_main(port: int, run: str, s: Scenario, ids: list[int], pattern: str, s
     tokens = [z.liveliness().declare_token(keys.alive_agent(a)) for a in ids]  # last: we are ready to receive
     states: dict[int, set[int]] = {a: set() for a in ids}
     beacons: dict[int, dict[int, int]] = {a: {} for a in ids}  # agent -> tick -> beacons heard
+    batches: dict[int, dict[int, int]] = {a: {} for a in ids}  # agent -> tick -> batches heard (batch)
     clocks: set[int] = set()
     k, sent = dict.fromkeys(ids, 0), dict.fromkeys(ids, -1)
     marks: dict[int, tuple[float, int, int, int]] = {}
@@ -127,11 +140,19 @@ def agent_main(port: int, run: str, s: Scenario, ids: list[int], pattern: str, s
                 raise RuntimeError(f"agents {ids}: stuck at ticks {sorted(set(k.values()))}")
             acting = [a for a in ids if k[a] in states[a]]
             want = None if not acting else max(1, min(
-                len(hear[a]) - beacons[a].get(k[a], 0) + (k[a] not in clocks) for a in acting))
+                (n_src[a] - batches[a].get(k[a], 0) if pattern == "batch" else len(hear[a]) - beacons[a].get(k[a], 0))
+                + (k[a] not in clocks) for a in acting))
             for _tag, (key, payload, _kind, _src, _at) in inbox.take(want, 1.0, max(1, len(ids) - len(acting))):
                 m = msgpack.unpackb(payload, raw=False)
                 if key.endswith("/beacon"):
                     heard_by(m["id"], m["k"])
+                elif key.endswith("/beacons"):
+                    rows = fp.batch_rows(m)
+                    for b in ids:
+                        if any(r in hear[b] for r, _ in rows):
+                            batches[b][rows[0][1]] = batches[b].get(rows[0][1], 0) + 1
+                    for r, rk in rows:
+                        heard_by(r, rk)
                 elif key.endswith("/state"):
                     states[m["id"]].add(m["k"])
                     if m["k"] == start and start not in marks:
@@ -144,13 +165,21 @@ def agent_main(port: int, run: str, s: Scenario, ids: list[int], pattern: str, s
             moved = True
             while moved:  # (a co-hosted agent's beacon may complete another's tick)
                 moved = False
+                out: dict[Any, list[tuple[int, int, float, Any, float]]] = {}  # (batch: cell -> its round's beacons)
                 for a in ids:
                     ka = k[a]
                     if ka in states[a] and sent[a] < ka:
-                        pub_beacon[a].put(beacon_bytes(a, ka, ka * dt, pts[a], radius[a]))
+                        if pattern == "batch":
+                            out.setdefault(home[a], []).append((a, ka, ka * dt, pts[a], radius[a]))
+                        else:
+                            pub_beacon[a].put(beacon_bytes(a, ka, ka * dt, pts[a], radius[a]))
                         sent[a] = ka
                         heard_by(a, ka)
                         moved = True
+                for c, rows_out in out.items():  # (put before any command of the round)
+                    pub_batch[c].put(fp.batch_bytes(hid, rows_out))
+                for a in ids:
+                    ka = k[a]
                     if ka in states[a] and ka in clocks and beacons[a].get(ka, 0) >= len(hear[a]):
                         pub_cmd[a].put(cmd_bytes(a, ka))
                         states[a].discard(ka)
@@ -286,7 +315,8 @@ def floor_run(n: int, pattern: str, ticks: int = 200, warmup: int = 20, timeout_
             for g in groups:
                 a = g[0]
                 out = (logs / f"agent{a}.out").open("w")
-                agents.append(spawn([*me, "agent", "--ids", ",".join(map(str, g)), "--pattern", pattern, *common],
+                agents.append(spawn([*me, "agent", "--ids", ",".join(map(str, g)), "--pattern", pattern, *common,
+                                     "--per-process", str(per_process)],
                                     env=client_env, cwd=ROOT, stdout=out, stderr=(logs / f"agent{a}.log").open("w")))
             procs.extend(agents)
             world = spawn([*me, "world", *common], env=client_env, cwd=ROOT, stdout=subprocess.PIPE,
@@ -346,7 +376,8 @@ def main() -> int:
     args = ap.parse_args()
     if args.role == "agent":
         return agent_main(args.port, args.run, scenario_of(args.agents[0], args.scenario),
-                          [int(a) for a in args.ids.split(",")], args.pattern[0], args.start, args.end)
+                          [int(a) for a in args.ids.split(",")], args.pattern[0], args.start, args.end,
+                          args.per_process[0])
     if args.role == "world":
         return world_main(args.port, args.run, scenario_of(args.agents[0], args.scenario), args.start, args.end)
     print(f"# floor: router + world + N agents (zenoh clients, K per process), msgpack only, {args.ticks} ticks "

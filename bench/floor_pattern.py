@@ -29,6 +29,7 @@ def heard(s: Scenario, agent_id: int, pattern: str) -> tuple[frozenset[int], fro
     peers = frozenset(a for a in pts if a != agent_id)
     if pattern == "all":
         return peers, peers
+    # (`cells` and `batch` hear the same peers: `batch` carries them in one message per host and cell)
     grid = CellGrid.for_scenario(s)
     own = pts[agent_id]
     cells = grid.listen_cells(*own)
@@ -56,3 +57,31 @@ def beacon_bytes(aid: int, k: int, t: float, p: XY, radius_m: float) -> bytes:
 
 def cmd_bytes(aid: int, k: int) -> bytes:
     return pack({"id": aid, "k": k, "v_mps": 0.123456789, "omega_radps": -0.987654321})
+
+
+def host_of(aid: int, per_process: int) -> int:
+    """The host's key id of agent aid (its process's lowest id: processes of K consecutive ids from 1)."""
+    return (aid - 1) // per_process * per_process + 1
+
+
+def sources(s: Scenario, agent_id: int, per_process: int) -> int:
+    """How many batches a tick brings the agent in the `batch` pattern: one per (other host, cell) among the peers
+    it hears."""
+    pts, grid, me = head_points(s), CellGrid.for_scenario(s), host_of(agent_id, per_process)
+    return len({(h, grid.cell_of(*pts[a])) for a in heard(s, agent_id, "cells")[0]
+                if (h := host_of(a, per_process)) != me})
+
+
+def batch_bytes(hid: int, beacons: list[tuple[int, int, float, XY, float]]) -> bytes:
+    """Same map as reconswarm/net/batch.py's batch_to_wire: (id, k, t, p, radius) rows in packed columns."""
+    from reconswarm.net import wire
+    from reconswarm.net.batch import batch_to_wire
+
+    return batch_to_wire(hid, [wire.Beacon(a, k, t, p[0], p[1], r, 0) for a, k, t, p, r in beacons])
+
+
+def batch_rows(m: dict[str, Any]) -> list[tuple[int, int]]:
+    """(id, k) of each beacon of an unpacked batch (its rows read, as a receiver reads them)."""
+    from reconswarm.net.batch import ROW
+
+    return [(r[0], r[1]) for r in ROW.iter_unpack(m["rows"])]

@@ -4,7 +4,8 @@ and its nodes taking the beacons, in one process on a real zenoh session (nothin
 
 The host holds agents 1..K of the sparse grid of N (bench/grid.py: a row of the grid, as `--agents-per-process K`
 packs them), each listening to the cells around its start (agent/neighbours.py); every other agent's beacon of a
-tick, from its start under its cell, is a remote sample, routed to the hosted agents that listen to that cell
+tick, from its start under its cell, comes in its host's batch for that cell (hosts of K consecutive ids), a
+remote sample routed to the hosted agents that listen to that cell
 (`AgentHost.route`), then each node steps with its batch (`AgentNode.step`: no state yet, so the step is the
 beacons' bookkeeping). Per row: the beacons the host takes a tick, the (beacon, receiving agent) pairs, and the
 microseconds per pair of routing and of routing plus the nodes' steps (the best of `--reps` ticks: the cost
@@ -26,6 +27,7 @@ import math
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import zenoh
@@ -43,6 +45,11 @@ from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Rejections
 from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions
+
+try:  # one beacon message per host and cell (a checkout before it: a sample per beacon)
+    from reconswarm.net.batch import batch_to_wire
+except ImportError:
+    batch_to_wire = None  # type: ignore[assignment]
 
 
 def measure(z: zenoh.Session, n: int, k: int, reps: int) -> tuple[int, int, float, float]:
@@ -67,15 +74,22 @@ def measure(z: zenoh.Session, n: int, k: int, reps: int) -> tuple[int, int, floa
         best_route = best_all = math.inf
         pairs = beacons = 0
         starts = s.starts
-        peers = [(spec, float(starts[i][0]), float(starts[i][1])) for i, spec in enumerate(s.agents) if i >= k]
+        peers = [(spec, float(starts[i][0]), float(starts[i][1]), s.agents[i // k * k].id)
+                 for i, spec in enumerate(s.agents) if i >= k]
         for tick in range(reps):
             items = []
-            for spec, x, y in peers:
+            by_host: dict[tuple[int, Any], list[wire.Beacon]] = {}  # (the peers' hosts of k: one batch per cell)
+            for spec, x, y, hid in peers:
                 cell = grid.cell_of(x, y)
                 if cell in heard:
                     b = wire.Beacon(spec.id, tick, 0.05 * tick, x, y, spec.radius_m, 0)
-                    items.append((("cell", cell), (keys.beacon(cell, spec.id), wire.beacon_to_wire(b), "PUT", "peer",
-                                                   0.0)))
+                    if batch_to_wire is None:  # (a checkout before the batches: a sample per beacon)
+                        items.append((("cell", cell), (keys.beacon(cell, spec.id), wire.beacon_to_wire(b), "PUT",
+                                                       "peer", 0.0)))
+                    by_host.setdefault((hid, cell), []).append(b)
+            if batch_to_wire is not None:
+                items = [(("cell", cell), (keys.host_beacons(cell, hid), batch_to_wire(hid, rows), "PUT", "peer", 0.0))
+                         for (hid, cell), rows in by_host.items()]
             t0 = time.perf_counter()
             batches = host.route(items)
             t1 = time.perf_counter()
@@ -83,7 +97,7 @@ def measure(z: zenoh.Session, n: int, k: int, reps: int) -> tuple[int, int, floa
                 links[a].node.step(batch, 1.0)
             t2 = time.perf_counter()
             best_route, best_all = min(best_route, t1 - t0), min(best_all, t2 - t0)
-            beacons, pairs = len(items), sum(len(b) for b in batches.values())
+            beacons, pairs = sum(map(len, by_host.values())), sum(len(b) for b in batches.values())
         return beacons, pairs, 1e6 * best_route / max(1, pairs), 1e6 * best_all / max(1, pairs)
     finally:
         host.close()

@@ -31,6 +31,7 @@ from monitor.rows import Close, Commit, Resume, write
 from reconswarm.errors import ProcessFailure
 from reconswarm.net import wire
 from reconswarm.net.admission import Intrusion, IntrusionKind
+from reconswarm.net.batch import BeaconBatch
 from reconswarm.net.decode import LIVE_VIEW, MONITOR, decode
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Inbox, Item, Rejections
@@ -106,6 +107,8 @@ class MonitorPort(Member):
             m = decode(self.keys, self.accepts, key, payload, kind)
             if m is None or isinstance(m, Token):
                 return m
+            if isinstance(m, BeaconBatch):  # (no kind the monitor accepts)
+                return None
             # (a report: from the session that speaks for that process; an agent's pinned by its first)
             if not self.gate.admit(m, source, key, at_s):
                 return None

@@ -6,10 +6,12 @@ crosses between the hosts: what the other hosts' processes may send and receive 
 own rules), and what ours may send their way; nothing else (our clock, say, never comes in from there).
 The rules (`R` = `swarm/<run>`) allow, per process and nothing else:
 
-- agent i: put `R/agent/i/cmd`, `R/cell/*/agent/i/{beacon,obstacles}` (in any cell, under its own id
-  only), its intrusion report `R/report/agent-i`; token `R/alive/agent/i`; the advanced publisher's cache
-  (queryable `R/cell/*/agent/i/obstacles/@adv/pub/**`, replies on `R/cell/*/agent/i/obstacles`); subscribe
-  (and receive) `R/agent/i/state`, `R/clock`, `R/cell/*/agent/*/beacon`, `R/cell/*/agent/*/obstacles`;
+- agent i, hosted in a process whose lowest agent id is h (h = i for a lone agent): put `R/agent/i/cmd`,
+  `R/cell/*/agent/i/obstacles` (in any cell, under its own id only), its host's beacon batches
+  `R/cell/*/host/h/beacons` (under its host's id only), its intrusion report `R/report/agent-i`; token
+  `R/alive/agent/i`; the advanced publisher's cache (queryable `R/cell/*/agent/i/obstacles/@adv/pub/**`,
+  replies on `R/cell/*/agent/i/obstacles`); subscribe (and receive) `R/agent/i/state`, `R/clock`,
+  `R/cell/*/host/*/beacons`, `R/cell/*/agent/*/obstacles`;
   history queries on `R/cell/*/agent/*/obstacles/@adv/**`; liveliness subscriptions on `R/alive/**` and
   `R/cell/*/agent/*/obstacles/@adv/pub/**`. An agent host (`agents-1-5`): what each of its agents may.
 - simworld: put `R/clock`, `R/truth`, `R/agent/*/state`, `R/report/simworld`; token `R/alive/simworld`;
@@ -106,13 +108,14 @@ class _Rules:
                 self.rule(f"{rid}-ros2-tokens", ["liveliness_token"], ("ingress",), [lv, f"{lv}/**"])]
 
 
-def _agent(b: _Rules, i: int, domain: int | None) -> list[str]:
+def _agent(b: _Rules, i: int, host: int, domain: int | None) -> list[str]:
     r = b.r
     a, own = f"{r}/agent/{i}", f"{r}/cell/*/agent/{i}"
-    beacons, obstacles = f"{r}/cell/*/agent/*/beacon", f"{r}/cell/*/agent/*/obstacles"
+    beacons, obstacles = f"{r}/cell/*/host/*/beacons", f"{r}/cell/*/agent/*/obstacles"
     out = [
         *b.obstacle_reader("agents", [f"{r}/clock", beacons]),
-        *b.publish(f"agent-{i}-pub", [f"{a}/cmd", f"{own}/beacon", f"{own}/obstacles", f"{r}/report/agent-{i}"],
+        *b.publish(f"agent-{i}-pub", [f"{a}/cmd", f"{r}/cell/*/host/{host}/beacons", f"{own}/obstacles",
+                                      f"{r}/report/agent-{i}"],
                    [f"{r}/agent/*/cmd", beacons, obstacles, f"{r}/report/*"]),
         *b.subscribe(f"agent-{i}-own", [f"{a}/state"]),
         *b.membership(f"agent-{i}", f"{r}/alive/agent/{i}"),
@@ -165,7 +168,8 @@ def _monitor(b: _Rules, live_view: bool) -> list[str]:
 def _all_processes(dep: Deployment) -> tuple[_Rules, dict[str, list[str]]]:
     """Every process of the deployment with its rule ids."""
     b = _Rules(dep.run)
-    per_agent = {i: _agent(b, i, dep.ros2_domain) for i in dep.agent_ids}
+    host_of = {i: min(g) for h in dep.hosts for g in h.agent_processes for i in g}  # (its host's key: lowest id)
+    per_agent = {i: _agent(b, i, host_of[i], dep.ros2_domain) for i in dep.agent_ids}
     grants: dict[str, list[str]] = {}
     for h in dep.hosts:
         for g in h.agent_processes:

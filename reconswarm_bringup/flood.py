@@ -23,6 +23,7 @@ from typing import Any
 
 import msgpack
 
+from reconswarm.net.batch import batch_from_wire
 from reconswarm.net.cells import Cell, CellGrid, chunk_cell
 from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions, open_session
@@ -67,14 +68,15 @@ def _cells_now(session: Any, k: Keys, ids: list[int], start: dict[int, Cell]) ->
     def got(sample: Any) -> None:
         key = str(sample.key_expr)
         try:  # (WireError is a ValueError)
-            _, a, _ = k.parse(key)
+            _, host, _ = k.parse(key)
             cell = chunk_cell(key.split("/")[-4])
+            batch = batch_from_wire(sample.payload.to_bytes(), host)
         except ValueError:
             return
-        if a is not None:
-            heard[a] = cell
+        for b in batch.beacons:
+            heard[b.id] = cell
 
-    sub = session.declare_subscriber(k.cell_agents(None, "beacon"), got)
+    sub = session.declare_subscriber(k.host_beacons(None, None), got)
     deadline = time.monotonic() + 2.0
     while time.monotonic() < deadline and not set(ids) <= heard.keys():
         time.sleep(0.05)
@@ -98,7 +100,7 @@ def run(cfg: FloodConfig) -> dict[str, int]:
         cells = _cells_now(session, k, ids, start)
         keys: list[tuple[str, int]] = [(k.clock, 0), (k.truth, 0), (k.event, 0)]
         for a in ids:
-            keys += [(k.state(a), a), (k.cmd(a), a), (k.beacon(cells[a], a), a),
+            keys += [(k.state(a), a), (k.cmd(a), a), (k.host_beacons(cells[a], a), a),
                      (k.obstacles(cells[a], a), a)]
         pubs = {key: session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
                 for key, _ in keys}

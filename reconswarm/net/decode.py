@@ -13,17 +13,19 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 from reconswarm.net import wire
+from reconswarm.net.batch import BeaconBatch, batch_from_wire
 from reconswarm.net.keys import Keys, ParsedKey, WireError
 from reconswarm.net.node import Role, Token
 from reconswarm.net.report import Report, report_from_wire
 
 Kind = tuple[str, str]  # (the key's kind, its leaf); a report key's leaf is ""
-Message = (wire.State | wire.Scan | wire.Beacon | wire.ObstacleSet | wire.Cmd | wire.Clock | wire.Truth | Report
-           | Token)
+Message = (wire.State | wire.Scan | wire.Beacon | BeaconBatch | wire.ObstacleSet | wire.Cmd | wire.Clock | wire.Truth
+           | Report | Token)
 
 STATE: Kind = ("agent", "state")
 SCAN: Kind = ("agent", "scan")
 BEACON: Kind = ("agent", "beacon")
+HOST_BEACONS: Kind = ("host", "beacons")
 OBSTACLES: Kind = ("agent", "obstacles")
 CMD: Kind = ("agent", "cmd")
 CLOCK: Kind = ("clock", "")
@@ -50,6 +52,7 @@ TABLE: dict[Kind, Entry] = {
     STATE: Entry(lambda b, p, _put: wire.state_from_wire(b, _id(p)), wire.State),
     SCAN: Entry(lambda b, p, _put: wire.scan_from_wire(b, _id(p)), wire.Scan),
     BEACON: Entry(lambda b, p, _put: wire.beacon_from_wire(b, _id(p)), wire.Beacon),
+    HOST_BEACONS: Entry(lambda b, p, _put: batch_from_wire(b, _id(p)), BeaconBatch),
     OBSTACLES: Entry(lambda b, p, _put: wire.obstacles_from_wire(b, _id(p)), wire.ObstacleSet),
     CMD: Entry(lambda b, p, _put: wire.cmd_from_wire(b, _id(p)), wire.Cmd),
     CLOCK: Entry(lambda b, _p, _put: wire.clock_from_wire(b), wire.Clock),
@@ -61,7 +64,7 @@ TABLE: dict[Kind, Entry] = {
 }
 
 # What each port accepts (the rest of the run's keys are not its).
-AGENT = frozenset({STATE, SCAN, BEACON, OBSTACLES, CLOCK, ALIVE_AGENT, ALIVE_WORLD})
+AGENT = frozenset({STATE, SCAN, HOST_BEACONS, OBSTACLES, CLOCK, ALIVE_AGENT, ALIVE_WORLD})
 WORLD = frozenset({CMD, ALIVE_AGENT, ALIVE_MONITOR})
 MONITOR = frozenset({CLOCK, TRUTH, REPORT, ALIVE_AGENT, ALIVE_WORLD})
 LIVE_VIEW = frozenset({OBSTACLES})  # the monitor's, while it serves the live view

@@ -7,7 +7,8 @@ from dataclasses import dataclass, field
 from reconswarm.net.cells import Cell, cell_chunk, chunk_cell
 from reconswarm.scenario.wire_limits import agent_id_from_text
 
-CELL_LEAVES = ("beacon", "obstacles")  # what is published under a cell of the sender's position
+CELL_LEAVES = ("beacon", "obstacles")  # an agent's keys under a cell of its position (`beacon`: in-process only)
+HOST_BEACONS = "beacons"  # a host's batch of its agents' beacons in a cell (reconswarm/net/batch.py)
 
 
 class WireError(ValueError):
@@ -16,8 +17,9 @@ class WireError(ValueError):
 
 @dataclass(frozen=True)
 class ParsedKey:
-    """A key's kind ("agent", "clock", "event", "truth", "alive", "report"), agent id, leaf, and the cell it was
-    published under (`cell/<cx>_<cy>/agent/<id>/<leaf>`; None for every other key)."""
+    """A key's kind ("agent", "host", "clock", "event", "truth", "alive", "report"), agent id (a host's key: its
+    lowest agent id), leaf, and the cell it was published under (`cell/<cx>_<cy>/agent/<id>/<leaf>`,
+    `cell/<cx>_<cy>/host/<hid>/beacons`; None for every other key)."""
 
     kind: str
     agent_id: int | None
@@ -53,7 +55,14 @@ class Keys:
         return f"{self.prefix}/cell/{cell_chunk(cell)}/agent/{agent_id}/{leaf}"
 
     def beacon(self, cell: Cell, agent_id: int) -> str:
+        """One agent's beacon in a cell: the label of a co-hosted agent's beacon handed over in the process (the
+        wire carries beacons in host batches, `host_beacons`; nobody subscribes to this key)."""
         return self.in_cell(cell, agent_id, "beacon")
+
+    def host_beacons(self, cell: Cell | None, host: int | None) -> str:
+        """A host's batch of its agents' beacons in a cell (None: every cell, every host)."""
+        where = "*" if cell is None else cell_chunk(cell)
+        return f"{self.prefix}/cell/{where}/host/{'*' if host is None else host}/{HOST_BEACONS}"
 
     def obstacles(self, cell: Cell, agent_id: int) -> str:
         return self.in_cell(cell, agent_id, "obstacles")
@@ -102,6 +111,7 @@ class Keys:
 
     def parse(self, key: str) -> tuple[str, int | None, str]:
         """Classify a key: ("agent", id, leaf) (also for `cell/<cx>_<cy>/agent/<id>/<leaf>`) |
+        ("host", its lowest agent id, "beacons") (`cell/<cx>_<cy>/host/<hid>/beacons`) |
         ("clock", None, "") | ("event", None, "") | ("truth", None, "") |
         ("alive", id or None, "agent" | "simworld" | "monitor") |
         ("report", agent id or None, "agent-<id>" | "simworld").
@@ -134,6 +144,12 @@ class Keys:
             except ValueError:
                 raise WireError(f"bad cell in key {key!r}") from None
             return ParsedKey("agent", _key_id(parts[3], key), parts[4], cell)
+        if len(parts) == 5 and parts[0] == "cell" and parts[2] == "host" and parts[4] == HOST_BEACONS:
+            try:
+                cell = chunk_cell(parts[1])
+            except ValueError:
+                raise WireError(f"bad cell in key {key!r}") from None
+            return ParsedKey("host", _key_id(parts[3], key), parts[4], cell)
         if len(parts) == 3 and parts[:2] == ["alive", "agent"]:
             return ParsedKey("alive", _key_id(parts[2], key), "agent")
         if len(parts) == 2 and parts[0] == "report" and parts[1] == "simworld":

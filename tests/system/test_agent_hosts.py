@@ -18,6 +18,7 @@ import pytest
 import zenoh
 
 from reconswarm.net import wire
+from reconswarm.net.batch import batch_from_wire
 from reconswarm.net.inbox import sample_source
 from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions
@@ -122,7 +123,7 @@ def test_an_outside_client_sees_each_hosted_agent_as_its_own(tmp_path: Path, out
         z = _open(f"tcp/127.0.0.1:{port}", proc)
         z.liveliness().declare_subscriber("swarm/*/alive/agent/*", lambda smp: tokens.put(
             (str(smp.key_expr), str(smp.kind))), history=True)
-        for key in ("swarm/*/cell/*/agent/*/beacon", "swarm/*/agent/*/cmd", "swarm/*/report/*"):
+        for key in ("swarm/*/cell/*/host/*/beacons", "swarm/*/agent/*/cmd", "swarm/*/report/*"):
             z.declare_subscriber(key, lambda smp: data.put(
                 (str(smp.key_expr), smp.payload.to_bytes(), sample_source(smp))))
         cpus = host_cpus(out, proc, 2)
@@ -150,9 +151,13 @@ def test_an_outside_client_sees_each_hosted_agent_as_its_own(tmp_path: Path, out
         key, payload, source = data.get()
         what, aid, leaf = keys.parse(key)
         assert aid is not None, key
-        if leaf == "beacon":
-            assert wire.beacon_from_wire(payload, aid).id == aid
-        elif leaf == "cmd":
+        if leaf == "beacons":  # a host's batch, under its lowest id: its own agents only
+            got = [b.id for b in batch_from_wire(payload, aid).beacons]
+            assert set(got) <= set(IDS[:5] if aid == IDS[0] else IDS[5:]), (key, got)
+            for b_id in got:
+                sources["beacon"][b_id].add(source)
+            continue
+        if leaf == "cmd":
             assert wire.cmd_from_wire(payload, aid).id == aid
         elif what == "report":
             leaf = "report"

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from monitor.messages import ClockFrom, Input, RefusedEnd
+from monitor.messages import ClockFrom, Input, RefusedEnd, Scene
 from monitor.node import MonitorNode
 from monitor.rows import Resume, write
 from reconswarm.net import wire
@@ -74,6 +74,7 @@ class Run:
         self.refused: list[RefusedEnd] = []
         self.rows: list[Any] = []  # what went to the record (events included), in order
         self.exit: Exit | None = None
+        self.scenes: list[Scene] = []  # what the live views were given, in order
 
     def step(self, now: float, *inputs: Input) -> list[Event]:
         """One step; the events it published."""
@@ -84,6 +85,8 @@ class Run:
                 self.exit = out
             elif isinstance(out, RefusedEnd):
                 self.refused.append(out)
+            elif isinstance(out, Scene):  # (for the live views)
+                self.scenes.append(out)
             else:
                 self.rows.append(out)
                 write(self.writer, out)

@@ -20,6 +20,7 @@ from agent.messages import Law, Reconnect
 from agent.neighbours import Cells
 from agent.node import AgentNode
 from reconswarm.net import wire
+from reconswarm.net.batch import batch_to_wire
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Rejections
 from reconswarm.net.node import Exit, Role, Token
@@ -106,7 +107,7 @@ def test_an_obstacle_set_larger_than_any_the_run_can_send_is_refused_by_each_lis
     assert host.links[1].gate.count == 1 and host.links[2].gate.count == 1
     assert set(host.links[1].gate.tally.rows) == {("oversize", PEER)} and host.links[1].rej.count == 0
     # A beacon that large is no set: decoded (malformed here), counted as invalid, no intrusion.
-    huge = (KEYS.beacon(A, 3), b"\x00" * (cap + 1), "PUT", PEER, 0.0)
+    huge = (KEYS.host_beacons(A, 3), b"\x00" * (cap + 1), "PUT", PEER, 0.0)
     got = route(host, [(("cell", A), huge)])
     assert kinds(got[1]) == ["Invalid"] and host.links[1].gate.count == 1 and host.links[1].rej.count == 1
 
@@ -117,7 +118,7 @@ def test_the_once_a_round_filter_merges_only_one_sample_through_two_subscription
     genuine = beacon(3, A, at=1.0)
     replayed = (genuine[0], genuine[1], "PUT", OTHER, 1.0)  # the same bytes at the same time, another session
     later = beacon(3, A, k=1, at=1.0)  # the same key and source, the next tick's bytes
-    moved = (KEYS.beacon(B, 3), genuine[1], "PUT", PEER, 1.0)  # the same bytes under another cell's key
+    moved = (KEYS.host_beacons(B, 3), genuine[1], "PUT", PEER, 1.0)  # the same bytes under another cell's key
     got = route(host, [(("cell", A), genuine), (("cell", None), genuine), (("cell", A), replayed),
                       (("cell", A), later), (("cell", B), moved)])
     assert [(m.id, m.k) for m in got[1]] == [(3, 0), (3, 1)]  # the replay refused by agent 1's admission, counted
@@ -170,7 +171,7 @@ def test_a_refusal_is_logged_with_the_key_it_came_on(host: AgentHost, caplog: py
     cap = host.links[1].gate.adm.max_set_bytes
     big = (KEYS.obstacles(A, 3), b"\x00" * (cap + 1), "PUT", PEER, 0.0)
     odd = beacon(3, A, source=PEER)
-    liar = (odd[0], wire.beacon_to_wire(wire.Beacon(3, 0, 0.0, 1e6, 1e6, float(S.radii[S.agent_index(3)]))),
+    liar = (odd[0], batch_to_wire(3, [wire.Beacon(3, 0, 0.0, 1e6, 1e6, float(S.radii[S.agent_index(3)]))]),
             "PUT", OTHER, 0.0)
     with caplog.at_level("WARNING"):
         route(host, [(("cell", A), big), (("cell", A), liar)])
@@ -181,8 +182,8 @@ def test_a_refusal_is_logged_with_the_key_it_came_on(host: AgentHost, caplog: py
 def test_a_key_without_a_valid_cell_counts_as_invalid_for_those_its_subscription_serves(host: AgentHost) -> None:
     host.listen(1, Cells(A, frozenset({A})))
     host.listen(2, Cells(B, frozenset({B})))
-    six_parts = f"{KEYS.prefix}/cell/0_0/agent/3/beacon/more"
-    no_cell = f"{KEYS.prefix}/cell/x_y/agent/3/beacon"
+    six_parts = f"{KEYS.prefix}/cell/0_0/host/3/beacons/more"
+    no_cell = f"{KEYS.prefix}/cell/x_y/host/3/beacons"
     payload = beacon(3, A)[1]
     got = route(host, [(("cell", B), (six_parts, payload, "PUT", PEER, 0.0)),
                       (("cell", None), (no_cell, payload, "PUT", PEER, 0.0)),

@@ -16,6 +16,7 @@ from typing import Any
 
 from agent.node import AgentNode
 from reconswarm.net import wire
+from reconswarm.net.batch import batch_to_wire
 from tests.support import wait_subscribed
 from tests.unit.test_agent_host_cases import make_host, state
 from tests.unit.test_agent_host_routing import KEYS, S, at_start
@@ -30,15 +31,15 @@ def test_a_burst_of_beacons_on_a_cell_reaches_the_inbox_before_the_state_put_aft
         h = make_host(z, (1,))
         try:
             home3 = AgentNode(S, 3, 0.0).nb.home
-            for key in (KEYS.state(1), KEYS.beacon(home3, 3)):  # (the host's declarations reach `out`)
+            for key in (KEYS.state(1), KEYS.host_beacons(home3, 3)):  # (the host's declarations reach `out`)
                 wait_subscribed(out, key)
             take_own_tokens(h.inbox, (1,))
-            burst, marker = wire.beacon_to_wire(at_start(3)), wire.beacon_to_wire(at_start(3, 1))
+            burst, marker = batch_to_wire(3, [at_start(3)]), batch_to_wire(3, [at_start(3, 1)])
             for rounds in range(ROUNDS):
                 for _ in range(BURST):
-                    out.put(KEYS.beacon(home3, 3), burst)
+                    out.put(KEYS.host_beacons(home3, 3), burst)
                 out.put(KEYS.state(1), wire.state_to_wire(state(1, rounds)))
-                out.put(KEYS.beacon(home3, 3), marker)  # (once in, every beacon of the burst is: one subscription)
+                out.put(KEYS.host_beacons(home3, 3), marker)  # (once in, every one of the burst is: one subscription)
                 got: list[Any] = []
                 deadline = time.monotonic() + 60.0
                 while not any(it[1] == marker for _tag, it in got) and time.monotonic() < deadline:

@@ -17,6 +17,7 @@ from agent.link import AgentLink
 from agent.neighbours import Cells
 from agent.node import AgentNode
 from reconswarm.net import wire
+from reconswarm.net.batch import batch_to_wire
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Rejections
 from reconswarm.net.keys import Keys
@@ -55,8 +56,9 @@ def at_start(aid: int, k: int = 0) -> wire.Beacon:
 
 def beacon(aid: int, cell: tuple[int, int], source: str = PEER, k: int = 0,
            at: float | None = None) -> tuple[str, bytes, str, str, float]:
-    """at_start's beacon as a sample in `cell` from `source`, arrived at `at` (None: now)."""
-    return (KEYS.beacon(cell, aid), wire.beacon_to_wire(at_start(aid, k)), "PUT", source,
+    """at_start's beacon as a sample in `cell` from `source` (a batch of one from the host of aid), arrived at `at`
+    (None: now)."""
+    return (KEYS.host_beacons(cell, aid), batch_to_wire(aid, [at_start(aid, k)]), "PUT", source,
             time.monotonic() if at is None else at)
 
 
@@ -99,8 +101,7 @@ def test_a_set_heard_before_is_replayed_to_an_agent_that_starts_listening_to_its
 def test_what_a_co_hosted_agent_publishes_goes_to_the_others_never_back(host: AgentHost) -> None:
     host.listen(1, Cells(A, frozenset({A})))
     host.listen(2, Cells(A, frozenset({A, B})))
-    item = beacon(1, A, source=host.source)
-    host.local.append((("local", 1), item, None))
+    host.act(1, at_start(1), 0.0)  # (handed over as the message itself; on the wire in the round's batch)
     assert host.pending() == {2: 1}  # (the runtime counts it in what agent 2 still needs: nothing need arrive)
     got = host.route([])
     assert got[1] == [] and ids(got[2]) == [("Beacon", 1)] and host.pending() == {}
@@ -131,9 +132,9 @@ def test_a_co_hosted_agents_beacon_reaches_the_others_as_the_message_it_put(host
     host.listen(2, Cells(A, frozenset({A})))
     sent = at_start(1)
     host.act(1, sent, 0.0)
-    [(tag, (key, payload, *_rest), message)] = host.local
+    [(tag, (key, _payload, *_rest), message)] = host.local
     assert tag == ("local", 1) and key == KEYS.beacon(A, 1) and message is sent
-    assert wire.beacon_from_wire(payload, 1) == sent
+    assert host.out.pending == {A: {1: sent}}  # (on the wire in the round's batch of cell A)
     got = host.route([])
     assert got[1] == [] and len(got[2]) == 1 and got[2][0] is sent and host.local == []
 

@@ -21,6 +21,7 @@ from agent.node import AgentNode
 from agent.ros2_io import AgentRos2, ros2_robot
 from reconswarm.net import ros2_graph as graph
 from reconswarm.net import wire
+from reconswarm.net.batch import batch_to_wire
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Rejections
 from reconswarm.net.node import Exit
@@ -71,16 +72,17 @@ def test_the_hosts_subscriptions_take_remote_samples_tagged_with_history_and_non
             pub.put(obstacle_set(3, home3)[1])
             wait_token(z, KEYS.alive_agent(3))
             h = make_host(z)
-            for key in (KEYS.state(1), KEYS.clock, KEYS.beacon(home3, 3)):  # (the host's declarations reach `out`)
+            for key in (KEYS.state(1), KEYS.clock, KEYS.host_beacons(home3, 3)):  # (the host's declarations reach it)
                 wait_subscribed(out, key)
             got: list[tuple[Any, Item]] = h.inbox.take(0, 0.0)  # (history: the token and the set)
             out.put(KEYS.state(1), wire.state_to_wire(state(1)))
             out.put(KEYS.clock, wire.clock_to_wire(wire.Clock(0, 0.0, (1, 2, 3))))
-            out.put(KEYS.beacon(home3, 3), wire.beacon_to_wire(at_start(3)))
-            z.put(KEYS.beacon(home3, 4), wire.beacon_to_wire(at_start(4)))  # our own session's: never taken
+            out.put(KEYS.host_beacons(home3, 3), batch_to_wire(3, [at_start(3)]))
+            z.put(KEYS.host_beacons(home3, 4), batch_to_wire(4, [at_start(4)]))  # our own session's: never taken
             z.put(*obstacle_set(4, home3)[:2])
             deadline = time.monotonic() + 10.0
-            want = {KEYS.state(1), KEYS.clock, KEYS.beacon(home3, 3), KEYS.alive_agent(3), KEYS.obstacles(home3, 3)}
+            want = {KEYS.state(1), KEYS.clock, KEYS.host_beacons(home3, 3), KEYS.alive_agent(3),
+                    KEYS.obstacles(home3, 3)}
             while time.monotonic() < deadline and not want <= {it[0] for _t, it in got}:
                 got += h.inbox.take(1, 0.5)
             tags: dict[str, set[Any]] = {}
@@ -88,10 +90,10 @@ def test_the_hosts_subscriptions_take_remote_samples_tagged_with_history_and_non
                 tags.setdefault(it[0], set()).add(tag)
             assert tags[KEYS.alive_agent(3)] == {ALL} and tags[KEYS.clock] == {ALL}
             assert tags[KEYS.state(1)] == {("own", 1)}
-            assert tags[KEYS.obstacles(home3, 3)] and tags[KEYS.beacon(home3, 3)]
-            assert all(t[0] == "cell" and t[1] in (None, home3) for t in tags[KEYS.beacon(home3, 3)] | tags[
+            assert tags[KEYS.obstacles(home3, 3)] and tags[KEYS.host_beacons(home3, 3)]
+            assert all(t[0] == "cell" and t[1] in (None, home3) for t in tags[KEYS.host_beacons(home3, 3)] | tags[
                 KEYS.obstacles(home3, 3)])
-            assert KEYS.beacon(home3, 4) not in tags and KEYS.obstacles(home3, 4) not in tags
+            assert KEYS.host_beacons(home3, 4) not in tags and KEYS.obstacles(home3, 4) not in tags
             batches = route(h, got)
             assert "Token" in kinds(batches[1]) and "ObstacleSet" in kinds(batches[1]) and "State" in kinds(batches[1])
             assert "State" not in kinds(batches[2]) and "Clock" in kinds(batches[2])
@@ -106,12 +108,12 @@ def test_the_states_of_the_hosted_agents_wake_the_host_at_once_a_peers_beacon_do
         h = make_host(z)
         try:
             home3 = AgentNode(S, 3, 0.0).nb.home
-            for key in (KEYS.state(1), KEYS.state(2), KEYS.beacon(home3, 3)):  # (the host's declarations reach `out`)
+            for key in (KEYS.state(1), KEYS.state(2), KEYS.host_beacons(home3, 3)):  # (the declarations reach `out`)
                 wait_subscribed(out, key)
             take_own_tokens(h.inbox, (1, 2))
-            out.put(KEYS.beacon(home3, 3), wire.beacon_to_wire(at_start(3)))  # (not urgent: the take waits it out)
+            out.put(KEYS.host_beacons(home3, 3), batch_to_wire(3, [at_start(3)]))  # (not urgent: the take waits it out)
             t0 = time.monotonic()
-            assert {it[0] for _tag, it in h.inbox.take(None, 1.0, urgent=1)} == {KEYS.beacon(home3, 3)}
+            assert {it[0] for _tag, it in h.inbox.take(None, 1.0, urgent=1)} == {KEYS.host_beacons(home3, 3)}
             assert time.monotonic() - t0 >= 0.9, "a peer's beacon woke the take as if it were our state"
             got: list[Any] = []
             t0 = time.monotonic()

@@ -166,9 +166,11 @@ def test_secure_mode_gives_an_agent_host_one_credential_granted_exactly_its_agen
                 and set(rules[rid]["messages"]) & {"put", "reply", "liveliness_token"}}
 
     r = "swarm/paper-0a1b2c"
-    assert sent("agents-1-5") == {k for i in (1, 2, 3, 4, 5) for k in (
-        f"{r}/agent/{i}/cmd", f"{r}/cell/*/agent/{i}/beacon", f"{r}/cell/*/agent/{i}/obstacles",
-        f"{r}/report/agent-{i}", f"{r}/alive/agent/{i}")} == set().union(*(sent(f"agent-{i}") for i in range(1, 6)))
+    own = {k for i in (1, 2, 3, 4, 5) for k in (
+        f"{r}/agent/{i}/cmd", f"{r}/cell/*/agent/{i}/obstacles", f"{r}/report/agent-{i}", f"{r}/alive/agent/{i}")}
+    assert sent("agents-1-5") == {*own, f"{r}/cell/*/host/1/beacons"}  # (its beacon batches: under its lowest id)
+    assert set().union(*(sent(f"agent-{i}") for i in range(1, 6))) == {
+        *own, *(f"{r}/cell/*/host/{i}/beacons" for i in range(1, 6))}
     assert not any(f"/{i}/" in k or k.endswith(f"/{i}") or k.endswith(f"-{i}") for k in sent("agents-1-5")
                    for i in range(6, 11))
     assert "agents-6" not in {c for sub in acl["subjects"] for c in sub["cert_common_names"]}

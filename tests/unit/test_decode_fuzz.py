@@ -29,9 +29,11 @@ from agent.node import AgentNode
 from monitor.node import MonitorNode
 from monitor.process import MonitorPort
 from reconswarm.net import wire
+from reconswarm.net.batch import FIELDS as BATCH_FIELDS
+from reconswarm.net.batch import batch_to_wire
 from reconswarm.net.gate import Gate
 from reconswarm.net.inbox import Item, Rejections
-from reconswarm.net.keys import Keys
+from reconswarm.net.keys import Keys, ParsedKey, WireError
 from reconswarm.net.node import Invalid, Role, Token
 from reconswarm.net.report import Report, report_to_wire
 from reconswarm.net.session import ZenohOptions
@@ -53,10 +55,13 @@ IDS_TEXT = st.one_of(
 CHUNKS = st.one_of(st.sampled_from(["0_0", "-1_0", "01_0", "-0_0", "²_1", "1_2_3", "", "0_٣"]),
                    st.tuples(st.integers(-3, 3), st.integers(-3, 3)).map(lambda c: f"{c[0]}_{c[1]}"),
                    st.text(max_size=10))
-LEAVES = st.one_of(st.sampled_from(["state", "scan", "cmd", "beacon", "obstacles", "x", ""]), st.text(max_size=8))
+LEAVES = st.one_of(st.sampled_from(["state", "scan", "cmd", "beacon", "beacons", "obstacles", "x", ""]),
+                   st.text(max_size=8))
 SUFFIXES = st.one_of(
     st.builds(lambda i, leaf: f"agent/{i}/{leaf}", IDS_TEXT, LEAVES),
     st.builds(lambda c, i, leaf: f"cell/{c}/agent/{i}/{leaf}", CHUNKS, IDS_TEXT, LEAVES),
+    st.builds(lambda c, i, leaf: f"cell/{c}/host/{i}/{leaf}", CHUNKS, IDS_TEXT, LEAVES),
+    st.builds(lambda c, i: f"cell/{c}/host/{i}/beacons", CHUNKS, IDS_TEXT),
     IDS_TEXT.map(lambda i: f"alive/agent/{i}"),
     IDS_TEXT.map(lambda i: f"report/agent-{i}"),
     st.sampled_from(["clock", "truth", "event", "alive/simworld", "alive/monitor", "alive/x", "report/simworld"]),
@@ -86,7 +91,14 @@ MESSAGES = st.one_of(
               K, st.lists(AIDS, max_size=12, unique=True), st.booleans()),
     st.builds(lambda a, n: report_to_wire(Report(f"agent-{a}", None, n)), IDS_TEXT, K),
 )
-PAYLOADS = st.one_of(st.binary(max_size=64), MESSAGES,
+ROWS = st.lists(st.tuples(AIDS, K, F, F, st.floats(0.1, 5.0)), min_size=1, max_size=4)
+BATCHES = st.one_of(  # a host's batch of beacons: well formed (its ids maybe another host's), or any columns
+    st.builds(lambda h, rows: batch_to_wire(h, [wire.Beacon(a, k, k * 0.05, x, y, r) for a, k, x, y, r in rows]),
+              AIDS, ROWS),
+    st.dictionaries(st.sampled_from(["host", "n", "rows", *BATCH_FIELDS]),
+                    st.one_of(VALUES, st.binary(max_size=120)), max_size=10).map(
+        lambda d: msgpack.packb({"v": wire.VERSION, **d}, use_bin_type=True)))
+PAYLOADS = st.one_of(st.binary(max_size=64), MESSAGES, BATCHES,
                      st.dictionaries(st.sampled_from(FIELDS), VALUES, max_size=10).map(
                          lambda d: msgpack.packb({"v": wire.VERSION, **d}, use_bin_type=True)))
 SAMPLES = st.tuples(KEYS_ANY, PAYLOADS, st.sampled_from(["PUT", "DELETE"]), st.sampled_from(["s1", "s2", ""]))
@@ -147,6 +159,13 @@ def roles(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Roles]:
         z.close()
 
 
+def _parsed(key: str) -> ParsedKey | None:
+    try:
+        return KEYS.parsed(key)
+    except WireError:
+        return None
+
+
 def _counted(before: int, after: int, got: list[Any]) -> None:
     invalid = sum(isinstance(m, Invalid) for m in got)
     assert after - before >= invalid, f"{invalid} invalid, {after - before} counted"
@@ -154,11 +173,14 @@ def _counted(before: int, after: int, got: list[Any]) -> None:
 
 def _own_keys(got: list[Any], items: list[Item]) -> None:
     """A message in an agent's name came on a key of that agent's, written as the run writes it (`alive/agent/03`
-    or `٣` is no key of agent 3's)."""
+    or `٣` is no key of agent 3's); a beacon in a host's batch, under a host key written so, of an id no higher."""
     keys = {it[0] for it in items}
+    hosts = [p.agent_id for k in keys if (p := _parsed(k)) is not None and p.kind == "host"]
     for m in got:
         if isinstance(m, Token) and m.role is Role.AGENT:
             assert m.agent is not None and KEYS.alive_agent(m.agent) in keys, (m, keys)
+        elif isinstance(m, wire.Beacon):
+            assert any(h is not None and h <= m.id for h in hosts), (m, keys)
         elif isinstance(m, (wire.Beacon, wire.ObstacleSet, wire.State, wire.Scan, wire.Cmd)):
             assert any(k.startswith(f"{KEYS.prefix}/") and f"/agent/{m.id}/" in k for k in keys), (m, keys)
 

@@ -14,6 +14,7 @@ import zenoh
 from monitor.process import MonitorPort
 from reconswarm.net import decode as dec
 from reconswarm.net import wire
+from reconswarm.net.batch import batch_to_wire
 from reconswarm.net.keys import Keys, ParsedKey, WireError
 from reconswarm.net.node import Invalid, Role, Token
 from reconswarm.net.report import Report, report_to_wire
@@ -29,6 +30,7 @@ SAMPLES: dict[dec.Kind, tuple[str, bytes]] = {  # a well-formed sample of each k
     dec.STATE: (K.state(3), wire.state_to_wire(wire.State(3, 1, 0.05, 1.0, 2.0, 0.0, 1.0, 2.0))),
     dec.SCAN: (K.scan(3), wire.scan_to_wire(wire.Scan(3, 1, 0.05, ()))),
     dec.BEACON: (K.beacon((1, -2), 3), wire.beacon_to_wire(wire.Beacon(3, 1, 0.05, 1.0, 2.0, 0.5))),
+    dec.HOST_BEACONS: (K.host_beacons((1, -2), 3), batch_to_wire(3, [wire.Beacon(3, 1, 0.05, 1.0, 2.0, 0.5)])),
     dec.OBSTACLES: (K.obstacles((0, 0), 3), wire.obstacles_to_wire(wire.ObstacleSet(3, 1, 0))),
     dec.CMD: (K.cmd(3), wire.cmd_to_wire(wire.Cmd(3, 1, 0.5, 0.1))),
     dec.CLOCK: (K.clock, wire.clock_to_wire(wire.Clock(1, 0.05, (3,)))),
@@ -71,6 +73,7 @@ def test_a_cell_key_gives_its_cell_from_the_one_parse() -> None:
     assert K.parsed(K.obstacles((0, 12), 2)).cell == (0, 12)
     assert K.parsed(K.state(2)).cell is None and K.parsed(K.clock).cell is None
     assert K.parse(K.beacon((-3, 4), 1)) == ("agent", 1, "beacon")
+    assert K.parsed(K.host_beacons((-3, 4), 7)) == ParsedKey("host", 7, "beacons", (-3, 4))
 
 
 @dataclass

@@ -8,10 +8,12 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import msgpack
 import pytest
 
 from agent.neighbours import Neighbourhood
 from reconswarm.net import wire
+from reconswarm.net.batch import batch_from_wire
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 import floor_pattern as floor
@@ -52,3 +54,16 @@ def test_payloads_are_the_wire_maps() -> None:
     assert clk.alive == tuple(alive) and not clk.end
     assert len(floor.clock_bytes(123, 6.15, alive)) == len(wire.clock_to_wire(clk))
     assert wire.clock_from_wire(floor.clock_bytes(124, 6.2, alive, end=True)).end
+
+
+def test_the_batch_pattern_puts_the_wires_batch_and_counts_one_per_other_host_and_cell() -> None:
+    rows = [(9, 123, 6.15, (1.25, -2.5), 1.5), (12, 123, 6.15, (3.0, 4.0), 0.5)]
+    got = batch_from_wire(floor.batch_bytes(9, rows), 9)
+    assert [(b.id, b.k, b.px, b.radius) for b in got.beacons] == [(9, 123, 1.25, 1.5), (12, 123, 3.0, 0.5)]
+    assert floor.batch_rows(msgpack.unpackb(floor.batch_bytes(9, rows))) == [(9, 123), (12, 123)]
+    s = grid_scenario(64, 10.0)
+    for aid in (1, 30):
+        peers = floor.heard(s, aid, "cells")[0]
+        assert floor.sources(s, aid, 1) == len(peers)  # (a host of one: one batch per peer)
+        assert floor.sources(s, aid, 64) == 0  # (every peer in our process: handed over in it)
+        assert 0 < floor.sources(s, aid, 8) <= len(peers)

@@ -266,3 +266,21 @@ def test_the_node_waits_for_nothing_and_sets_no_timer_of_its_own(tmp_path: Path)
     run.tick(0, 0.0)
     assert run.node.awaiting(0.1) is None and run.node.wake_at_s() is None  # the truth (urgent) or its poll
     assert np.array_equal(run.node.alive, np.ones(len(IDS), dtype=bool))
+
+
+def test_each_step_that_records_a_tick_gives_the_live_views_its_scene_and_no_other_step_does(tmp_path: Path) -> None:
+    """The live views (Foxglove, the terminal's table) take the node's `Scene` output, not its internals: the newest
+    tick a step recorded, as copies (a later tick does not change a scene already given)."""
+    run = started(tmp_path)
+    assert run.scenes == []
+    p0 = S.starts + 1.0
+    run.tick(0, 0.0, p0)
+    (sc,) = run.scenes
+    assert (sc.k, sc.t_s) == (0, 0.0) and np.array_equal(sc.p, p0) and sc.alive.all() and sc.rejected == 0
+    assert sc.n_groups >= 1 and sc.edges.shape[1] == 2 and sc.min_gap_m == pytest.approx(sc.gaps_m[0])
+    run.step(0.1, report(IDS[0], rejected=3))  # no new tick: no scene
+    assert len(run.scenes) == 1
+    run.step(0.2, clock(1), truth(1, p0 + 2.0))
+    assert [s.k for s in run.scenes] == [0, 1] and np.array_equal(run.scenes[0].p, p0)  # (the first one kept)
+    assert np.array_equal(run.scenes[1].p, p0 + 2.0) and run.scenes[1].t_s == pytest.approx(DT)
+    assert run.scenes[1].rejected == 3  # (what agent 1 reported it dropped)

@@ -29,8 +29,9 @@ class Payload:
 class Sample:
     """What the inbox reads of a zenoh sample (inbox.to_item)."""
 
-    def __init__(self, key: str) -> None:
+    def __init__(self, key: str, attachment: bytes | None = None) -> None:
         self.key_expr, self.payload, self.kind, self.timestamp = key, Payload(b"x"), "PUT", None
+        self.attachment = None if attachment is None else Payload(attachment)
 
 
 def fill(inbox: TaggedInbox, *who: int | str) -> None:
@@ -126,3 +127,17 @@ def timed_take(inbox: TaggedInbox, want: int | None, timeout: float, urgent: int
     if not got:
         assert took >= 0.9 * timeout, f"nothing came, yet the take returned after {took:.2f} s of {timeout} s"
     return got
+
+
+def test_a_batch_of_beacons_counts_for_its_rows_as_its_attachment_says() -> None:
+    """The nodes count the beacons they wait for; a host's batch carries several (agent/beacons.py)."""
+    inbox = TaggedInbox()
+    inbox.callback(("cell", None), rows=True)(Sample("s/cell/0_0/host/1/beacons", (3).to_bytes(4, "little")))
+    t0 = time.monotonic()
+    assert take(inbox, 3, 1, timeout=30.0) == ["s/cell/0_0/host/1/beacons"]  # (3 wanted: in at once)
+    assert time.monotonic() - t0 < 10.0
+    for att in (None, b"", (0).to_bytes(4, "little")):  # (none, or a forged count: one sample, no more)
+        inbox.callback(("cell", None), rows=True)(Sample("s/cell/0_0/host/1/beacons", att))
+        t0 = time.monotonic()
+        assert take(inbox, 2, 1, timeout=0.3) == ["s/cell/0_0/host/1/beacons"]
+        assert time.monotonic() - t0 >= 0.25  # (one of the 2 wanted: the take waited its timeout out)

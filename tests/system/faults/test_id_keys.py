@@ -1,6 +1,6 @@
 """Keys whose agent id is not the canonical decimal of one (issue 51, items 1 and 2), from an outside client on
 the run's router during a short lockstep run of the paper mission (two agent hosts of five): a liveliness
-token on `alive/agent/²` ('²'.isdigit(), but int('²') raises), one byte on `cell/<cell>/agent/²/beacon` in
+token on `alive/agent/²` ('²'.isdigit(), but int('²') raises), one byte on `cell/<cell>/host/²/beacons` in
 every cell an agent is in, on `agent/²/cmd` and on `report/agent-²`; tokens on `alive/agent/03` and
 `alive/agent/٣` (another key than agent 3's, read as agent 3 by a lax parser), declared, held a few ticks and
 undeclared (a DELETE that would say agent 3 left). Every process must survive them, the mission run its
@@ -92,7 +92,7 @@ def test_keys_with_unicode_digits_or_aliased_ids_kill_nobody_and_lose_no_agent(t
         a.put(f"{pre}/agent/²/cmd", b"\x00")
         a.put(f"{pre}/report/agent-²", b"\x00")
         for c in cells:
-            a.put(f"{pre}/cell/{cell_chunk(c)}/agent/²/beacon", b"\x00")
+            a.put(f"{pre}/cell/{cell_chunk(c)}/host/²/beacons", b"\x00")
         tokens = [a.z.liveliness().declare_token(f"{pre}/alive/agent/{bad}") for bad in BAD_IDS]
         _wait_ticks(db, 10, proc)
         for t in tokens:

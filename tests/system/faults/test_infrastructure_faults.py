@@ -65,7 +65,7 @@ def test_flood_of_malformed_messages(out: Path) -> None:
         sent_by[leaf] = sent_by.get(leaf, 0) + n - sent["over_limit"].get(key, 0)
     fixed = {"clock": 10 + 1, "truth": 1, "event": 0, "state": 1, "cmd": 1}
     lowest = sum(n * fixed[k] for k, n in sent_by.items() if k in fixed)
-    highest = lowest + sent_by["beacon"] * 10 + sent_by["obstacles"] * 10
+    highest = lowest + sent_by["beacons"] * 10 + sent_by["obstacles"] * 10
     # Every delivery is dropped and counted exactly once, as rejected (it does not decode); none is an
     # intrusion (the flood's only ones were its payloads over 1 MiB on obstacle-set keys, which the router
     # keeps back). Exactly so where the fan-out is known:

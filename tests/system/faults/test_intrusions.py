@@ -25,6 +25,7 @@ import numpy as np
 import zenoh
 
 from reconswarm.net import wire
+from reconswarm.net.batch import batch_to_wire
 from reconswarm.net.cells import CellGrid
 from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions
@@ -117,8 +118,11 @@ def _attack(a: Attacker, until_t_s: float, timeout_s: float = 600.0) -> dict[str
             put("cmd", a.keys.cmd(2), wire.cmd_to_wire(wire.Cmd(2, k, float(v[0]), float(w[0]))))
         cx, cy = sum(tr.px) / len(tr.px), sum(tr.py) / len(tr.py)
         here = CellGrid.for_scenario(s).cell_of(cx, cy)  # the agents near the centroid listen to its cell
-        put("beacon", a.keys.beacon(here, 99), wire.beacon_to_wire(wire.Beacon(99, c.k, c.t, cx, cy, 1e6)))
-        put("beacon", a.keys.beacon(here, 4), wire.beacon_to_wire(wire.Beacon(4, c.k, c.t, cx + 60.0, cy, 2.6)))
+        # beacon batches as a host would put them: a phantom host 99, and one under agent 4's host key naming
+        # agent 4 60 m ahead and the phantom (each row judged as a beacon)
+        put("beacon", a.keys.host_beacons(here, 99), batch_to_wire(99, [wire.Beacon(99, c.k, c.t, cx, cy, 1e6)]))
+        put("beacon", a.keys.host_beacons(here, 4), batch_to_wire(4, [wire.Beacon(4, c.k, c.t, cx + 60.0, cy, 2.6),
+                                                                      wire.Beacon(99, c.k, c.t, cx, cy, 1e6)]))
         put("obstacles", a.keys.obstacles(here, 99), wire.obstacles_to_wire(wire.ObstacleSet(99, c.k, 1, slab)))
         put("obstacles", a.keys.obstacles(here, 4), wire.obstacles_to_wire(wire.ObstacleSet(4, c.k, 99, slab)))
         put("obstacles", a.keys.obstacles(here, 4), wire.obstacles_to_wire(wire.ObstacleSet(4, c.k, 98, many)))

@@ -21,6 +21,7 @@ import pytest
 import zenoh
 
 from reconswarm.net import ros2, wire
+from reconswarm.net.batch import batch_from_wire
 from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions
 from tests.support import (
@@ -61,7 +62,7 @@ class Outsider:
         self.beacons3: list[wire.Beacon] = []  # agent 3's idea of its robot, as it tells its peers
         self.subs = [self.z.declare_subscriber(self.keys.truth, self._on_truth),
                      self.z.declare_subscriber(self.keys.clock, self._on_clock),
-                     self.z.declare_subscriber(f"{self.keys.prefix}/cell/*/agent/3/beacon", self._on_beacon)]
+                     self.z.declare_subscriber(self.keys.host_beacons(None, None), self._on_beacon)]
         self.sent = 0
 
     def _on_truth(self, s: Any) -> None:
@@ -72,9 +73,9 @@ class Outsider:
             self.head3[tr.k] = (tr.px[i3], tr.py[i3])
 
     def _on_beacon(self, s: Any) -> None:
-        b = wire.beacon_from_wire(s.payload.to_bytes(), 3)
+        got = [b for b in batch_from_wire(s.payload.to_bytes()).beacons if b.id == 3]  # (its host's batches)
         with self.lock:
-            self.beacons3.append(b)
+            self.beacons3 += got
 
     def idea_off_m(self) -> float:
         """How far agent 3's beacons put its robot from where the world has it, at the same tick (the largest)."""

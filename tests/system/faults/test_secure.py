@@ -24,6 +24,7 @@ import zenoh
 from zenoh import ext
 
 from reconswarm.net import wire
+from reconswarm.net.batch import batch_to_wire
 from reconswarm.scenario.model import load
 from reconswarm_bringup import secure
 from tests.support import (
@@ -121,7 +122,7 @@ def test_create_writes_private_credentials_and_configs(tmp_path: Path) -> None:
     (pol3,) = [p for p in acl["policies"] if p["subjects"] == ["agent-3"]]
     sent = {k for rid in pol3["rules"] for k in rules[rid]["key_exprs"]
             if "ingress" in rules[rid]["flows"] and set(rules[rid]["messages"]) & {"put", "reply", "liveliness_token"}}
-    assert sent == {f"{run}/agent/3/cmd", f"{run}/cell/*/agent/3/beacon", f"{run}/cell/*/agent/3/obstacles",
+    assert sent == {f"{run}/agent/3/cmd", f"{run}/cell/*/host/3/beacons", f"{run}/cell/*/agent/3/obstacles",
                     f"{run}/report/agent-3", f"{run}/alive/agent/3"}
     assert "intruder" not in {c for sub in acl["subjects"] for c in sub["cert_common_names"]}
     with pytest.raises(Exception, match="no credentials for agent 42"):
@@ -255,14 +256,14 @@ def test_agent_credentials_cannot_impersonate_another_agent(live: Live) -> None:
     beacons, cmds, sets, alive, clock, reads = Catch(), Catch(), Catch(), Catch(), Catch(), Catch()
     a3 = _open(sec / "agent-3.json5")
     try:
-        a2.declare_subscriber(f"{run}/cell/*/agent/*/beacon", beacons)  # (the monitor no longer hears beacons)
+        a2.declare_subscriber(f"{run}/cell/*/host/*/beacons", beacons)  # (the monitor no longer hears beacons)
         mon.declare_subscriber(f"{run}/clock", clock)
         mon.liveliness().declare_subscriber(f"{run}/alive/**", alive, history=True)
         sim.declare_subscriber(f"{run}/agent/*/cmd", cmds)
         a3.declare_subscriber(f"{run}/agent/5/state", reads)  # not agent 3's to read
         a3.declare_subscriber(f"{run}/agent/3/state", reads)  # its own: allowed
-        # Agent 3's credentials, agent 5's keys: beacon, command, obstacle set (an advanced publisher whose
-        # cache answers late joiners), liveliness token; and a token for an agent that does not exist.
+        # Agent 3's credentials, agent 5's keys: beacons (its host's batch key), command, obstacle set (an advanced
+        # publisher whose cache answers late joiners), liveliness token; and a token for an agent that does not exist.
         one = ext.CacheConfig(max_samples=1)
         fake_set = ext.declare_advanced_publisher(a3, f"{run}/cell/0_0/agent/5/obstacles", cache=one)
         own_set = ext.declare_advanced_publisher(a3, f"{run}/cell/0_0/agent/3/obstacles", cache=one)
@@ -271,7 +272,7 @@ def test_agent_credentials_cannot_impersonate_another_agent(live: Live) -> None:
         # The declarations are in place once the run is heard and probes on agent 3's own keys come through.
         wait_until(lambda: len(clock) and f"{run}/agent/3/state" in reads.key_set(), 30,
                    "the clock and agent 3's state heard")
-        probes = {f"{run}/cell/0_0/agent/3/beacon": (wire.beacon_to_wire(wire.Beacon(3, 0, 0.0, -78.0, 0.0, 2.6)),
+        probes = {f"{run}/cell/0_0/host/3/beacons": (batch_to_wire(3, [wire.Beacon(3, 0, 0.0, -78.0, 0.0, 2.6)]),
                                                      beacons),
                   f"{run}/agent/3/cmd": (wire.cmd_to_wire(wire.Cmd(3, 1, 0.0, 0.0)), cmds)}  # (not the controls)
         for key, (probe, catch) in probes.items():
@@ -291,13 +292,13 @@ def test_agent_credentials_cannot_impersonate_another_agent(live: Live) -> None:
             sent.setdefault(key, []).append(payload)
 
         for n in range(20):  # valid-looking messages for the ticks to come
-            send(f"{run}/cell/0_0/agent/5/beacon", wire.beacon_to_wire(wire.Beacon(5, k + n, 0.0, 123.0, 45.0, 2.6)))
+            send(f"{run}/cell/0_0/host/5/beacons", batch_to_wire(5, [wire.Beacon(5, k + n, 0.0, 123.0, 45.0, 2.6)]))
             send(f"{run}/agent/5/cmd", wire.cmd_to_wire(wire.Cmd(5, k + n, 100.0, 0.0)))
             hull: dict[str, tuple[tuple[float, float], ...]] = {"fake": ((0.0, 0.0), (10.0, 0.0), (0.0, 10.0))}
             fake = wire.obstacles_to_wire(wire.ObstacleSet(5, k + n, 99, hull))
             send(f"{run}/cell/0_0/agent/5/obstacles", fake, fake_set)
             # the control: the same session on agent 3's own keys
-            send(f"{run}/cell/0_0/agent/3/beacon", wire.beacon_to_wire(wire.Beacon(3, 0, 0.0, -77.0, 0.0, 2.6)))
+            send(f"{run}/cell/0_0/host/3/beacons", batch_to_wire(3, [wire.Beacon(3, 0, 0.0, -77.0, 0.0, 2.6)]))
             send(f"{run}/agent/3/cmd", wire.cmd_to_wire(wire.Cmd(3, 0, 0.0, 0.0)))
             time.sleep(0.1)
         own_payload = wire.obstacles_to_wire(wire.ObstacleSet(3, 0, 99, {"own": ((5.0, 5.0), (6.0, 5.0), (5.0, 6.0))}))
@@ -314,17 +315,17 @@ def test_agent_credentials_cannot_impersonate_another_agent(live: Live) -> None:
         a3.close()
         for z in observers:
             z.close()
-    seen = {"beacon": beacons, "cmd": cmds, "obstacles": sets}
+    seen = {"beacons": beacons, "cmd": cmds, "obstacles": sets}
     arrived = {key: sum(1 for x in seen[key.rsplit("/", 1)[1]].payloads(key) if x in payloads)
                for key, payloads in sent.items()}
     print("messages from agent 3's credentials that arrived, per key:", arrived)
-    for key in (f"{run}/cell/0_0/agent/5/beacon", f"{run}/agent/5/cmd", f"{run}/cell/0_0/agent/5/obstacles"):
+    for key in (f"{run}/cell/0_0/host/5/beacons", f"{run}/agent/5/cmd", f"{run}/cell/0_0/agent/5/obstacles"):
         assert arrived[key] == 0, f"a message from agent 3's credentials arrived on {key}"
     assert f"{run}/alive/agent/11" not in alive.key_set()
     assert [kind for key, _, kind in alive.items if key == f"{run}/alive/agent/5"] == ["SampleKind.PUT"]
     assert f"{run}/agent/5/state" not in reads.key_set()
     # The same credentials do work on agent 3's own keys: nothing above passes because all is blocked.
-    assert arrived[f"{run}/cell/0_0/agent/3/beacon"] > 0 and arrived[f"{run}/agent/3/cmd"] > 0
+    assert arrived[f"{run}/cell/0_0/host/3/beacons"] > 0 and arrived[f"{run}/agent/3/cmd"] > 0
     assert arrived[f"{run}/cell/0_0/agent/3/obstacles"] >= 1  # through the publisher's cache, to a late joiner
     assert f"{run}/agent/3/state" in reads.key_set()
     assert len(clock) > 10
@@ -342,7 +343,7 @@ def test_the_docs_example_of_joining_as_a_role_receives(live: Live) -> None:
     code = block.replace("runs/latest", str(live.out)).replace("time.sleep(5)", f"time.sleep({SETTLE_S + 2.0})")
     exec(compile(code, "docs/security.md", "exec"), scope)  # returns: the example closes its sessions itself
     assert any(h.endswith("/clock") for h in heard), heard[:5]
-    assert any(h.endswith("/beacon") for h in heard), heard[:5]
+    assert any(h.endswith("/beacons") for h in heard), heard[:5]
 
 
 def test_secure_run_stops_on_sigint(live: Live) -> None:

@@ -101,31 +101,32 @@ def test_what_a_process_may_say_crosses_hosts_and_nothing_else(two: Two) -> None
     try:
         on_a, on_b = Catch(), Catch()
         a1.declare_subscriber(keys.clock, on_a)
-        a1.declare_subscriber(keys.cell_agents(None, "beacon"), on_a)
+        a1.declare_subscriber(keys.host_beacons(None, None), on_a)
         b6.declare_subscriber(keys.clock, on_b)
-        b6.declare_subscriber(keys.cell_agents(None, "beacon"), on_b)
+        b6.declare_subscriber(keys.host_beacons(None, None), on_b)
         # The declarations crossed both routers once a probe on a beacon key each way comes through (each listener
         # declared its clock subscription first: it is through too). The probes' cell (1_1) is one no check reads.
-        probe7, probe2 = keys.beacon((1, 1), 7), keys.beacon((1, 1), 2)
+        probe7, probe2 = keys.host_beacons((1, 1), 7), keys.host_beacons((1, 1), 2)
         heard_probe(b7, probe7, on_a)
         heard_probe(a2, probe2, on_b)
         for _ in range(5):
-            b7.put(keys.beacon((0, 0), 7), b"seven")  # its own: crosses to A
-            b7.put(keys.beacon((0, 0), 1), b"forged")  # agent 1's, from B: stopped at B's router
+            b7.put(keys.host_beacons((0, 0), 7), b"seven")  # its own: crosses to A
+            b7.put(keys.host_beacons((0, 0), 1), b"forged")  # agent 1's, from B: stopped at B's router
             b7.put(keys.clock, b"forged clock")  # only the world (on A) may
             world.put(keys.clock, b"clock")  # crosses to B
-            a2.put(keys.beacon((0, 0), 2), b"two")  # crosses to B
+            a2.put(keys.host_beacons((0, 0), 2), b"two")  # crosses to B
             time.sleep(0.2)  # (the pace of a round)
         # b7's forgeries went the ways its own beacons go, in order: a last probe of its own heard on both hosts
         # means they came or never will; and the world's and agent 2's five each
         heard_probe(b7, probe7, on_a, on_b, payload=b"last")
         wait_until(lambda: len(on_a.payloads(keys.clock)) >= 5 and len(on_b.payloads(keys.clock)) >= 5
-                   and len(on_b.payloads(keys.beacon((0, 0), 2))) >= 5, 30, "the world's clocks and agent 2's beacons")
+                   and len(on_b.payloads(keys.host_beacons((0, 0), 2))) >= 5, 30,
+                   "the world's clocks and agent 2's beacons")
         print("heard on A:", sorted(on_a.key_set()), "on B:", sorted(on_b.key_set()))
-        assert on_a.payloads(keys.beacon((0, 0), 7)) == [b"seven"] * 5
-        assert on_b.payloads(keys.beacon((0, 0), 2)) == [b"two"] * 5
+        assert on_a.payloads(keys.host_beacons((0, 0), 7)) == [b"seven"] * 5
+        assert on_b.payloads(keys.host_beacons((0, 0), 2)) == [b"two"] * 5
         assert on_a.payloads(keys.clock) == on_b.payloads(keys.clock) == [b"clock"] * 5  # only the world's
-        assert on_a.payloads(keys.beacon((0, 0), 1)) == on_b.payloads(keys.beacon((0, 0), 1)) == []
+        assert on_a.payloads(keys.host_beacons((0, 0), 1)) == on_b.payloads(keys.host_beacons((0, 0), 1)) == []
     finally:
         for z in (a1, a2, world, b6, b7):
             z.close()
@@ -141,21 +142,22 @@ def test_a_router_admits_only_its_own_hosts_processes(two: Two) -> None:
     try:
         got_stray, got_b6 = Catch(), Catch()
         stray.declare_subscriber("swarm/**", got_stray)
-        stray.declare_subscriber(keys.cell_agents(None, "beacon"), got_stray)
-        b6.declare_subscriber(keys.cell_agents(None, "beacon"), got_b6)
-        probe7 = keys.beacon((1, 1), 7)  # (a cell no check reads)
+        stray.declare_subscriber(keys.host_beacons(None, None), got_stray)
+        b6.declare_subscriber(keys.host_beacons(None, None), got_b6)
+        probe7 = keys.host_beacons((1, 1), 7)  # (a cell no check reads)
         heard_probe(b7, probe7, got_b6)  # agent 6's subscription is in place
         for _ in range(5):
-            stray.put(keys.beacon((0, 0), 1), b"from B's router")
-            b7.put(keys.beacon((0, 0), 7), b"seven")
+            stray.put(keys.host_beacons((0, 0), 1), b"from B's router")
+            b7.put(keys.host_beacons((0, 0), 7), b"seven")
             time.sleep(0.2)  # (the pace of a round)
-        wait_until(lambda: len(got_b6.payloads(keys.beacon((0, 0), 7))) >= 5, 30, "agent 7's five beacons at agent 6")
+        wait_until(lambda: len(got_b6.payloads(keys.host_beacons((0, 0), 7))) >= 5, 30,
+                   "agent 7's five beacons at agent 6")
         # (the stray's last put went to the same router before agent 7's last beacon: it had as long to arrive)
         print("stray heard:", sorted(got_stray.key_set()), "agent 6 heard:", sorted(got_b6.key_set()))
-        assert got_b6.payloads(keys.beacon((0, 0), 7)) == [b"seven"] * 5  # B works for its own
-        assert got_b6.payloads(keys.beacon((0, 0), 1)) == []  # the stray's puts reach nobody
+        assert got_b6.payloads(keys.host_beacons((0, 0), 7)) == [b"seven"] * 5  # B works for its own
+        assert got_b6.payloads(keys.host_beacons((0, 0), 1)) == []  # the stray's puts reach nobody
         # ... and nothing reaches it (a session hears its own puts locally, whatever the router says)
-        assert got_stray.key_set() <= {keys.beacon((0, 0), 1)}
+        assert got_stray.key_set() <= {keys.host_beacons((0, 0), 1)}
     finally:
         for z in (stray, b6, b7):
             z.close()
