@@ -44,7 +44,7 @@ if [ "$workers" != 0 ] && ! "$venv/bin/python" -c "import xdist" 2>/dev/null; th
     workers=0
 fi
 parallel=()
-[ "$workers" = 0 ] || parallel=(-n "$workers" --dist loadgroup)  # (an xdist_group runs on one worker)
+[ "$workers" = 0 ] || parallel=(-n "$workers" --dist loadfile)  # (a file's tests on one worker: its module fixtures once)
 reports="$(mktemp -d)"
 trap 'rm -rf "$reports"' EXIT
 failed=()

@@ -4,7 +4,7 @@ Every test under tests/system is marked `system`, so `pytest -m "not system"` ru
 markers say where a system test can run (deploy/run_tests.sh, docs/testing.md):
 - `parallel`: no wall-clock bound, and exact whatever the load: the engine in-process, commands on records,
   refusals, and lockstep launches that assert no determinism (a fault's outcome); it runs beside the unit tests,
-  on every CPU (pytest-xdist; tests that share a module's launch or may not overlap name one `xdist_group`);
+  on every CPU (pytest-xdist, a file's tests on one worker: a module-scoped launch runs once);
 - `realtime`: it holds only if the machine keeps the clock's pace (the realtime clock, ROS 2 mode, a bound in wall
   seconds): it runs alone, after the others; `-m "not realtime"` leaves them out on a loaded machine.
 The rest of tests/system (lockstep launches whose bit-for-bit equality or pace a second run beside them could

@@ -57,14 +57,12 @@ def restarted(tmp_path_factory: pytest.TempPathFactory) -> dict[int, list[str]]:
 
 
 @pytest.mark.parallel
-@pytest.mark.xdist_group("restarted")  # (one worker runs both: the module's mission once)
 def test_agent_restarted_rejoins_with_shared_obstacles(restarted: dict[int, list[str]]) -> None:
     joined = restarted[4]
     assert joined and "'diamond'" in joined[-1]  # its peers' cached obstacle sets
 
 
 @pytest.mark.parallel
-@pytest.mark.xdist_group("restarted")
 def test_late_agent_catches_up_on_obstacles(restarted: dict[int, list[str]]) -> None:
     joined = restarted[8]
     assert joined  # ("joining at tick" in its log)

@@ -22,8 +22,7 @@ def need_network_namespaces() -> None:
         pytest.fail(f"as root, two hosts need network namespaces (iproute2's `ip netns`): {why}")
 
 
-@pytest.mark.parallel  # (lockstep: exact under load; 10 s cut off leave a CPU free)
-@pytest.mark.xdist_group("two_hosts")  # (one two-host run at a time: the end checks that no namespace is left)
+@pytest.mark.parallel  # (lockstep: exact under load; the only two-host run of part 1: it checks no namespace is left)
 def test_partition_between_hosts(tmp_path: Path) -> None:
     need_network_namespaces()
     out = tmp_path / "run"

@@ -185,8 +185,6 @@ def test_a_bad_deployment_file_is_one_line_exit_2(tmp_path: Path) -> None:
 
 # --- run_local.sh --secure --hosts 2 (network namespaces: root) -----------------------------------------------
 
-@pytest.mark.parallel  # (as the open partition test, on the same worker)
-@pytest.mark.xdist_group("two_hosts")
 def test_secure_two_hosts_converge_through_a_partition_and_refuse_outsiders(tmp_path: Path) -> None:
     """The paper at --secure --hosts 2 with the link between the hosts cut for 10 s: the routers relink over
     mutual TLS and the mission converges as in open mode; meanwhile a session without credentials is refused by
