@@ -22,7 +22,6 @@ def need_network_namespaces() -> None:
         pytest.fail(f"as root, two hosts need network namespaces (iproute2's `ip netns`): {why}")
 
 
-@pytest.mark.parallel  # (lockstep: exact under load; the only two-host run of part 1: it checks no namespace is left)
 def test_partition_between_hosts(tmp_path: Path) -> None:
     need_network_namespaces()
     out = tmp_path / "run"
