@@ -1,10 +1,9 @@
 #!/usr/bin/env bash
 # The test suite: sets itself up like run_local.sh, then runs pytest (docs/testing.md).
 #   deploy/run_tests.sh               the whole suite in three parts, each test's name and result as it ends:
-#                                     1. the system tests marked `parallel`, and the unit tests, on every CPU
+#                                     1. the unit tests, then the system tests marked `parallel`, on every CPU
 #                                        (pytest-xdist; RECONSWARM_TEST_WORKERS=N for N workers, 0 for none);
-#                                     2. the other system tests (lockstep launches that need the machine to
-#                                        themselves), one at a time;
+#                                     2. the other system tests (lockstep launches), one at a time;
 #                                     3. those marked `realtime`, one at a time, with nothing else of the suite.
 #                                     Then the 20 slowest tests of the whole run. A failing part does not stop the
 #                                     next; Ctrl-C stops the run after pytest's summary of what ran.
@@ -44,7 +43,7 @@ if [ "$workers" != 0 ] && ! "$venv/bin/python" -c "import xdist" 2>/dev/null; th
     workers=0
 fi
 parallel=()
-[ "$workers" = 0 ] || parallel=(-n "$workers" --dist loadfile)  # (a file's tests on one worker: its module fixtures once)
+[ "$workers" = 0 ] || parallel=(-n "$workers")
 reports="$(mktemp -d)"
 trap 'rm -rf "$reports"' EXIT
 failed=()
@@ -63,8 +62,7 @@ part() {  # part NAME PYTEST-ARGS...: run one part; stop the script if pytest wa
     esac
 }
 
-# (tests/system first: its launches, the longest tests, start first and the unit tests fill in beside them)
-part 1-unit-and-parallel "${parallel[@]}" -m "not system or parallel" tests/system tests/unit
+part 1-unit-and-parallel "${parallel[@]}" -m "not system or parallel" tests/unit tests/system
 part 2-system -v -m "system and not parallel and not realtime" tests/system
 part 3-realtime -v -m "system and realtime" tests/system
 

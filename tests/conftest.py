@@ -2,13 +2,11 @@
 
 Every test under tests/system is marked `system`, so `pytest -m "not system"` runs the unit suite alone. Two more
 markers say where a system test can run (deploy/run_tests.sh, docs/testing.md):
-- `parallel`: no wall-clock bound, and exact whatever the load: the engine in-process, commands on records,
-  refusals, and lockstep launches that assert no determinism (a fault's outcome); it runs beside the unit tests,
-  on every CPU (pytest-xdist, a file's tests on one worker: a module-scoped launch runs once);
+- `parallel`: no launch, no router, no wall-clock bound (the engine in-process, commands on records, refusals):
+  it runs beside the unit tests, on every CPU (pytest-xdist);
 - `realtime`: it holds only if the machine keeps the clock's pace (the realtime clock, ROS 2 mode, a bound in wall
   seconds): it runs alone, after the others; `-m "not realtime"` leaves them out on a loaded machine.
-The rest of tests/system (lockstep launches whose bit-for-bit equality or pace a second run beside them could
-upset) runs one test at a time.
+The rest of tests/system (lockstep launches: exact whatever the load) runs one test at a time.
 """
 
 from __future__ import annotations
@@ -27,7 +25,7 @@ _SYSTEM = Path(__file__).parent / "system"
 
 
 MARKERS = (
-    "parallel: a system test with no wall-clock bound, exact under load: runs beside the unit tests and each other",
+    "parallel: a system test with no launch, no router and no wall-clock bound: runs beside the unit tests",
     "realtime: holds only if the machine keeps the clock's pace: runs alone, after the other system tests",
 )
 

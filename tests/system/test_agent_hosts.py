@@ -167,7 +167,6 @@ def test_an_outside_client_sees_each_hosted_agent_as_its_own(tmp_path: Path, out
     assert len({pids[a] for a in IDS[:5]}) == 1 and pids[1] != pids[6]
 
 
-@pytest.mark.parallel  # (lockstep: exact under load)
 def test_killing_a_hosted_agent_kills_its_host_and_the_survivors_avoid_them_all(out: Path) -> None:
     p = run_launcher(out, "--agents-per-process", "5", "--fault", "kill:agent:3@60", "--json")
     assert p.returncode == 0, p.stderr[-3000:]
@@ -219,7 +218,6 @@ def test_bad_packing_or_zenoh_mode_is_one_line_exit_2(out: Path, args: list[str]
     assert line in last, last
 
 
-@pytest.mark.parallel  # (lockstep: exact under load)
 def test_restarting_a_hosted_agent_restarts_its_host_and_all_its_agents_rejoin(out: Path) -> None:
     p = run_launcher(out, "--agents-per-process", "5", "--fault", "restart:agent:4@70+1", "--json")
     assert p.returncode == 0, p.stderr[-3000:]

@@ -108,7 +108,6 @@ def test_two_launches_at_the_same_moment_one_is_refused(tmp_path: Path, small: t
           f"{results[loser][2].strip()}")
 
 
-@pytest.mark.parallel  # (lockstep, and _check_undisturbed knows what load does to it)
 def test_second_launch_20s_later_is_refused_and_run_id_names_the_keys(tmp_path: Path) -> None:
     ref = reconswarm("sim", str(PAPER), "-o", str(tmp_path / "sim"), "--json")
     assert ref.returncode == 0, ref.stderr

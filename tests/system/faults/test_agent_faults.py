@@ -28,7 +28,6 @@ def test_agent_killed(out: Path) -> None:
     assert len(track) > 100 and max(abs(x - track[0][1]) + abs(y - track[0][2]) for _, x, y in track) == 0.0
 
 
-@pytest.mark.parallel  # (lockstep: exact under load; a 5 s freeze leaves a CPU free)
 def test_agent_frozen_then_rejoins(tmp_path: Path, out: Path) -> None:
     """The paper's first three agents without obstacles (a freeze, a hold and a rejoin ask for no diamond)."""
     p = run_launcher(out, "-s", str(three_agents(tmp_path)), "--fault", "freeze:agent:2@50+5", "--json")
@@ -56,20 +55,17 @@ def restarted(tmp_path_factory: pytest.TempPathFactory) -> dict[int, list[str]]:
         assert_all_gone(out)
 
 
-@pytest.mark.parallel
 def test_agent_restarted_rejoins_with_shared_obstacles(restarted: dict[int, list[str]]) -> None:
     joined = restarted[4]
     assert joined and "'diamond'" in joined[-1]  # its peers' cached obstacle sets
 
 
-@pytest.mark.parallel
 def test_late_agent_catches_up_on_obstacles(restarted: dict[int, list[str]]) -> None:
     joined = restarted[8]
     assert joined  # ("joining at tick" in its log)
     assert "'diamond'" in joined[-1]  # learned from its peers' cached sets, before sensing anything itself
 
 
-@pytest.mark.parallel  # (lockstep; 18 s of the world stopped leave a CPU free)
 def test_dead_robot_is_still_avoided_after_a_world_stall(out: Path) -> None:
     """Issue 11, collisions with no attacker 1: agent 3 killed, then the world stalled for 18 s, so the agents
     go without commanding for longer than the session safety net while the world's token is gone (15 s) and
