@@ -1,10 +1,9 @@
 """ROS 2 mode attacked from an outside zenoh session with no credentials (issue 20): robot 3's odometry
 replayed shifted by 40 m, a forged cmd_vel driving robot 3 onto robot 5 (rosbags CDR, a hand-packed 33-byte
 attachment), cmd_vel at v = 1.7e308 m/s for robot 7, and a liveliness token held for agent 3 while agent 3
-is killed. Each is one short run of the paper mission (cut to DURATION_S, real time) on a router at
-127.0.0.1: the run keeps its robots apart, no process dies, and every refused forgery is counted with the
-attacker's session as its source; the dead agent is dropped by the world although a token stands for it.
-"""
+is killed. Short runs of the paper mission (real time; `RUNS`: the forged odometry and cmd_vel share one) on a
+router at 127.0.0.1: the run keeps its robots apart, no process dies, and every refused forgery is counted with
+the attacker's session as its source; the dead agent is dropped by the world although a token stands for it."""
 
 from __future__ import annotations
 
@@ -154,64 +153,89 @@ ATTACKS = {"odometry": _forge_odometry, "cmd_vel": _forge_cmd_vel, "absurd": _ab
            "token": _token_for_dead_agent}
 
 
-def _run(tmp_path: Path, attack: str) -> tuple[dict[str, Any], Outsider, int]:
-    out = tmp_path / "run"
+# Each attack's run: the mission's simulated seconds, and the attack's wall seconds from ATTACK_FROM_S on. The
+# forged odometry and the forged cmd_vel go at one run from two outside sessions (each forgery is counted against
+# its own session's id, at its own addressee); the absurd cmd_vel (40 samples, 0.4 s) and the token held for a
+# dead agent (killed: the run's outcome differs) have a run each, as long as what they check needs.
+RUNS: dict[tuple[str, ...], tuple[float, float]] = {("odometry", "cmd_vel"): (DURATION_S, ATTACK_WALL_S),
+                                                    ("absurd",): (12.0, 1.0),
+                                                    ("token",): (20.0, 16.0)}
+
+
+def _run(tmp: Path, attacks: tuple[str, ...]) -> tuple[dict[str, Any], dict[str, Outsider], int]:
+    duration_s, attack_wall_s = RUNS[attacks]
+    out = tmp / "run"
     port = free_port()
-    scenario = paper_with(tmp_path, **{"duration_s = 300.0": f"duration_s = {DURATION_S}"})
-    extra = ["--fault", f"kill:agent:3@{KILL_AT_S:g}"] if attack == "token" else []
-    err = tmp_path / "launcher.err"
+    scenario = paper_with(tmp, **{"duration_s = 300.0": f"duration_s = {duration_s}"})
+    extra = ["--fault", f"kill:agent:3@{KILL_AT_S:g}"] if "token" in attacks else []
+    err = tmp / "launcher.err"
     with err.open("wb") as fh:
         proc = subprocess.Popen(launcher_cmd(out, "-s", str(scenario), "--ros2", "--ros-domain-id", str(DOMAIN),
                                              "--json", *extra, port=port), cwd=ROOT, stdout=subprocess.PIPE, stderr=fh)
-    o: Outsider | None = None
+    outs: dict[str, Outsider] = {}
     try:
         wait_for_ticks(out / "run.db", round(ATTACK_FROM_S / 0.05), proc, 120, lambda: err.read_text()[-2000:])
-        o = Outsider(f"tcp/127.0.0.1:{port}", read_run_id(out))
-        ATTACKS[attack](o, time.monotonic() + ATTACK_WALL_S)
+        for attack in attacks:
+            outs[attack] = Outsider(f"tcp/127.0.0.1:{port}", read_run_id(out))
+        until = time.monotonic() + attack_wall_s
+        threads = [threading.Thread(target=ATTACKS[a], args=(outs[a], until)) for a in attacks]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
         stdout, _ = proc.communicate(timeout=180)
     finally:
-        end_launch(proc, out, o)
-    assert proc.returncode in (0, 1) and stdout.strip(), err.read_text()[-3000:]  # (1: not converged in 36 s)
+        end_launch(proc, out, *outs.values())
+    assert proc.returncode in (0, 1) and stdout.strip(), err.read_text()[-3000:]  # (1: not converged so soon)
     s = json.loads(stdout)
-    print(attack, "sent:", o.sent, "summary:", {k: s.get(k) for k in (
+    print(attacks, "sent:", {a: o.sent for a, o in outs.items()}, "summary:", {k: s.get(k) for k in (
         "duration_s", "end_reason", "converged", "collisions", "min_agent_gap_m", "agents_lost", "intrusions",
         "intrusions_by_kind", "messages_rejected_by_process")})
-    assert s["duration_s"] >= DURATION_S - 0.1 and s["end_reason"] == "duration", s  # the mission ran its course
-    return s, o, proc.returncode
+    assert s["duration_s"] >= duration_s - 0.1 and s["end_reason"] == "duration", s  # the mission ran its course
+    return s, outs, proc.returncode
 
 
-def test_forged_odometry_cannot_move_an_agents_idea_of_its_robot(tmp_path: Path) -> None:
-    s, o, _ = _run(tmp_path, "odometry")
+@pytest.fixture(scope="module")
+def forged(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, Any], dict[str, Outsider], Path]:
+    tmp = tmp_path_factory.mktemp("forged")
+    s, outs, _ = _run(tmp, ("odometry", "cmd_vel"))
+    return s, outs, tmp / "run" / "run.db"
+
+
+def test_forged_odometry_cannot_move_an_agents_idea_of_its_robot(forged: tuple[dict, dict, Path]) -> None:
+    s, outs, db = forged
+    o = outs["odometry"]
     assert o.sent > 100
     off = o.idea_off_m()
     print(f"agent 3's beacons ({len(o.beacons3)}) off the world's robot 3 by at most {off:.3g} m")
     assert off < 1e-6  # (NaN, no beacon compared, fails too)
     assert s["collisions"] == 0 and s["min_agent_gap_m"] > 0 and s["agents_lost"] == []
-    refused = refused_from(tmp_path / "run" / "run.db", o.zid)
+    refused = refused_from(db, o.zid)
     assert refused.get("agent-3", {}).get("not_from_world", 0) == o.sent, refused  # each one, at its addressee
 
 
-def test_forged_cmd_vel_cannot_move_a_robot(tmp_path: Path) -> None:
-    s, o, _ = _run(tmp_path, "cmd_vel")
+def test_forged_cmd_vel_cannot_move_a_robot(forged: tuple[dict, dict, Path]) -> None:
+    s, outs, db = forged
+    o = outs["cmd_vel"]
     assert o.sent > 100
     assert s["collisions"] == 0 and s["min_agent_gap_m"] > 0 and s["agents_lost"] == []
-    refused = refused_from(tmp_path / "run" / "run.db", o.zid)
+    refused = refused_from(db, o.zid)
     assert refused.get("simworld", {}).get("impersonation", 0) == o.sent, refused
     assert o.zid in s["intrusion_sources"]
 
 
 def test_an_absurd_cmd_vel_crashes_nothing(tmp_path: Path) -> None:
-    s, o, _ = _run(tmp_path, "absurd")
+    s, outs, _ = _run(tmp_path, ("absurd",))
     assert s["agents_lost"] == [] and s["collisions"] == 0
-    assert s["messages_rejected_by_process"].get("simworld", 0) >= o.sent == 40  # refused at decode, counted
+    assert s["messages_rejected_by_process"].get("simworld", 0) >= outs["absurd"].sent == 40  # refused at decode
     log = (tmp_path / "run" / "logs" / "agent-7.log").read_text()
     assert "OverflowError" not in log and "Traceback" not in log
 
 
 def test_a_forged_token_cannot_hide_a_dead_agent(tmp_path: Path) -> None:
-    s, o, _ = _run(tmp_path, "token")
+    s, outs, _ = _run(tmp_path, ("token",))
     assert s["agents_lost"] == [3] and s["collisions"] == 0, s
-    late = [c for c in o.clocks if c.t >= KILL_AT_S + 6.0]  # the world drops it within its grace of silence
+    late = [c for c in outs["token"].clocks if c.t >= KILL_AT_S + 6.0]  # the world drops it within its grace of silence
     assert late and all(3 not in c.alive for c in late), [c.alive for c in late[:3]]
 
 
