@@ -7,6 +7,7 @@ test noticed (bench/mutation.py agent/host.py)."""
 from __future__ import annotations
 
 from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -44,8 +45,9 @@ def make_host(z: Any, ids: tuple[int, ...] = (1, 2)) -> AgentHost:
     return AgentHost(z, KEYS, links, inbox)
 
 
-@pytest.fixture
-def host() -> Iterator[AgentHost]:
+@contextmanager
+def lone_host() -> Iterator[AgentHost]:
+    """Agents 1 and 2 hosted on a session of their own (a peer that listens, linked to nobody)."""
     z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{free_port()}",), "peer").config())
     h = make_host(z)
     try:
@@ -53,6 +55,12 @@ def host() -> Iterator[AgentHost]:
     finally:
         h.close()
         z.close()
+
+
+@pytest.fixture
+def host() -> Iterator[AgentHost]:
+    with lone_host() as h:
+        yield h
 
 
 def state(aid: int, k: int = 0) -> wire.State:

@@ -11,16 +11,14 @@ from typing import Any
 
 import msgpack
 import pytest
-import zenoh
 
 from agent.host import AgentHost
 from agent.neighbours import Cells
 from reconswarm.net import wire
 from reconswarm.net.batch import ROW, batch_from_wire, batch_to_wire
 from reconswarm.net.keys import WireError
-from reconswarm.net.session import ZenohOptions
-from tests.support import free_port, wait_until
-from tests.unit.test_agent_host_cases import OTHER, kinds, make_host, route
+from tests.support import wait_until
+from tests.unit.test_agent_host_cases import OTHER, kinds, lone_host, route
 from tests.unit.test_agent_host_routing import KEYS, PEER, at_start
 
 A = (0, 0)
@@ -28,13 +26,8 @@ A = (0, 0)
 
 @pytest.fixture
 def host() -> Iterator[AgentHost]:
-    z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{free_port()}",), "peer").config())  # alone
-    h = make_host(z)
-    try:
+    with lone_host() as h:  # (alone)
         yield h
-    finally:
-        h.close()
-        z.close()
 
 
 def _b(aid: int, k: int = 3, px: float = 1.5, radius: float = 0.5) -> wire.Beacon:
