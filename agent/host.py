@@ -8,14 +8,18 @@ is for, through one inbox and one loop that steps every hosted node (agent/node.
   batches and obstacle sets (advanced subscriber: publishers' cached sets), declared while at least one hosted
   agent listens to that cell (agent/neighbours.py) and handed to those that do; an agent that starts
   listening to a cell the host already hears gets the newest set of each publisher there, from the host's copy;
-- per agent: its state (urgent: it starts a tick; in ROS 2 mode its odometry and its scan);
+- the hosted agents' states: one message per tick for all of them (urgent: it starts a tick), taken apart once
+  (agent/robot_io.py `HostKeys`, `take_states`); in ROS 2 mode each agent's odometry and its scan;
 - a sample is decoded and admitted once, whatever number of hosted agents it is for: each beacon of a peer
   host's batch, a set and the clock are judged by the host's one admission (the hosted agents' gates share it)
   and appended to the batch of each agent that listens (a refusal is counted by each of them); what concerns
   one agent alone (its state, a sample on its own key, a malformed one) goes through its own link;
 - the law: the plans of one tick that the hosted agents' nodes returned in a round are computed in one call of
   `law` (each row the same bit for bit as the agent's alone) and each node takes its command back (`Law`);
-- beacons go out as one message per cell and round (agent/beacons.py), put before any command of the round.
+- beacons go out as one message per cell and round (agent/beacons.py), put before any command of the round; the
+  round's commands as one message (`HostKeys.flush`) once the round is over;
+- the host's own liveliness token `alive/host/<hid>/<members>` (declared before its agents' own tokens) tells the
+  world which agents it speaks for (simworld/hosts.py).
 
 Co-hosted agents hear each other in the process: a beacon or set one of them publishes is handed to the others
 that listen to its cell, at once (a beacon as the message itself; a set as its bytes with the session as
@@ -39,11 +43,13 @@ from agent.brain import Plan, commands
 from agent.link import OWN, PASSED, PEER_MESSAGES, AgentLink, Decoded, decode_sample
 from agent.messages import Input, Law, Reconnect
 from agent.neighbours import Cells
+from agent.robot_io import HostKeys, KeysRobot, take_states
 from agent.tagged_inbox import ALL, Tag, TaggedInbox
 from reconswarm.net import trace, wire
 from reconswarm.net.admission import Intrusion
 from reconswarm.net.batch import BeaconBatch
 from reconswarm.net.cells import Cell
+from reconswarm.net.hostwire import StateBatch
 from reconswarm.net.inbox import Item
 from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.lifecycle import Stopper
@@ -97,9 +103,18 @@ class AgentHost:
             # what they still need is in.
             self.subs += [z.declare_subscriber(key, inbox.handler(("own", aid), urgent=urgent))
                           for key, urgent in link.robot.own_keys(k)]
+        # On the project's keys, our agents' robots speak through one subscription and one publisher for all.
+        keyed = [link.robot for link in links.values() if isinstance(link.robot, KeysRobot)]
+        self.robots = HostKeys(session, keys, tuple(links)) if keyed else None
+        for robot in keyed:
+            robot.out = self.robots
+        if self.robots is not None:
+            self.subs.append(self.robots.subscribe(inbox.handler))
         self.subs += [z.declare_subscriber(k.clock, inbox.handler(ALL)),
                       z.liveliness().declare_subscriber(k.alive_all, inbox.handler(ALL), history=True)]
-        for link in links.values():  # declared last: a token tells the world its agent is ready to receive
+        # Declared last, ours first: it names whom we speak for; an agent's token tells the world it is ready.
+        self.token = z.liveliness().declare_token(k.alive_host(tuple(links)))
+        for link in links.values():
             link.announce()
 
     # ------------------------------------------------------------------------------------ listening
@@ -189,6 +204,10 @@ class AgentHost:
         """Hand one sample to the agents it is for (`only`: to that one alone); `sent`: the co-hosted agent's beacon
         the sample was put from (its bytes decode to it: not decoded again)."""
         key, payload, kind, source, at_s = item
+        if tag[0] == "states":
+            take_states(decode_sample(self.keys, key, payload, kind), key, source, at_s, self.active, self.links,
+                        self.gate, batches)
+            return
         if tag[0] == "own":
             link = self.active.get(tag[1])
             mine = None if link is None else link.decode(key, payload, kind, source)
@@ -223,6 +242,8 @@ class AgentHost:
             if m.alive == self._alive:
                 m = dataclasses.replace(m, alive=self._alive)
             self._alive = m.alive
+        if isinstance(m, StateBatch):  # (only on our states' key: not a cell's or everyone's)
+            return
         if isinstance(m, BeaconBatch):
             take_batch(m, key, source, who, batches, at_s, self.active, self.gate, len(self.known))
             return
@@ -285,6 +306,7 @@ class AgentHost:
                 for out in nodes[aid].step(inputs, now):
                     if not isinstance(out, Exit | Reconnect):
                         self.act(aid, out, now)
+            self.answers(now)
         return RECONNECT if rt.interrupted else max((e.code for e in exits.values()), default=0)
 
     def pending(self) -> dict[int, int]:
@@ -310,6 +332,8 @@ class AgentHost:
         for k, plans in by_tick.items():
             for (aid, _p), (v, w) in zip(plans, commands([p for _aid, p in plans]), strict=True):
                 out[aid] = [Law(k, v, w)]
+        if not out and self.robots is not None:  # (the round is over: its commands, in one message)
+            self.robots.flush()
         return out
 
     def idle(self, who: int, now_s: float) -> None:
@@ -357,8 +381,11 @@ class AgentHost:
     def close(self) -> None:
         self._flush()
         self.out.close()
+        if self.robots is not None:
+            self.robots.close()
         for link in self.links.values():
             link.close()
+        self.token.undeclare()
         for subs in self.cell_subs.values():
             for sub in subs:
                 sub.undeclare()

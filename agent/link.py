@@ -20,13 +20,14 @@ from zenoh import ext
 from agent.messages import Output, Received
 from agent.neighbours import Cells
 from agent.node import AgentNode
-from agent.robot_io import RobotFactory, keys_robot
+from agent.robot_io import Decoded, RobotFactory, keys_robot
 from reconswarm.net import wire
 from reconswarm.net.admission import Intrusion, IntrusionKind
 from reconswarm.net.batch import BeaconBatch
 from reconswarm.net.cells import Cell
 from reconswarm.net.decode import AGENT, decode
 from reconswarm.net.gate import Gate
+from reconswarm.net.hostwire import StateBatch
 from reconswarm.net.inbox import Rejections
 from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.node import Invalid, RouterLink, Stop, Token
@@ -38,7 +39,6 @@ log = logging.getLogger("reconswarm.agent")
 PASSED = (Token, RouterLink, Stop)  # taken as they are
 OWN = (wire.State, wire.Scan)  # for one agent: the others drop it
 PEER_MESSAGES = (wire.Beacon, wire.ObstacleSet)  # a peer's: never in our own name from another session
-Decoded = Received | BeaconBatch | None  # what a sample decodes to (None: a key no agent reads)
 
 
 def decode_sample(keys: Keys, key: str, payload: bytes, kind: str) -> Decoded:
@@ -110,7 +110,7 @@ class AgentLink(Member):
 
     def take(self, m: Decoded, key: str, source: str) -> Received | None:
         """A decoded sample, as this agent takes it: ours to act on, counted as invalid, or refused."""
-        if m is None or isinstance(m, BeaconBatch):  # (a batch of beacons: the host's, agent/host.py)
+        if m is None or isinstance(m, BeaconBatch | StateBatch):  # (batches: the host's, agent/host.py)
             return None
         if isinstance(m, PASSED):
             return m

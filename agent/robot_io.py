@@ -3,26 +3,34 @@
 `RobotIO` is what an agent's link (agent/link.py) and its host (agent/host.py) need of it; two interfaces
 implement it:
 
-- `KeysRobot`, the project's keys: the robot's state (its scan inside) on `agent/<id>/state`, the command on
-  `agent/<id>/cmd` (reconswarm/net/keys.py, docs/wire.md);
+- `KeysRobot`, the project's keys, through its host's `HostKeys`: one message per host and tick each way, the
+  states of the host's agents (their scans inside) on `host/<hid>/state`, their commands of a round of the host's
+  loop on `host/<hid>/cmd` (reconswarm/net/hostwire.py, docs/wire.md);
 - `agent/ros2_io.AgentRos2`, ROS 2 topics through rmw_zenoh: `/robot_<i>/odom` in (its own subscription), the
   scan on the project's `scan` key, `/robot_<i>/cmd_vel` out (docs/ros2.md).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import time
+from collections.abc import Callable, Container, Mapping
 from typing import Any, Protocol
 
 import zenoh
 
-from agent.messages import Received
+from agent.messages import Input, Received
+from agent.tagged_inbox import Tag
 from reconswarm.net import trace, wire
+from reconswarm.net.admission import Intrusion, IntrusionKind
+from reconswarm.net.batch import BeaconBatch
 from reconswarm.net.gate import Gate
+from reconswarm.net.hostwire import StateBatch, cmds_to_wire
 from reconswarm.net.inbox import Rejections
 from reconswarm.net.keys import Keys
 from reconswarm.net.node import Invalid
 from reconswarm.net.timing import Timing
+
+Decoded = Received | BeaconBatch | StateBatch | None  # what a sample decodes to (None: a key no agent reads)
 
 
 class RobotIO(Protocol):
@@ -57,17 +65,78 @@ class RobotIO(Protocol):
 RobotFactory = Callable[[zenoh.Session, Keys, int, float, float, Timing, Callable[[Any], None]], RobotIO]
 
 
-class KeysRobot:
-    """The project's keys: the state comes through the host's subscription (`own_keys`), the command goes out on its
-    publisher."""
+STATES: Tag = ("states", None)  # the tag of the host's state batches in its inbox (agent/tagged_inbox.py)
 
-    def __init__(self, session: zenoh.Session, keys: Keys, agent_id: int) -> None:
-        self.pub_cmd: zenoh.Publisher | None = session.declare_publisher(
-            keys.cmd(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
-        self.id = agent_id
+
+class HostKeys:
+    """A host's robots on the project's keys: one subscription to its agents' states, one publisher of their
+    commands (what its agents' `KeysRobot`s command in a round goes out in one message, at `flush`)."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, ids: tuple[int, ...]) -> None:
+        self.z, self.keys, self.hid = session, keys, min(ids)
+        self.pub: zenoh.Publisher | None = session.declare_publisher(
+            keys.host(self.hid, "cmd"), congestion_control=zenoh.CongestionControl.BLOCK)
+        self.cmds: list[wire.Cmd] = []
+
+    def subscribe(self, handler: Callable[[Tag, bool, bool], Any]) -> Any:
+        """Our agents' states: urgent (they start a tick), counted for the rows each carries."""
+        return self.z.declare_subscriber(self.keys.host(self.hid, "state"), handler(STATES, True, True))
+
+    def add(self, c: wire.Cmd) -> None:
+        self.cmds.append(c)
+        trace.mark(trace.Mark.CMD_PUT, c.k, c.id)
+
+    def flush(self) -> None:
+        """Put the commands of this round, in one message."""
+        if self.cmds and self.pub is not None:
+            self.pub.put(cmds_to_wire(self.hid, self.cmds))
+            trace.mark(trace.Mark.HOST_CMD_PUT, self.cmds[0].k, self.hid)
+        self.cmds = []
+
+    def close(self) -> None:
+        self.flush()
+        if self.pub is not None:
+            self.pub.undeclare()
+            self.pub = None
+
+
+def take_states(m: Decoded, key: str, source: str, at_s: float, active: Mapping[int, Any], hosted: Container[int],
+                gate: Gate, batches: dict[int, list[Input]]) -> None:
+    """A host's state batch, taken apart once: each state for its agent (if still running). Malformed: counted once
+    (by the lowest running agent); not from the world, or naming an agent we do not host: one intrusion, and those
+    rows not believed."""
+    if not active:
+        return
+    first = active[min(active)]
+    if not isinstance(m, StateBatch):
+        got = None if m is None else first.take(m, key, source)
+        if got is not None:
+            batches[first.id].append(got)
+        return
+    now = time.monotonic()
+    bad = gate.check(m.states[0], source, key, now)
+    if bad is None and (foreign := [st.id for st in m.states if st.id not in hosted]):
+        bad = Intrusion(IntrusionKind.IMPERSONATION, source, key, f"states of agents {foreign[:8]}, not hosted here")
+    if bad is not None:
+        first.gate.refuse(bad, now)
+        if bad.kind is not IntrusionKind.IMPERSONATION:
+            return
+    trace.mark(trace.Mark.HOST_STATE_IN, m.states[0].k, m.host, at_s)
+    for st in m.states:
+        if st.id in active and st.id in hosted:
+            batches[st.id].append(st)
+            trace.mark(trace.Mark.STATE_IN, st.k, st.id, at_s)
+
+
+class KeysRobot:
+    """The project's keys: the state comes in its host's batch (`HostKeys`, taken apart by `take_states`), the
+    command goes out in its host's batch of the round (`out`: its host's, bound by the host, agent/host.py)."""
+
+    def __init__(self, out: HostKeys | None, agent_id: int) -> None:
+        self.out, self.id = out, agent_id
 
     def own_keys(self, keys: Keys) -> list[tuple[str, bool]]:
-        return [(keys.state(self.id), True)]
+        return []
 
     def owns(self, key: str) -> bool:
         return False
@@ -76,19 +145,17 @@ class KeysRobot:
         raise AssertionError("the project's keys decode through the decode table")
 
     def command(self, c: wire.Cmd, period_s: float) -> None:
-        if self.pub_cmd is not None:
-            self.pub_cmd.put(wire.cmd_to_wire(c))
-            trace.mark(trace.Mark.CMD_PUT, c.k, c.id)
+        assert self.out is not None, "a hosted agent's robot is bound to its host's keys"
+        self.out.add(c)
 
     def dropped(self) -> list[Invalid]:
         return []
 
-    def close(self) -> None:  # (a link closes when its agent fails and again with its host)
-        if self.pub_cmd is not None:
-            self.pub_cmd.undeclare()
-            self.pub_cmd = None
+    def close(self) -> None:  # (the host's publisher is its HostKeys')
+        return None
 
 
-def keys_robot(session: zenoh.Session, keys: Keys, agent_id: int, _l_m: float, _dt_s: float, _timing: Timing,
+def keys_robot(_session: zenoh.Session, _keys: Keys, agent_id: int, _l_m: float, _dt_s: float, _timing: Timing,
                _callback: Callable[[Any], None]) -> RobotIO:
-    return KeysRobot(session, keys, agent_id)
+    """An agent's robot on the project's keys, bound to its host's `HostKeys` by the host (agent/host.py)."""
+    return KeysRobot(None, agent_id)

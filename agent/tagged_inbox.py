@@ -14,7 +14,8 @@ import zenoh
 from reconswarm.net.inbox import Inbox, Item, to_item
 
 ALL = ("all", None)  # the tag of a sample for every hosted agent (clock, liveliness)
-Tag = tuple[str, Any]  # ALL | ("own", agent id) | ("cell", cell or None): the subscription it came through
+# ALL | ("own", agent id) | ("cell", cell or None) | ("states", None): the subscription a sample came through
+Tag = tuple[str, Any]
 
 
 class TaggedInbox:
@@ -23,29 +24,31 @@ class TaggedInbox:
     the hosted agents' states, wake the loop; nothing blocks or calls zenoh in a callback); counted in
     inbox.Inbox's process totals.
 
-    The world publishes every robot's state of a tick in one burst: the loop wakes once the states of all the
-    hosted agents that wait for one are in (`urgent` of them), or `LINGER_S` after the first, so that one
-    round, not several, takes the burst."""
+    The world publishes the states of a tick in one burst (in keys mode one message per host, counted for the
+    states it carries; in ROS 2 mode one odometry per robot): the loop wakes once the states of all the hosted
+    agents that wait for one are in (`urgent` of them), or `LINGER_S` after the first, so that one round, not
+    several, takes the burst."""
 
     LINGER_S = 0.002  # how long the rest of a burst of states may take after its first
     MAX_ROWS = 4096  # the most a batch's attachment may count for
 
     def __init__(self) -> None:
-        self._samples: deque[tuple[Tag, Any, float, bool]] = deque()
+        self._samples: deque[tuple[Tag, Any, float, int]] = deque()  # (tag, sample, at, states it counts for)
         self._ready = threading.Event()
         self._want: float = 1
         self._lock = threading.Lock()
         self._count = 0  # what the samples waiting count for: one each, a batch of beacons its rows (`rows`)
 
     def callback(self, tag: Tag, urgent: bool = False, rows: bool = False) -> Callable[[Any], None]:
-        """rows: a host's batch of beacons counts for the beacons it carries, as its attachment says (the nodes count
-        the beacons they wait for); a wrong count only wakes the loop early, or at its poll."""
+        """rows: a host's batch counts for the rows it carries, as its attachment says (the nodes count the beacons
+        they wait for; an urgent batch, our states, for the agents it has a state for); a wrong count only wakes
+        the loop early, or at its poll."""
         def cb(sample: Any) -> None:
             n = 1
             if rows and (att := sample.attachment) is not None:
                 n = min(self.MAX_ROWS, max(1, int.from_bytes(att.to_bytes()[:4], "little")))
             with self._lock:
-                self._samples.append((tag, sample, time.monotonic(), urgent))
+                self._samples.append((tag, sample, time.monotonic(), (n if rows else 1) if urgent else 0))
                 self._count += n
             if urgent or self._count >= self._want:
                 self._ready.set()
@@ -62,9 +65,12 @@ class TaggedInbox:
         return zenoh.handlers.Callback(self.callback(tag, urgent, rows), indirect=False)
 
     def _states(self) -> tuple[int, float]:
-        """How many hosted agents' urgent samples wait, and when the first came (inf: none)."""
-        got = [(at, tag) for tag, _s, at, urgent in list(self._samples) if urgent]  # (list(): one atomic copy)
-        return len({tag for _at, tag in got}), min((at for at, _tag in got), default=math.inf)
+        """How many hosted agents' states wait (one per tag of a sample of one agent's, a batch's rows), and when the
+        first came (inf: none)."""
+        got = [(at, tag, n) for tag, _s, at, n in list(self._samples) if n]  # (list(): one atomic copy)
+        alone = {tag for _at, tag, n in got if tag[0] == "own"}
+        return len(alone) + sum(n for _at, tag, n in got if tag[0] != "own"), min((at for at, _t, _n in got),
+                                                                                 default=math.inf)
 
     def take(self, want: int | None, timeout: float | None, urgent: int = 1) -> list[tuple[Tag, Item]]:
         """Every sample waiting, once `want` of them (None: only states) are in, or the states of `urgent` hosted
@@ -87,7 +93,7 @@ class TaggedInbox:
         with self._lock:
             got, self._count = list(self._samples), 0
             self._samples.clear()
-        for tag, sample, at, _urgent in got:
+        for tag, sample, at, _n in got:
             item = to_item(sample, at)
             if item is not None:
                 out.append((tag, item))

@@ -34,6 +34,7 @@ from reconswarm.net.admission import Intrusion, IntrusionKind
 from reconswarm.net.batch import BeaconBatch
 from reconswarm.net.decode import LIVE_VIEW, MONITOR, decode
 from reconswarm.net.gate import Gate
+from reconswarm.net.hostwire import CmdBatch, StateBatch
 from reconswarm.net.inbox import Inbox, Item, Rejections
 from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.lifecycle import Stopper
@@ -107,7 +108,7 @@ class MonitorPort(Member):
             m = decode(self.keys, self.accepts, key, payload, kind)
             if m is None or isinstance(m, Token):
                 return m
-            if isinstance(m, BeaconBatch):  # (no kind the monitor accepts)
+            if isinstance(m, BeaconBatch | StateBatch | CmdBatch):  # (no kind the monitor accepts)
                 return None
             # (a report: from the session that speaks for that process; an agent's pinned by its first)
             if not self.gate.admit(m, source, key, at_s):

@@ -6,16 +6,17 @@ crosses between the hosts: what the other hosts' processes may send and receive 
 own rules), and what ours may send their way; nothing else (our clock, say, never comes in from there).
 The rules (`R` = `swarm/<run>`) allow, per process and nothing else:
 
-- agent i, hosted in a process whose lowest agent id is h (h = i for a lone agent): put `R/agent/i/cmd`,
-  `R/cell/*/agent/i/obstacles` (in any cell, under its own id only), its host's beacon batches
-  `R/cell/*/host/h/beacons` (under its host's id only), its intrusion report `R/report/agent-i`; token
-  `R/alive/agent/i`; the advanced publisher's cache (queryable `R/cell/*/agent/i/obstacles/@adv/pub/**`,
-  replies on `R/cell/*/agent/i/obstacles`); subscribe (and receive) `R/agent/i/state`, `R/clock`,
+- agent i, hosted in a process whose lowest agent id is h (h = i for a lone agent) with agents M (`1-5,9`):
+  put its host's command batches `R/host/h/cmd`, `R/cell/*/agent/i/obstacles` (in any cell, under its own id
+  only), its host's beacon batches `R/cell/*/host/h/beacons` (under its host's id only), its intrusion report
+  `R/report/agent-i`; tokens `R/alive/agent/i` and its host's `R/alive/host/h/M` (that key alone); the advanced
+  publisher's cache (queryable `R/cell/*/agent/i/obstacles/@adv/pub/**`, replies on
+  `R/cell/*/agent/i/obstacles`); subscribe (and receive) its host's state batches `R/host/h/state`, `R/clock`,
   `R/cell/*/host/*/beacons`, `R/cell/*/agent/*/obstacles`;
   history queries on `R/cell/*/agent/*/obstacles/@adv/**`; liveliness subscriptions on `R/alive/**` and
   `R/cell/*/agent/*/obstacles/@adv/pub/**`. An agent host (`agents-1-5`): what each of its agents may.
-- simworld: put `R/clock`, `R/truth`, `R/agent/*/state`, `R/report/simworld`; token `R/alive/simworld`;
-  subscribe `R/agent/*/cmd`, liveliness `R/alive/**`; the truth's advanced publisher.
+- simworld: put `R/clock`, `R/truth`, `R/host/*/state`, `R/report/simworld`; token `R/alive/simworld`;
+  subscribe `R/host/*/cmd`, liveliness `R/alive/**`; the truth's advanced publisher.
 - monitor: put `R/event`; token `R/alive/monitor`; subscribe `R/truth`, `R/clock`, `R/report/*`, liveliness
   `R/alive/**`; recovery of a lost truth. With the live view (`--foxglove`): the obstacle sets it draws
   (subscribe, history queries and their replies, the publishers' liveliness), as an agent reads them.
@@ -34,6 +35,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from reconswarm.net.keys import Keys
 from reconswarm_bringup.deployment import Deployment, Host
 from reconswarm_bringup.packing import ids_spec
 
@@ -108,16 +110,17 @@ class _Rules:
                 self.rule(f"{rid}-ros2-tokens", ["liveliness_token"], ("ingress",), [lv, f"{lv}/**"])]
 
 
-def _agent(b: _Rules, i: int, host: int, domain: int | None) -> list[str]:
-    r = b.r
+def _agent(b: _Rules, i: int, group: tuple[int, ...], domain: int | None) -> list[str]:
+    r, host = b.r, min(group)
     a, own = f"{r}/agent/{i}", f"{r}/cell/*/agent/{i}"
     beacons, obstacles = f"{r}/cell/*/host/*/beacons", f"{r}/cell/*/agent/*/obstacles"
     out = [
         *b.obstacle_reader("agents", [f"{r}/clock", beacons]),
-        *b.publish(f"agent-{i}-pub", [f"{a}/cmd", f"{r}/cell/*/host/{host}/beacons", f"{own}/obstacles",
+        *b.publish(f"agent-{i}-pub", [f"{r}/host/{host}/cmd", f"{r}/cell/*/host/{host}/beacons", f"{own}/obstacles",
                                       f"{r}/report/agent-{i}"],
-                   [f"{r}/agent/*/cmd", beacons, obstacles, f"{r}/report/*"]),
-        *b.subscribe(f"agent-{i}-own", [f"{a}/state"]),
+                   [f"{r}/host/*/cmd", beacons, obstacles, f"{r}/report/*"]),
+        *b.subscribe(f"host-{host}-states", [f"{r}/host/{host}/state"]),
+        b.rule(f"host-{host}-token", ["liveliness_token"], ("ingress",), [Keys(b.run).alive_host(group)]),
         *b.membership(f"agent-{i}", f"{r}/alive/agent/{i}"),
         # its advanced publisher's cache: a queryable under its own key, replies with its own set only
         b.rule(f"agent-{i}-cache", ["declare_queryable"], ("ingress",), [f"{own}/obstacles/@adv/pub/**"]),
@@ -133,9 +136,9 @@ def _agent(b: _Rules, i: int, host: int, domain: int | None) -> list[str]:
 def _simworld(b: _Rules, domain: int | None) -> list[str]:
     r = b.r
     out = [
-        *b.publish("simworld-pub", [f"{r}/clock", f"{r}/truth", f"{r}/agent/*/state", f"{r}/report/simworld"],
+        *b.publish("simworld-pub", [f"{r}/clock", f"{r}/truth", f"{r}/host/*/state", f"{r}/report/simworld"],
                    [f"{r}/report/*"]),
-        *b.subscribe("simworld-sub", [f"{r}/agent/*/cmd"]),
+        *b.subscribe("simworld-sub", [f"{r}/host/*/cmd"]),
         *b.membership("simworld", f"{r}/alive/simworld"),
         # the truth's advanced publisher: its cache (a queryable, replies with the truth only) and heartbeats
         b.rule("simworld-truth-cache", ["declare_queryable"], ("ingress",), [f"{r}/truth/@adv/pub/**"]),
@@ -168,8 +171,8 @@ def _monitor(b: _Rules, live_view: bool) -> list[str]:
 def _all_processes(dep: Deployment) -> tuple[_Rules, dict[str, list[str]]]:
     """Every process of the deployment with its rule ids."""
     b = _Rules(dep.run)
-    host_of = {i: min(g) for h in dep.hosts for g in h.agent_processes for i in g}  # (its host's key: lowest id)
-    per_agent = {i: _agent(b, i, host_of[i], dep.ros2_domain) for i in dep.agent_ids}
+    group_of = {i: g for h in dep.hosts for g in h.agent_processes for i in g}  # (its host's key: the lowest id)
+    per_agent = {i: _agent(b, i, group_of[i], dep.ros2_domain) for i in dep.agent_ids}
     grants: dict[str, list[str]] = {}
     for h in dep.hosts:
         for g in h.agent_processes:

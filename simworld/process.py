@@ -34,7 +34,7 @@ from reconswarm.net.wire import ClockMode
 from reconswarm.scenario.model import load
 from simworld.robot_io import KeysIO, RobotIO
 from simworld.ros2_io import Ros2IO, Ros2Robots, ros2_world
-from simworld.world import WorldInput, WorldNode, WorldOutput
+from simworld.world import Command, WorldInput, WorldNode, WorldOutput
 
 log = logging.getLogger("reconswarm.simworld")
 WORLD = 0  # the one node the process hosts
@@ -89,13 +89,16 @@ class WorldPort(Member):
         got: list[WorldInput] = [self._invalid(key, reason) for key, reason in self.io.dropped()]
         for item in items:
             m = self.decode(*item)
-            if m is not None:
+            if isinstance(m, list):
+                got += m
+            elif m is not None:
                 got.append(m)
         return {WORLD: got}
 
-    def decode(self, key: str, payload: bytes, kind: str, source: str, at_s: float) -> WorldInput | None:
-        """A sample as the node's input (None: not the world's, or refused by the gate, which counts and logs it);
-        a malformed one is Invalid (counted)."""
+    def decode(self, key: str, payload: bytes, kind: str, source: str,
+               at_s: float) -> WorldInput | list[Command] | None:
+        """A sample as the node's input (None: not the world's, or refused by the gate, which counts and logs it; a
+        host's command batch: the commands admitted); a malformed one is Invalid (counted)."""
         try:
             return self.io.decode(key, payload, kind, source, at_s)
         except (ros2.Ros2Error, WireError) as exc:
@@ -108,21 +111,25 @@ class WorldPort(Member):
     # ----------------------------------------------------------------------------------------- out
 
     def act(self, who: Any, out: WorldOutput, now_s: float) -> bool:
-        """Put what the node returned under its key (in ROS 2 mode a state as odometry, its scan on its own key)."""
+        """Put what the node returned under its key (in ROS 2 mode a state as odometry, its scan on its own key); a
+        tick's states go out together, before its truth."""
         if isinstance(out, wire.Clock):
             trace.mark(trace.Mark.CLOCK_PUT, out.k, 0)
             self.pub_clock.put(wire.clock_to_wire(out))
             self.gate.world_k, self.gate.t = out.k, out.t  # (the newest tick published; the intrusions' first_t)
         elif isinstance(out, wire.Truth):
+            self.io.flush()
             self.pub_truth.put(wire.truth_to_wire(out))
         elif isinstance(out, wire.State):
             self.io.put_state(out)
         return False
 
     def idle(self, who: Any, now_s: float) -> None:
+        self.io.flush()
         self.report()
 
     def exited(self, who: Any, code: Exit, now_s: float) -> None:
+        self.io.flush()
         self.report(final=True)
 
     def report(self, final: bool = False) -> None:

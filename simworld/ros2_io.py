@@ -158,6 +158,9 @@ class Ros2IO:
         if len(self.published_ns) > self.keep_ticks:
             del self.published_ns[min(self.published_ns)]
 
+    def flush(self) -> None:  # (each state went out as its odometry)
+        return None
+
     def dropped(self) -> list[tuple[str, str]]:
         """A cmd_vel sample without a valid rmw_zenoh attachment, each: dropped by the node before `decode`."""
         n, self.counted = self.node.bad_attachments - self.counted, self.node.bad_attachments

@@ -5,10 +5,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from reconswarm.net.cells import Cell, cell_chunk, chunk_cell
-from reconswarm.scenario.wire_limits import agent_id_from_text
+from reconswarm.scenario.wire_limits import agent_id_from_text, ids_from_text, ids_to_text
 
 CELL_LEAVES = ("beacon", "obstacles")  # an agent's keys under a cell of its position (`beacon`: in-process only)
 HOST_BEACONS = "beacons"  # a host's batch of its agents' beacons in a cell (reconswarm/net/batch.py)
+HOST_LEAVES = ("state", "cmd")  # a host's batch of its agents' states (the world's), their commands (net/hostwire.py)
 
 
 class WireError(ValueError):
@@ -18,13 +19,15 @@ class WireError(ValueError):
 @dataclass(frozen=True)
 class ParsedKey:
     """A key's kind ("agent", "host", "clock", "event", "truth", "alive", "report"), agent id (a host's key: its
-    lowest agent id), leaf, and the cell it was published under (`cell/<cx>_<cy>/agent/<id>/<leaf>`,
-    `cell/<cx>_<cy>/host/<hid>/beacons`; None for every other key)."""
+    lowest agent id), leaf, the cell it was published under (`cell/<cx>_<cy>/agent/<id>/<leaf>`,
+    `cell/<cx>_<cy>/host/<hid>/beacons`; None for every other key), and a host's token's members
+    (`alive/host/<hid>/<members>`; None for every other key)."""
 
     kind: str
     agent_id: int | None
     leaf: str
     cell: Cell | None = None
+    members: tuple[int, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -63,6 +66,14 @@ class Keys:
         """A host's batch of its agents' beacons in a cell (None: every cell, every host)."""
         where = "*" if cell is None else cell_chunk(cell)
         return f"{self.prefix}/cell/{where}/host/{'*' if host is None else host}/{HOST_BEACONS}"
+
+    def host(self, host: int | None, leaf: str) -> str:
+        """A host's batch of its agents' states (`state`, the world's) or commands (`cmd`); None: every host."""
+        return f"{self.prefix}/host/{'*' if host is None else host}/{leaf}"
+
+    def alive_host(self, members: tuple[int, ...] | list[int]) -> str:
+        """A host's liveliness token: its id (its lowest agent's) and every agent it speaks for, in one key."""
+        return f"{self.prefix}/alive/host/{min(members)}/{ids_to_text(members)}"
 
     def obstacles(self, cell: Cell, agent_id: int) -> str:
         return self.in_cell(cell, agent_id, "obstacles")
@@ -112,6 +123,7 @@ class Keys:
     def parse(self, key: str) -> tuple[str, int | None, str]:
         """Classify a key: ("agent", id, leaf) (also for `cell/<cx>_<cy>/agent/<id>/<leaf>`) |
         ("host", its lowest agent id, "beacons") (`cell/<cx>_<cy>/host/<hid>/beacons`) |
+        ("host", hid, "state" | "cmd") (`host/<hid>/<leaf>`) | ("alive", hid, "host") (`alive/host/<hid>/<members>`) |
         ("clock", None, "") | ("event", None, "") | ("truth", None, "") |
         ("alive", id or None, "agent" | "simworld" | "monitor") |
         ("report", agent id or None, "agent-<id>" | "simworld").
@@ -150,6 +162,13 @@ class Keys:
             except ValueError:
                 raise WireError(f"bad cell in key {key!r}") from None
             return ParsedKey("host", _key_id(parts[3], key), parts[4], cell)
+        if len(parts) == 3 and parts[0] == "host" and parts[2] in HOST_LEAVES:
+            return ParsedKey("host", _key_id(parts[1], key), parts[2])
+        if len(parts) == 4 and parts[:2] == ["alive", "host"]:
+            hid, members = _key_id(parts[2], key), ids_from_text(parts[3])
+            if members is None or members[0] != hid:
+                raise WireError(f"bad members in host token {key!r} (canonical ids, the lowest the host's)")
+            return ParsedKey("alive", hid, "host", members=members)
         if len(parts) == 3 and parts[:2] == ["alive", "agent"]:
             return ParsedKey("alive", _key_id(parts[2], key), "agent")
         if len(parts) == 2 and parts[0] == "report" and parts[1] == "simworld":

@@ -22,9 +22,11 @@ from typing import Protocol, TypeVar
 
 
 class Role(Enum):
-    """Who a liveliness token stands for (its key's leaf: `alive/agent/<i>`, `alive/simworld`, `alive/monitor`)."""
+    """Who a liveliness token stands for (its key's leaf: `alive/agent/<i>`, `alive/host/<hid>/<members>`,
+    `alive/simworld`, `alive/monitor`)."""
 
     AGENT = "agent"
+    HOST = "host"
     WORLD = "simworld"
     MONITOR = "monitor"
 
@@ -33,11 +35,13 @@ class Role(Enum):
 @dataclass(frozen=True)
 class Token:
     """A process's liveliness token appeared (up) or went away (its process stopped, or froze past its
-    lease); `agent` is the agent's id for Role.AGENT (None otherwise)."""
+    lease); `agent` is the agent's id for Role.AGENT, the host's id for Role.HOST (None otherwise); `members`: the
+    agents a host speaks for (Role.HOST)."""
 
     role: Role
     up: bool
     agent: int | None = None
+    members: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,11 @@ class Mark(enum.Enum):
     BEACON_IN = "beacon_in"  # a host took agent a's beacon of tick k from another process (the time it arrived)
     CMD_PUT = "cmd_put"  # agent a's host put its command of tick k
     CMD_IN = "cmd_in"  # the world took agent a's command of tick k (the time it arrived)
+    # One per message of a host (a: the host's id, its lowest agent's; k: its first row's tick).
+    HOST_STATE_PUT = "host_state_put"  # the world put a message of host a's states of tick k
+    HOST_STATE_IN = "host_state_in"  # host a took a message of its states of tick k (the time it arrived)
+    HOST_CMD_PUT = "host_cmd_put"  # host a put a message of its agents' commands
+    HOST_CMD_IN = "host_cmd_in"  # the world took a message of host a's commands (the time it arrived)
 
 
 _dir = os.environ.get(ENV) or None

@@ -43,3 +43,37 @@ def int_from_text(text: str, lo: int, hi: int) -> int | None:
 def agent_id_from_text(text: str) -> int | None:
     """An agent id (0..MAX_AGENT_ID) written canonically (see `int_from_text`); None for anything else."""
     return int_from_text(text, 0, MAX_AGENT_ID)
+
+
+def ids_to_text(ids: tuple[int, ...] | list[int]) -> str:
+    """A set of agent ids in its one canonical text, `1-5,9`: ascending runs of consecutive ids as ranges (what a
+    host's liveliness token names, `alive/host/<hid>/<members>`)."""
+    parts: list[str] = []
+    order = sorted(set(ids))
+    start = prev = order[0]
+    for a in [*order[1:], None]:
+        if a is not None and a == prev + 1:
+            prev = a
+            continue
+        parts.append(str(start) if start == prev else f"{start}-{prev}")
+        if a is not None:
+            start = prev = a
+    return ",".join(parts)
+
+
+def ids_from_text(text: str, most: int = MAX_IDS) -> tuple[int, ...] | None:
+    """The ids whose canonical text (`ids_to_text`) `text` is, ascending; None for any other text (a range of one
+    id, ranges out of order, touching or overlapping, more than `most` ids, a non-canonical number)."""
+    out: list[int] = []
+    if not text or len(text) > 16 * most:
+        return None
+    for part in text.split(","):
+        lo, dash, hi = part.partition("-")
+        a = agent_id_from_text(lo)
+        b = agent_id_from_text(hi) if dash else a
+        if a is None or b is None or (dash and b <= a) or (out and a <= out[-1] + 1):
+            return None
+        if len(out) + b - a + 1 > most:
+            return None
+        out.extend(range(a, b + 1))
+    return tuple(out)

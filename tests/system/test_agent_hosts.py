@@ -17,8 +17,8 @@ from typing import Any
 import pytest
 import zenoh
 
-from reconswarm.net import wire
 from reconswarm.net.batch import batch_from_wire
+from reconswarm.net.hostwire import cmd_batch_from_wire
 from reconswarm.net.inbox import sample_source
 from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions
@@ -121,9 +121,10 @@ def test_an_outside_client_sees_each_hosted_agent_as_its_own(tmp_path: Path, out
     z = None
     try:
         z = _open(f"tcp/127.0.0.1:{port}", proc)
-        z.liveliness().declare_subscriber("swarm/*/alive/agent/*", lambda smp: tokens.put(
-            (str(smp.key_expr), str(smp.kind))), history=True)
-        for key in ("swarm/*/cell/*/host/*/beacons", "swarm/*/agent/*/cmd", "swarm/*/report/*"):
+        for who in ("agent/*", "host/**"):
+            z.liveliness().declare_subscriber(f"swarm/*/alive/{who}", lambda smp: tokens.put(
+                (str(smp.key_expr), str(smp.kind))), history=True)
+        for key in ("swarm/*/cell/*/host/*/beacons", "swarm/*/host/*/cmd", "swarm/*/report/*"):
             z.declare_subscriber(key, lambda smp: data.put(
                 (str(smp.key_expr), smp.payload.to_bytes(), sample_source(smp))))
         cpus = host_cpus(out, proc, 2)
@@ -140,12 +141,17 @@ def test_an_outside_client_sees_each_hosted_agent_as_its_own(tmp_path: Path, out
     if len(mine) > 1:  # each host on a CPU of its own, the CPUs in turn
         assert cpus[1] == {mine[0]} and cpus[6] == {mine[1]}, cpus
     keys = Keys((out / "run_id").read_text().strip())
-    seen_tokens = set()
+    seen_tokens, seen_hosts = set(), set()
     while not tokens.empty():
         key, kind = tokens.get()
         if not kind.endswith("DELETE"):
-            seen_tokens.add(keys.parse(key)[1])
+            p = keys.parsed(key)
+            if p.leaf == "host":
+                seen_hosts.add((p.agent_id, p.members))
+            else:
+                seen_tokens.add(p.agent_id)
     assert seen_tokens == set(IDS)  # each hosted agent's own token
+    assert seen_hosts == {(1, IDS[:5]), (6, IDS[5:])}  # each host's: its id and the agents it speaks for
     sources: dict[str, dict[int, set[str]]] = defaultdict(lambda: defaultdict(set))
     while not data.empty():
         key, payload, source = data.get()
@@ -157,9 +163,13 @@ def test_an_outside_client_sees_each_hosted_agent_as_its_own(tmp_path: Path, out
             for b_id in got:
                 sources["beacon"][b_id].add(source)
             continue
-        if leaf == "cmd":
-            assert wire.cmd_from_wire(payload, aid).id == aid
-        elif what == "report":
+        if leaf == "cmd":  # a host's commands, under its lowest id: its own agents only
+            got = [c.id for c in cmd_batch_from_wire(payload, aid).cmds]
+            assert set(got) <= set(IDS[:5] if aid == IDS[0] else IDS[5:]), (key, got)
+            for c_id in got:
+                sources["cmd"][c_id].add(source)
+            continue
+        if what == "report":
             leaf = "report"
         sources[leaf][aid].add(source)
     for leaf in ("beacon", "cmd", "report"):  # on its own keys, from its host's one session

@@ -20,9 +20,11 @@ from agent.link import AgentLink
 from agent.messages import Law, Reconnect
 from agent.neighbours import Cells
 from agent.node import AgentNode
+from agent.robot_io import STATES
 from reconswarm.net import wire
 from reconswarm.net.batch import batch_to_wire
 from reconswarm.net.gate import Gate
+from reconswarm.net.hostwire import cmd_batch_from_wire, state_batches
 from reconswarm.net.inbox import Rejections
 from reconswarm.net.node import Exit, Role, Token
 from reconswarm.net.session import ZenohOptions
@@ -77,14 +79,30 @@ def kinds(batch: list[Any]) -> list[str]:
     return [type(m).__name__ for m in batch]
 
 
-def test_a_state_on_an_agents_own_key_goes_to_it_alone_and_a_malformed_one_counts_as_invalid(host: AgentHost) -> None:
-    item = (KEYS.state(1), wire.state_to_wire(state(1)), "PUT", "world", 0.0)
-    got = route(host, [(("own", 1), item)])
-    assert kinds(got[1]) == ["State"] and got[1][0].id == 1 and got[2] == []
-    got = route(host, [(("own", 2), (KEYS.state(2), b"\xc1 not msgpack", "PUT", "world", 0.0))])
-    assert kinds(got[2]) == ["Invalid"] and host.links[2].rej.count == 1 and host.links[1].rej.count == 0
-    host.exited(2, Exit(1, "failed"), 0.0)
-    assert route(host, [(("own", 2), (KEYS.state(2), wire.state_to_wire(state(2)), "PUT", "world", 0.0))]) == {1: []}
+def states(*sts: wire.State, host: int = 1) -> Item:
+    """The world's message of a host's states (its one message: no scan is large)."""
+    ((payload, _n),) = state_batches(host, list(sts))
+    return (KEYS.host(host, "state"), payload, "PUT", "world", 0.0)
+
+
+def test_the_hosts_state_batch_is_taken_apart_once_each_state_to_its_agent_a_malformed_one_counts_once(
+        host: AgentHost) -> None:
+    got = route(host, [(STATES, states(state(1), state(2)))])
+    assert kinds(got[1]) == ["State"] and got[1][0].id == 1 and kinds(got[2]) == ["State"] and got[2][0].id == 2
+    got = route(host, [(STATES, (KEYS.host(1, "state"), b"\xc1 not msgpack", "PUT", "world", 0.0))])
+    assert kinds(got[1]) == ["Invalid"] and got[2] == [] and host.links[1].rej.count == 1
+    assert host.links[2].rej.count == 0
+    host.exited(1, Exit(1, "failed"), 0.0)
+    got = route(host, [(STATES, states(state(1), state(2)))])
+    assert list(got) == [2] and kinds(got[2]) == ["State"]  # (agent 1's state: nobody's now)
+
+
+def test_a_state_batch_naming_an_agent_we_do_not_host_is_one_intrusion_and_that_row_not_believed(
+        host: AgentHost) -> None:
+    got = route(host, [(STATES, states(state(1), state(3)))])
+    assert kinds(got[1]) == ["State"] and got[2] == []
+    assert host.links[1].gate.tally.total == 1 and host.links[2].gate.tally.total == 0
+    assert set(host.links[1].gate.tally.rows) == {("impersonation", "world")}
 
 
 def test_the_clock_and_the_tokens_go_to_every_running_agent(host: AgentHost) -> None:
@@ -250,9 +268,23 @@ def answers(host: AgentHost) -> dict[int, list[Any]]:
 
 
 def test_our_state_from_a_session_other_than_the_worlds_is_refused(host: AgentHost) -> None:
-    got = route(host, [(("own", 1), (KEYS.state(1), wire.state_to_wire(state(1)), "PUT", "world", 0.0)),
-                       (("own", 1), (KEYS.state(1), wire.state_to_wire(state(1, 1)), "PUT", OTHER, 0.0))])
-    assert [m.k for m in got[1]] == [0] and set(host.links[1].gate.tally.rows) == {("not_from_world", OTHER)}
+    forged = states(state(1, 1), state(2, 1))
+    got = route(host, [(STATES, states(state(1), state(2))), (STATES, (*forged[:3], OTHER, 0.0))])
+    assert [m.k for m in got[1]] == [0] and [m.k for m in got[2]] == [0]
+    assert set(host.links[1].gate.tally.rows) == {("not_from_world", OTHER)} and host.links[1].gate.tally.total == 1
+
+
+def test_the_commands_of_a_round_go_out_in_one_message_once_the_round_is_over(host: AgentHost) -> None:
+    assert host.robots is not None
+    sent: list[tuple[bytes, Any]] = []
+    host.robots.pub = type("Pub", (), {"put": lambda _self, p, **kw: sent.append((p, kw)),
+                                       "undeclare": lambda _self: None})()
+    host.act(1, wire.Cmd(1, 0, 1.0, 0.0), 0.0)
+    host.act(2, wire.Cmd(2, 0, 2.0, 0.5), 0.0)
+    assert sent == []  # (not before the round is over)
+    assert answers(host) == {} and len(sent) == 1
+    assert cmd_batch_from_wire(sent[0][0], 1).cmds == (wire.Cmd(1, 0, 1.0, 0.0), wire.Cmd(2, 0, 2.0, 0.5))
+    assert answers(host) == {} and len(sent) == 1  # (nothing new: nothing put)
 
 
 def test_what_a_hosted_agent_will_find_in_its_next_batch_is_counted_per_agent(host: AgentHost) -> None:

@@ -18,11 +18,13 @@ from agent.host import ALL, AgentHost, TaggedInbox
 from agent.link import AgentLink
 from agent.neighbours import Cells
 from agent.node import AgentNode
+from agent.robot_io import STATES
 from agent.ros2_io import AgentRos2, ros2_robot
 from reconswarm.net import ros2_graph as graph
 from reconswarm.net import wire
 from reconswarm.net.batch import batch_to_wire
 from reconswarm.net.gate import Gate
+from reconswarm.net.hostwire import attachment, state_batches
 from reconswarm.net.inbox import Rejections
 from reconswarm.net.node import Exit
 from reconswarm.net.report import report_from_wire
@@ -72,16 +74,16 @@ def test_the_hosts_subscriptions_take_remote_samples_tagged_with_history_and_non
             pub.put(obstacle_set(3, home3)[1])
             wait_token(z, KEYS.alive_agent(3))
             h = make_host(z)
-            for key in (KEYS.state(1), KEYS.clock, KEYS.host_beacons(home3, 3)):  # (the host's declarations reach it)
+            for key in (KEYS.host(1, "state"), KEYS.clock, KEYS.host_beacons(home3, 3)):  # (the host's declarations)
                 wait_subscribed(out, key)
             got: list[tuple[Any, Item]] = h.inbox.take(0, 0.0)  # (history: the token and the set)
-            out.put(KEYS.state(1), wire.state_to_wire(state(1)))
+            out.put(KEYS.host(1, "state"), state_batches(1, [state(1)])[0][0])
             out.put(KEYS.clock, wire.clock_to_wire(wire.Clock(0, 0.0, (1, 2, 3))))
             out.put(KEYS.host_beacons(home3, 3), batch_to_wire(3, [at_start(3)]))
             z.put(KEYS.host_beacons(home3, 4), batch_to_wire(4, [at_start(4)]))  # our own session's: never taken
             z.put(*obstacle_set(4, home3)[:2])
             deadline = time.monotonic() + 10.0
-            want = {KEYS.state(1), KEYS.clock, KEYS.host_beacons(home3, 3), KEYS.alive_agent(3),
+            want = {KEYS.host(1, "state"), KEYS.clock, KEYS.host_beacons(home3, 3), KEYS.alive_agent(3),
                     KEYS.obstacles(home3, 3)}
             while time.monotonic() < deadline and not want <= {it[0] for _t, it in got}:
                 got += h.inbox.take(1, 0.5)
@@ -89,7 +91,7 @@ def test_the_hosts_subscriptions_take_remote_samples_tagged_with_history_and_non
             for tag, it in got:
                 tags.setdefault(it[0], set()).add(tag)
             assert tags[KEYS.alive_agent(3)] == {ALL} and tags[KEYS.clock] == {ALL}
-            assert tags[KEYS.state(1)] == {("own", 1)}
+            assert tags[KEYS.host(1, "state")] == {STATES}
             assert tags[KEYS.obstacles(home3, 3)] and tags[KEYS.host_beacons(home3, 3)]
             assert all(t[0] == "cell" and t[1] in (None, home3) for t in tags[KEYS.host_beacons(home3, 3)] | tags[
                 KEYS.obstacles(home3, 3)])
@@ -108,7 +110,7 @@ def test_the_states_of_the_hosted_agents_wake_the_host_at_once_a_peers_beacon_do
         h = make_host(z)
         try:
             home3 = AgentNode(S, 3, 0.0).nb.home
-            for key in (KEYS.state(1), KEYS.state(2), KEYS.host_beacons(home3, 3)):  # (the declarations reach `out`)
+            for key in (KEYS.host(1, "state"), KEYS.host_beacons(home3, 3)):  # (the declarations reach `out`)
                 wait_subscribed(out, key)
             take_own_tokens(h.inbox, (1, 2))
             out.put(KEYS.host_beacons(home3, 3), batch_to_wire(3, [at_start(3)]))  # (not urgent: the take waits it out)
@@ -119,18 +121,12 @@ def test_the_states_of_the_hosted_agents_wake_the_host_at_once_a_peers_beacon_do
             t0 = time.monotonic()
             taker = threading.Thread(target=lambda: got.extend(h.inbox.take(None, 30.0, urgent=2)))
             taker.start()
-            for a in (1, 2):
-                out.put(KEYS.state(a), wire.state_to_wire(state(a)))
+            payload, n = state_batches(1, [state(1), state(2)])[0]  # (one message, counted for both states)
+            out.put(KEYS.host(1, "state"), payload, attachment=attachment(n))
             taker.join(40.0)
             assert not taker.is_alive()
             assert time.monotonic() - t0 < 15.0, "the states did not wake the take: it waited for its timeout"
-            if len(got) < 2:  # (a loaded machine can space the two states more than LINGER_S apart: then one
-                # take wakes on the first and the next at once on the second; tests/unit/test_tagged_inbox.py
-                # checks the burst without a network)
-                t1 = time.monotonic()
-                got += h.inbox.take(None, 30.0, urgent=1)
-                assert time.monotonic() - t1 < 15.0, "the second state did not wake the take"
-            assert sorted(it[0] for _tag, it in got) == [KEYS.state(1), KEYS.state(2)]
+            assert [it[0] for _tag, it in got] == [KEYS.host(1, "state")]
         finally:
             h.close()
 
@@ -142,6 +138,9 @@ def test_an_agent_that_fails_stops_listening_and_its_token_goes_one_that_ends_st
         for a, cell in ((1, A), (2, B), (3, B)):
             host.listen(a, Cells(cell, frozenset({cell})))
         assert alive_tokens(host) == {1, 2, 3}
+        hosts = [str(r.ok.key_expr) for r in host.z.liveliness().get(f"{KEYS.prefix}/alive/host/**", timeout=2.0)
+                 if r.ok is not None]
+        assert hosts == [KEYS.alive_host((1, 2, 3))]  # whom the host speaks for, in its one token
         host.exited(1, Exit(1, "failed"), 0.0)  # it stops; agents 2 and 3 go on
         assert 1 not in host.listening and 1 not in host.by_cell.get(A, set()) and A not in host.cell_subs
         assert alive_tokens(host) == {2, 3}
@@ -154,9 +153,9 @@ def test_an_agent_that_fails_stops_listening_and_its_token_goes_one_that_ends_st
 
 
 def alive_tokens(host: AgentHost) -> set[int]:
-    """The agents whose token the host's session itself sees."""
+    """The agents whose own token the host's session itself sees."""
     got = set()
-    for reply in host.z.liveliness().get(KEYS.alive_all, timeout=2.0):
+    for reply in host.z.liveliness().get(KEYS.alive_agent("*"), timeout=2.0):  # type: ignore[arg-type]
         if reply.ok is not None:
             got.add(int(str(reply.ok.key_expr).rsplit("/", 1)[1]))
     return got
@@ -197,7 +196,7 @@ def test_in_ros2_mode_an_agent_takes_its_scan_not_its_state_and_odometry_without
             take_own_tokens(inbox, (1,))
             scan = wire.Scan(1, 0, 0.0, ())
             out.put(KEYS.scan(1), wire.scan_to_wire(scan))
-            out.put(KEYS.state(1), wire.state_to_wire(state(1)))
+            out.put(KEYS.host(1, "state"), state_batches(1, [state(1)])[0][0])  # (keys mode's: nobody hears it)
             out.put(ros2.odom_key, b"no attachment")
             got: list[Any] = []
             deadline = time.monotonic() + 10.0
@@ -215,16 +214,15 @@ def test_in_ros2_mode_an_agent_takes_its_scan_not_its_state_and_odometry_without
 def test_a_closed_host_takes_nothing_more() -> None:
     with two_sessions() as (z, out):
         h = make_host(z)
-        wait_subscribed(out, KEYS.state(1))
+        wait_subscribed(out, KEYS.host(1, "state"))
         h.close()  # (its session stays open: a new host on a new session replaces it, this inbox is left)
-        for key in (KEYS.state(1), KEYS.state(2), KEYS.clock):
+        for key in (KEYS.host(1, "state"), KEYS.clock):
             wait_subscribed(out, key, matched=False)
         h.inbox.take(0, 0.0)
         marks: list[Any] = []
         mark = z.declare_subscriber("test/mark", marks.append)  # (the same session: the same link, in order)
         wait_subscribed(out, "test/mark")
-        for a in (1, 2):
-            out.put(KEYS.state(a), wire.state_to_wire(state(a)))
+        out.put(KEYS.host(1, "state"), state_batches(1, [state(1), state(2)])[0][0])
         out.put(KEYS.clock, wire.clock_to_wire(wire.Clock(0, 0.0, (1, 2))))
         out.put("test/mark", b"after the states and the clock")
         wait_until(lambda: marks, 10.0, "the mark put after the states and the clock")

@@ -26,12 +26,14 @@ from hypothesis import strategies as st
 from agent.host import ALL, AgentHost, TaggedInbox
 from agent.link import AgentLink
 from agent.node import AgentNode
+from agent.robot_io import STATES
 from monitor.node import MonitorNode
 from monitor.process import MonitorPort
 from reconswarm.net import wire
 from reconswarm.net.batch import FIELDS as BATCH_FIELDS
 from reconswarm.net.batch import batch_to_wire
 from reconswarm.net.gate import Gate
+from reconswarm.net.hostwire import cmds_to_wire, state_batches
 from reconswarm.net.inbox import Item, Rejections
 from reconswarm.net.keys import Keys, ParsedKey, WireError
 from reconswarm.net.node import Invalid, Role, Token
@@ -41,7 +43,7 @@ from reconswarm.record.store import RunWriter
 from reconswarm.scenario.model import load
 from reconswarm.scenario.wire_limits import MAX_AGENT_ID
 from simworld.process import WorldPort
-from simworld.world import WorldNode
+from simworld.world import Command, WorldNode
 from tests.support import PAPER, free_port
 
 S = load(PAPER)
@@ -55,6 +57,8 @@ IDS_TEXT = st.one_of(
 CHUNKS = st.one_of(st.sampled_from(["0_0", "-1_0", "01_0", "-0_0", "²_1", "1_2_3", "", "0_٣"]),
                    st.tuples(st.integers(-3, 3), st.integers(-3, 3)).map(lambda c: f"{c[0]}_{c[1]}"),
                    st.text(max_size=10))
+MEMBERS = st.one_of(st.sampled_from(["1", "1-2", "1,2", "1-5,9", "1-1", "2,1", "1-2,3", "01", "1-", "-2", "1,,2",
+                                      "3-1", "1-3,2", ""]), st.text(max_size=10))
 LEAVES = st.one_of(st.sampled_from(["state", "scan", "cmd", "beacon", "beacons", "obstacles", "x", ""]),
                    st.text(max_size=8))
 SUFFIXES = st.one_of(
@@ -62,6 +66,8 @@ SUFFIXES = st.one_of(
     st.builds(lambda c, i, leaf: f"cell/{c}/agent/{i}/{leaf}", CHUNKS, IDS_TEXT, LEAVES),
     st.builds(lambda c, i, leaf: f"cell/{c}/host/{i}/{leaf}", CHUNKS, IDS_TEXT, LEAVES),
     st.builds(lambda c, i: f"cell/{c}/host/{i}/beacons", CHUNKS, IDS_TEXT),
+    st.builds(lambda i, leaf: f"host/{i}/{leaf}", IDS_TEXT, st.one_of(st.sampled_from(["state", "cmd"]), LEAVES)),
+    st.builds(lambda i, m: f"alive/host/{i}/{m}", IDS_TEXT, MEMBERS),
     IDS_TEXT.map(lambda i: f"alive/agent/{i}"),
     IDS_TEXT.map(lambda i: f"report/agent-{i}"),
     st.sampled_from(["clock", "truth", "event", "alive/simworld", "alive/monitor", "alive/x", "report/simworld"]),
@@ -98,7 +104,16 @@ BATCHES = st.one_of(  # a host's batch of beacons: well formed (its ids maybe an
     st.dictionaries(st.sampled_from(["host", "n", "rows", *BATCH_FIELDS]),
                     st.one_of(VALUES, st.binary(max_size=120)), max_size=10).map(
         lambda d: msgpack.packb({"v": wire.VERSION, **d}, use_bin_type=True)))
-PAYLOADS = st.one_of(st.binary(max_size=64), MESSAGES, BATCHES,
+STATE_ROWS = st.lists(st.tuples(AIDS, F, F), min_size=1, max_size=4)
+HOST_BATCHES = st.one_of(  # a host's states or commands: well formed (its ids maybe another host's), or any fields
+    st.builds(lambda h, k, rows: state_batches(h, [wire.State(a, k, k * 0.05, x, y, 0.0, x, y,
+                                                              wire.Scan(a, k, k * 0.05, ((x, y, "o"),)))
+                                                   for a, x, y in rows])[0][0], AIDS, K, STATE_ROWS),
+    st.builds(lambda h, k, rows: cmds_to_wire(h, [wire.Cmd(a, k, x, y) for a, x, y in rows]), AIDS, K, STATE_ROWS),
+    st.dictionaries(st.sampled_from(["host", "n", "rows", "k", "t", "scans"]),
+                    st.one_of(VALUES, st.binary(max_size=120), st.lists(st.lists(VALUES, max_size=3), max_size=3)),
+                    max_size=8).map(lambda d: msgpack.packb({"v": wire.VERSION, **d}, use_bin_type=True)))
+PAYLOADS = st.one_of(st.binary(max_size=64), MESSAGES, BATCHES, HOST_BATCHES,
                      st.dictionaries(st.sampled_from(FIELDS), VALUES, max_size=10).map(
                          lambda d: msgpack.packb({"v": wire.VERSION, **d}, use_bin_type=True)))
 SAMPLES = st.tuples(KEYS_ANY, PAYLOADS, st.sampled_from(["PUT", "DELETE"]), st.sampled_from(["s1", "s2", ""]))
@@ -173,13 +188,17 @@ def _counted(before: int, after: int, got: list[Any]) -> None:
 
 def _own_keys(got: list[Any], items: list[Item]) -> None:
     """A message in an agent's name came on a key of that agent's, written as the run writes it (`alive/agent/03`
-    or `٣` is no key of agent 3's); a beacon in a host's batch, under a host key written so, of an id no higher."""
+    or `٣` is no key of agent 3's); a beacon, state or command in a host's batch, under a host key written so, of
+    an id no higher (a command: of a host the world heard the token of, naming it)."""
     keys = {it[0] for it in items}
     hosts = [p.agent_id for k in keys if (p := _parsed(k)) is not None and p.kind == "host"]
     for m in got:
         if isinstance(m, Token) and m.role is Role.AGENT:
             assert m.agent is not None and KEYS.alive_agent(m.agent) in keys, (m, keys)
-        elif isinstance(m, wire.Beacon):
+        elif isinstance(m, Command):
+            assert any(h is not None and h <= m.cmd.id for h in hosts), (m, keys)
+            assert any(KEYS.host(h, "cmd") in keys for h in (hosts or [])), (m, keys)
+        elif isinstance(m, wire.Beacon | wire.State):
             assert any(h is not None and h <= m.id for h in hosts), (m, keys)
         elif isinstance(m, (wire.Beacon, wire.ObstacleSet, wire.State, wire.Scan, wire.Cmd)):
             assert any(k.startswith(f"{KEYS.prefix}/") and f"/agent/{m.id}/" in k for k in keys), (m, keys)
@@ -211,7 +230,7 @@ def test_any_key_and_payload_is_dropped_and_counted_or_taken_by_every_role(roles
     # an agent host of two agents: each sample through every subscription it may come through
     links = roles.host.active
     before = sum(lk.rej.count for lk in links.values())
-    tagged = [(tag, it) for it in items for tag in (ALL, ("own", 1), ("cell", None), ("cell", (0, 0)))]
+    tagged = [(tag, it) for it in items for tag in (ALL, ("own", 1), ("cell", None), ("cell", (0, 0)), STATES)]
     batches = roles.host.route(tagged, now)
     got_a = [m for b in batches.values() for m in b]
     assert sum(lk.rej.count for lk in links.values()) - before >= sum(isinstance(m, Invalid) for m in got_a)

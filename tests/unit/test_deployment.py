@@ -126,15 +126,20 @@ def test_each_router_names_its_own_processes_and_the_other_router() -> None:
     assert names[1] == {"agents-4-5", "monitor", "router-A"}
     r = "swarm/paper"
     sent, heard = _sent_and_heard(b, "agents-4-5")
-    assert sent == {f"{r}/cell/*/host/4/beacons"} | {k for i in (4, 5) for k in (
-        f"{r}/agent/{i}/cmd", f"{r}/cell/*/agent/{i}/obstacles", f"{r}/report/agent-{i}", f"{r}/alive/agent/{i}")}
-    assert f"{r}/agent/4/state" in heard and f"{r}/agent/1/state" not in heard
+    # A host's keys are its own host id's (4), its token names its agents (4-5), and no other host's.
+    assert sent == {f"{r}/cell/*/host/4/beacons", f"{r}/host/4/cmd", f"{r}/alive/host/4/4-5"} | {
+        k for i in (4, 5) for k in (f"{r}/cell/*/agent/{i}/obstacles", f"{r}/report/agent-{i}", f"{r}/alive/agent/{i}")}
+    assert f"{r}/host/4/state" in heard and not {f"{r}/host/1/state", f"{r}/host/*/state"} & heard
+    sent_3, heard_3 = _sent_and_heard(a, "agent-3")  # (a lone agent: a host of one)
+    assert {f"{r}/host/3/cmd", f"{r}/alive/host/3/3"} <= sent_3 and f"{r}/host/3/state" in heard_3
+    assert not any("/host/1/" in k or "/host/4/" in k or "alive/host/1" in k for k in sent_3 | heard_3)
     # What crosses from B into A: B's processes' own keys (agents 4 and 5, the monitor's events), not A's.
     sent_b, heard_b = _sent_and_heard(a, "router-B")
-    assert {f"{r}/agent/4/cmd", f"{r}/alive/agent/5", f"{r}/event", f"{r}/alive/monitor"} <= sent_b
-    assert not {f"{r}/agent/1/cmd", f"{r}/clock", f"{r}/truth", f"{r}/alive/simworld"} & sent_b
-    # ... and what A may send B's way: the world's clock and truth, agents 1-3's own keys.
-    assert {f"{r}/clock", f"{r}/truth", f"{r}/agent/*/state", f"{r}/cell/*/host/1/beacons"} <= heard_b
+    assert {f"{r}/host/4/cmd", f"{r}/alive/host/4/4-5", f"{r}/alive/agent/5", f"{r}/event",
+            f"{r}/alive/monitor"} <= sent_b
+    assert not {f"{r}/host/1/cmd", f"{r}/alive/host/1/1-2", f"{r}/clock", f"{r}/truth", f"{r}/alive/simworld"} & sent_b
+    # ... and what A may send B's way: the world's clock, truth and states, agents 1-3's own keys.
+    assert {f"{r}/clock", f"{r}/truth", f"{r}/host/*/state", f"{r}/cell/*/host/1/beacons"} <= heard_b
 
 
 def test_ros2_keys_and_live_view_granted_only_when_named() -> None:

@@ -1,9 +1,10 @@
 """Keys whose agent id is not the canonical decimal of one (issue 51, items 1 and 2), from an outside client on
 the run's router during a short lockstep run of the paper mission (two agent hosts of five): a liveliness
 token on `alive/agent/²` ('²'.isdigit(), but int('²') raises), one byte on `cell/<cell>/host/²/beacons` in
-every cell an agent is in, on `agent/²/cmd` and on `report/agent-²`; tokens on `alive/agent/03` and
-`alive/agent/٣` (another key than agent 3's, read as agent 3 by a lax parser), declared, held a few ticks and
-undeclared (a DELETE that would say agent 3 left). Every process must survive them, the mission run its
+every cell an agent is in, on `host/²/cmd` and on `report/agent-²`; tokens on `alive/agent/03` and
+`alive/agent/٣` (another key than agent 3's, read as agent 3 by a lax parser), and host tokens naming agents in
+no canonical text (`alive/host/1/1-3,4-5`, `alive/host/03/3`), declared, held a few ticks and undeclared (a DELETE
+that would say agent 3 left, or take its host's states away). Every process must survive them, the mission run its
 course, and no agent be lost."""
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from tests.support import (
 
 DURATION_S = 20.0
 BAD_IDS = ("²", "03", "٣")  # a digit int() refuses, a leading zero, an Arabic-Indic 3
+BAD_HOSTS = ("1/1-3,4-5", "03/3", "1/5,1-4")  # host 1's agents in no canonical text, host 3 with a leading zero
 
 
 class Outsider:
@@ -89,11 +91,12 @@ def test_keys_with_unicode_digits_or_aliased_ids_kill_nobody_and_lose_no_agent(t
         grid = CellGrid.for_scenario(load(scenario))
         tr = a.newest()
         cells = {grid.cell_of(x, y) for x, y in zip(tr.px, tr.py, strict=True)}  # every agent hears its own cell
-        a.put(f"{pre}/agent/²/cmd", b"\x00")
+        a.put(f"{pre}/host/²/cmd", b"\x00")
         a.put(f"{pre}/report/agent-²", b"\x00")
         for c in cells:
             a.put(f"{pre}/cell/{cell_chunk(c)}/host/²/beacons", b"\x00")
         tokens = [a.z.liveliness().declare_token(f"{pre}/alive/agent/{bad}") for bad in BAD_IDS]
+        tokens += [a.z.liveliness().declare_token(f"{pre}/alive/host/{bad}") for bad in BAD_HOSTS]
         _wait_ticks(db, 10, proc)
         for t in tokens:
             t.undeclare()  # (a DELETE on each key)
