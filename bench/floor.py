@@ -117,8 +117,8 @@ def agent_main(port: int, run: str, s: Scenario, ids: list[int], pattern: str, s
     else:
         pub_beacon = {a: z.declare_publisher(keys.agent(a, "beacon"), congestion_control=block) for a in ids}
         subs = [z.declare_subscriber(keys.all_agents("beacon"), inbox.handler(("all", None)), allowed_origin=remote)]
-    pub_cmd = {a: z.declare_publisher(keys.cmd(a), congestion_control=block) for a in ids}
-    subs += [z.declare_subscriber(keys.state(a), inbox.handler(("own", a), urgent=True)) for a in ids]
+    pub_cmd = {a: z.declare_publisher(keys.agent(a, "cmd"), congestion_control=block) for a in ids}
+    subs += [z.declare_subscriber(keys.agent(a, "state"), inbox.handler(("own", a), urgent=True)) for a in ids]
     subs.append(z.declare_subscriber(keys.clock, inbox.handler(("clock", None))))
     tokens = [z.liveliness().declare_token(keys.alive_agent(a)) for a in ids]  # last: we are ready to receive
     states: dict[int, set[int]] = {a: set() for a in ids}
@@ -211,7 +211,7 @@ def world_main(port: int, run: str, s: Scenario, start: int, end: int) -> int:
     block = zenoh.CongestionControl.BLOCK
     inbox = Inbox()
     pub_clock = z.declare_publisher(keys.clock, congestion_control=block)
-    pub_state = {a: z.declare_publisher(keys.state(a), congestion_control=block) for a in ids}
+    pub_state = {a: z.declare_publisher(keys.agent(a, "state"), congestion_control=block) for a in ids}
     subs = [z.declare_subscriber(keys.all_agents("cmd"), inbox.handler()),
             z.liveliness().declare_subscriber(keys.alive_all, inbox.handler(), history=True)]
     try:

@@ -4,6 +4,7 @@ Every payload is invalid by construction, one of several kinds: random bytes, tr
 schema version, NaN / inf numbers, wrong types, another agent's id, an oversized payload. A valid message
 is never sent, so the run's outcome must not change; every receiver must drop and count each one it receives
 (the run's router forwards no payload over the wire's limit: reconswarm/net/session.py PAYLOAD_CAP).
+A host's keys are flooded under every agent's id (each a host id when it is a host's lowest or alone).
 Beacons and obstacle sets go under the cell each agent is in when the flood starts (heard from the run's
 beacons for up to 2 s; else the cell of its start), so the agents listening there receive them too.
 Prints one JSON line: how many payloads went to each key (`sent`), how many of them were over the limit
@@ -100,7 +101,7 @@ def run(cfg: FloodConfig) -> dict[str, int]:
         cells = _cells_now(session, k, ids, start)
         keys: list[tuple[str, int]] = [(k.clock, 0), (k.truth, 0), (k.event, 0)]
         for a in ids:
-            keys += [(k.state(a), a), (k.cmd(a), a), (k.host_beacons(cells[a], a), a),
+            keys += [(k.host(a, "state"), a), (k.host(a, "cmd"), a), (k.host_beacons(cells[a], a), a),
                      (k.obstacles(cells[a], a), a)]
         pubs = {key: session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
                 for key, _ in keys}

@@ -34,7 +34,7 @@ from reconswarm.net.wire import ClockMode
 from reconswarm.scenario.model import load
 from simworld.robot_io import KeysIO, RobotIO
 from simworld.ros2_io import Ros2IO, Ros2Robots, ros2_world
-from simworld.world import Command, WorldInput, WorldNode, WorldOutput
+from simworld.world import WorldInput, WorldNode, WorldOutput
 
 log = logging.getLogger("reconswarm.simworld")
 WORLD = 0  # the one node the process hosts
@@ -96,7 +96,7 @@ class WorldPort(Member):
         return {WORLD: got}
 
     def decode(self, key: str, payload: bytes, kind: str, source: str,
-               at_s: float) -> WorldInput | list[Command] | None:
+               at_s: float) -> WorldInput | list[WorldInput] | None:
         """A sample as the node's input (None: not the world's, or refused by the gate, which counts and logs it; a
         host's command batch: the commands admitted); a malformed one is Invalid (counted)."""
         try:

@@ -38,7 +38,7 @@ class RobotIO(Protocol):
     state goes."""
 
     def decode(self, key: str, payload: bytes, kind: str, source: str,
-               at_s: float) -> WorldInput | list[Command] | None: ...
+               at_s: float) -> WorldInput | list[WorldInput] | None: ...
 
     def put_state(self, m: wire.State) -> None: ...
 
@@ -69,17 +69,27 @@ class KeysIO:
         self.hosts = Hosts()
         self.pub_state: dict[int, Any] = {}  # hid -> its states' publisher
         self.states: list[wire.State] = []  # put since the last flush
+        self.held: dict[int, Token] = {}  # agents' tokens that came before a host spoke for them
         self.sub = session.declare_subscriber(keys.host(None, "cmd"), handler)
 
     def decode(self, key: str, payload: bytes, kind: str, source: str,
-               at_s: float) -> WorldInput | list[Command] | None:
+               at_s: float) -> WorldInput | list[WorldInput] | None:
+        """A host's token tells whom it speaks for; an agent's token counts for the node once a host speaks for it
+        (its states have somewhere to go: held until then, so the mission's start or an agent's return is never a
+        tick its states are lost for)."""
         m = token_or_cmd(self.keys, key, payload, kind)
         if isinstance(m, Token) and m.role is Role.HOST:
             assert m.agent is not None
             self.hosts.token(m.agent, m.members, m.up)
-            return None
+            return [self.held.pop(a) for a in m.members if a in self.held and a in self.hosts.owner]
+        if isinstance(m, Token) and m.role is Role.AGENT and m.agent is not None:
+            self.held.pop(m.agent, None)
+            if m.up and m.agent not in self.hosts.owner:
+                self.held[m.agent] = m
+                return None
+            return m
         if isinstance(m, CmdBatch):
-            return self.commands(m, key, source, at_s)
+            return list(self.commands(m, key, source, at_s))
         return m if isinstance(m, Token) else None
 
     def commands(self, b: CmdBatch, key: str, source: str, at_s: float) -> list[Command]:

@@ -23,14 +23,12 @@ Kind = tuple[str, str]  # (the key's kind, its leaf); a report key's leaf is ""
 Message = (wire.State | wire.Scan | wire.Beacon | BeaconBatch | StateBatch | CmdBatch | wire.ObstacleSet | wire.Cmd
            | wire.Clock | wire.Truth | Report | Token)
 
-STATE: Kind = ("agent", "state")
 SCAN: Kind = ("agent", "scan")
 BEACON: Kind = ("agent", "beacon")
 HOST_BEACONS: Kind = ("host", "beacons")
 HOST_STATE: Kind = ("host", "state")
 HOST_CMD: Kind = ("host", "cmd")
 OBSTACLES: Kind = ("agent", "obstacles")
-CMD: Kind = ("agent", "cmd")
 CLOCK: Kind = ("clock", "")
 TRUTH: Kind = ("truth", "")
 REPORT: Kind = ("report", "")
@@ -53,14 +51,12 @@ def _id(p: ParsedKey) -> int:
 
 
 TABLE: dict[Kind, Entry] = {
-    STATE: Entry(lambda b, p, _put: wire.state_from_wire(b, _id(p)), wire.State),
     SCAN: Entry(lambda b, p, _put: wire.scan_from_wire(b, _id(p)), wire.Scan),
     BEACON: Entry(lambda b, p, _put: wire.beacon_from_wire(b, _id(p)), wire.Beacon),
     HOST_BEACONS: Entry(lambda b, p, _put: batch_from_wire(b, _id(p)), BeaconBatch),
     HOST_STATE: Entry(lambda b, p, _put: state_batch_from_wire(b, _id(p)), StateBatch),
     HOST_CMD: Entry(lambda b, p, _put: cmd_batch_from_wire(b, _id(p)), CmdBatch),
     OBSTACLES: Entry(lambda b, p, _put: wire.obstacles_from_wire(b, _id(p)), wire.ObstacleSet),
-    CMD: Entry(lambda b, p, _put: wire.cmd_from_wire(b, _id(p)), wire.Cmd),
     CLOCK: Entry(lambda b, _p, _put: wire.clock_from_wire(b), wire.Clock),
     TRUTH: Entry(lambda b, _p, _put: wire.truth_from_wire(b), wire.Truth),
     REPORT: Entry(lambda b, p, _put: report_from_wire(b, p.leaf), Report),
@@ -70,8 +66,8 @@ TABLE: dict[Kind, Entry] = {
     ALIVE_MONITOR: Entry(lambda _b, _p, put: Token(Role.MONITOR, put), Token),
 }
 
-# What each port accepts (the rest of the run's keys are not its). The per-agent state and command (`STATE`, `CMD`)
-# are no port's on the wire: the world and the hosts speak in batches (reconswarm/net/hostwire.py).
+# What each port accepts (the rest of the run's keys are not its). States and commands go in a host's batches
+# (reconswarm/net/hostwire.py).
 AGENT = frozenset({HOST_STATE, SCAN, HOST_BEACONS, OBSTACLES, CLOCK, ALIVE_AGENT, ALIVE_WORLD})
 WORLD = frozenset({HOST_CMD, ALIVE_AGENT, ALIVE_HOST, ALIVE_MONITOR})
 MONITOR = frozenset({CLOCK, TRUTH, REPORT, ALIVE_AGENT, ALIVE_WORLD})

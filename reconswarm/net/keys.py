@@ -44,14 +44,8 @@ class Keys:
     def agent(self, agent_id: int, leaf: str) -> str:
         return f"{self.prefix}/agent/{agent_id}/{leaf}"
 
-    def state(self, agent_id: int) -> str:
-        return self.agent(agent_id, "state")
-
     def scan(self, agent_id: int) -> str:
         return self.agent(agent_id, "scan")
-
-    def cmd(self, agent_id: int) -> str:
-        return self.agent(agent_id, "cmd")
 
     def in_cell(self, cell: Cell, agent_id: int, leaf: str) -> str:
         """A key published under the spatial cell of the sender's position (reconswarm/net/cells.py)."""

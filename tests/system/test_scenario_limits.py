@@ -108,7 +108,7 @@ def test_agent_ids_are_the_wires():
     top = MAX_AGENT_ID
     s = parse(sub("id = 10\n", f"id = {top}\n"))
     assert s.agents[-1].id == top
-    assert Keys("paper").parse(Keys("paper").state(top)) == ("agent", top, "state")
+    assert Keys("paper").parse(Keys("paper").host(top, "state")) == ("host", top, "state")
     refused(sub("id = 10\n", f"id = {top + 1}\n"), "agents[9].id")
     refused(sub("id = 10\n", "id = -1\n"), "agents[9].id")
 

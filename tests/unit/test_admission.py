@@ -52,7 +52,7 @@ def started() -> Admission:
     adm = Admission(S)
     assert adm.check_clock(clock(0), WORLD, KEYS.clock) is None  # pins the world
     assert adm.check_beacon(beacon(2, 40.0, 0.0), A2, KEYS.beacon((0, 0), 2), now=0.0) is None  # pins agent 2
-    assert adm.check_cmd(wire.Cmd(2, 0, 1.0, 0.0), A2, KEYS.cmd(2), now=0.0, world_k=0) is None
+    assert adm.check_cmd(wire.Cmd(2, 0, 1.0, 0.0), A2, KEYS.host(2, "cmd"), now=0.0, world_k=0) is None
     return adm
 
 
@@ -60,17 +60,17 @@ def test_forged_cmd_for_agent_2_is_refused() -> None:
     adm = started()
     # Steering agent 2 into agent 5: a plausible command, but not from agent 2's session.
     steer = wire.Cmd(2, 1, -5.0, 3.0)
-    got = adm.check_cmd(steer, X, KEYS.cmd(2), now=0.1, world_k=1)
-    assert kind(got) is K.IMPERSONATION and got is not None and got.source == X and got.key == KEYS.cmd(2)
-    assert adm.check_cmd(steer, A2, KEYS.cmd(2), now=0.1, world_k=1) is None  # the real agent 2 is fine
-    assert kind(adm.check_cmd(steer, UNATTRIBUTED, KEYS.cmd(2), now=0.1, world_k=1)) is K.IMPERSONATION
+    got = adm.check_cmd(steer, X, KEYS.host(2, "cmd"), now=0.1, world_k=1)
+    assert kind(got) is K.IMPERSONATION and got is not None and got.source == X and got.key == KEYS.host(2, "cmd")
+    assert adm.check_cmd(steer, A2, KEYS.host(2, "cmd"), now=0.1, world_k=1) is None  # the real agent 2 is fine
+    assert kind(adm.check_cmd(steer, UNATTRIBUTED, KEYS.host(2, "cmd"), now=0.1, world_k=1)) is K.IMPERSONATION
     # Whoever sends it: no command above what the planner can output, none for a tick not yet published.
     big = adm.u_max * 1.01
-    assert kind(adm.check_cmd(wire.Cmd(2, 1, big, 0.0), A2, KEYS.cmd(2), 0.1, 1)) is K.COMMAND
-    assert kind(adm.check_cmd(wire.Cmd(2, 9, 1.0, 0.0), A2, KEYS.cmd(2), 0.1, 1)) is K.COMMAND
+    assert kind(adm.check_cmd(wire.Cmd(2, 1, big, 0.0), A2, KEYS.host(2, "cmd"), 0.1, 1)) is K.COMMAND
+    assert kind(adm.check_cmd(wire.Cmd(2, 9, 1.0, 0.0), A2, KEYS.host(2, "cmd"), 0.1, 1)) is K.COMMAND
     # A restarted agent's new session takes over once the old one has been silent for repin_after_s.
-    assert kind(adm.check_cmd(steer, "agent2-new", KEYS.cmd(2), now=0.5, world_k=1)) is K.IMPERSONATION
-    assert adm.check_cmd(steer, "agent2-new", KEYS.cmd(2), now=1.2, world_k=1) is None
+    assert kind(adm.check_cmd(steer, "agent2-new", KEYS.host(2, "cmd"), now=0.5, world_k=1)) is K.IMPERSONATION
+    assert adm.check_cmd(steer, "agent2-new", KEYS.host(2, "cmd"), now=1.2, world_k=1) is None
 
 
 def test_phantom_beacons_are_refused() -> None:
@@ -172,12 +172,12 @@ def test_clock_only_from_the_world() -> None:
     assert kind(adm.check_clock(wire.Clock(9, 123.0, ()), WORLD, KEYS.clock)) is K.CLOCK  # t != k dt
     assert adm.check_clock(clock(9, end=True, reason="converged"), WORLD, KEYS.clock) is None
     # State, scan and truth likewise come from the world alone.
-    assert adm.check_world_source(WORLD, KEYS.state(2)) is None
-    assert kind(adm.check_world_source(X, KEYS.state(2))) is K.NOT_FROM_WORLD
+    assert adm.check_world_source(WORLD, KEYS.host(2, "state")) is None
+    assert kind(adm.check_world_source(X, KEYS.host(2, "state"))) is K.NOT_FROM_WORLD
     fresh = Admission(S)  # the first message only the world sends pins the world's session, whichever it is
-    assert fresh.check_world_source(WORLD, KEYS.state(2)) is None
+    assert fresh.check_world_source(WORLD, KEYS.host(2, "state")) is None
     assert kind(fresh.check_clock(clock(0), X, KEYS.clock)) is K.NOT_FROM_WORLD
-    assert kind(Admission(S).check_world_source(UNATTRIBUTED, KEYS.state(2))) is K.NOT_FROM_WORLD
+    assert kind(Admission(S).check_world_source(UNATTRIBUTED, KEYS.host(2, "state"))) is K.NOT_FROM_WORLD
 
 
 def test_a_forged_liveliness_token_does_not_keep_a_dead_agent_alive() -> None:
@@ -298,11 +298,11 @@ def test_command_bound_holds_for_the_planner_even_in_contact() -> None:
 
 def test_tally_counts_per_kind_and_source() -> None:
     tally = IntrusionTally(max_rows=3)
-    i1 = Intrusion(K.COMMAND, X, KEYS.cmd(2), "x")
+    i1 = Intrusion(K.COMMAND, X, KEYS.host(2, "cmd"), "x")
     assert tally.add(i1, 1.0) and not tally.add(i1, 2.0)
     assert tally.add(Intrusion(K.CLOCK, X, KEYS.clock, "y"), 3.0)
     for n in range(5):  # an attacker cycling session ids fills no more than max_rows rows
-        tally.add(Intrusion(K.COMMAND, f"s{n}", KEYS.cmd(2), "z"), 4.0 + n)
+        tally.add(Intrusion(K.COMMAND, f"s{n}", KEYS.host(2, "cmd"), "z"), 4.0 + n)
     assert tally.total == 8 and len(tally.rows) == 4
     assert ("command", X, 2, 1.0) in tally.as_rows() and ("command", "(other sources)", 4, 5.0) in tally.as_rows()
 
@@ -311,7 +311,7 @@ def test_report_round_trip_and_key() -> None:
     from reconswarm.net.report import Report, report_from_wire, report_to_wire
 
     tally = IntrusionTally()
-    tally.add(Intrusion(K.COMMAND, X, KEYS.cmd(2), "x"), 1.5)
+    tally.add(Intrusion(K.COMMAND, X, KEYS.host(2, "cmd"), "x"), 1.5)
     m = Report("agent-3", tuple(tally.as_rows()))
     assert report_from_wire(report_to_wire(m), "agent-3") == m
     with pytest.raises(WireError):
@@ -338,11 +338,11 @@ def test_gate_delivers_the_runs_messages_and_counts_logs_and_reports_the_rest(ca
 
     g = Gate(S, "agent-3")
     assert g.admit(clock(0), WORLD, KEYS.clock, 0.0) and g.world_k == 0
-    assert g.admit(wire.State(3, 0, 0.0, 0.0, 0.0, 0.0, 0.5, 0.0), WORLD, KEYS.state(3), 0.0)
+    assert g.admit(wire.State(3, 0, 0.0, 0.0, 0.0, 0.0, 0.5, 0.0), WORLD, KEYS.host(3, "state"), 0.0)
     assert g.admit(beacon(2, 40.0, 0.0, t=0.0), A2, KEYS.beacon((0, 0), 2), 0.0)
     assert g.report(0.0) is None  # nothing refused yet
     with caplog.at_level("WARNING", logger="reconswarm.admission"):
-        assert not g.admit(wire.State(3, 1, 0.05, 9.0, 9.0, 0.0, 9.5, 9.0), X, KEYS.state(3), 0.1)
+        assert not g.admit(wire.State(3, 1, 0.05, 9.0, 9.0, 0.0, 9.5, 9.0), X, KEYS.host(3, "state"), 0.1)
         for n in range(5):
             assert not g.admit(clock(2 + n, end=True, reason="converged"), X, KEYS.clock, 0.2 + 0.01 * n)
         assert not g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.beacon((0, 0), 99), 0.3)

@@ -132,7 +132,7 @@ def test_the_turn_rate_counts_in_u_through_the_head_offset() -> None:
     """|u| = |M(θ) [v, ω]| = hypot(v, h ω), h the agent's head offset."""
     adm = started()
     h = float(PAPER_S.head_offsets[PAPER_S.agent_index(2)])
-    key = KEYS.cmd(2)
+    key = KEYS.host(2, "cmd")
     assert adm.check_cmd(wire.Cmd(2, 0, 0.0, 0.99 * adm.u_max / h), A2, key, now=0.0, world_k=0) is None
     got = adm.check_cmd(wire.Cmd(2, 0, 0.0, 1.01 * adm.u_max / h), A2, key, now=0.0, world_k=0)
     assert refused(got, K.COMMAND, A2, key, "above the bound")
@@ -152,7 +152,7 @@ def test_a_ros2_twist_is_bounded_by_where_it_moves_the_head_point_over_the_step(
     twist for |u| just under the bound is admitted although hypot(v, h ω) is up to π/2 times |u|."""
     adm = started()
     h, dt = float(PAPER_S.head_offsets[PAPER_S.agent_index(2)]), PAPER_S.meta.dt_s
-    key = KEYS.cmd(2)
+    key = KEYS.host(2, "cmd")
     v, w = unicycle.arc_twist(-2.0 * h / dt, 1e-3 / h, h, dt)  # straight back by 2 h, a hair aside: a half-turn
     assert math.hypot(v, h * w) > 1.5 * math.hypot(-2.0 * h / dt, 1e-3)
     assert adm.check_cmd(wire.Cmd(2, 0, v, w), A2, key, now=0.0, world_k=0, ticked=False) is None
@@ -169,7 +169,7 @@ def test_a_ros2_twist_is_bounded_by_where_it_moves_the_head_point_over_the_step(
 
 def test_a_command_for_an_agent_the_scenario_does_not_have() -> None:
     adm = started()
-    key = KEYS.cmd(99)
+    key = KEYS.host(99, "cmd")
     for omega in (0.0, 2.0 * adm.u_max):  # an unknown agent has no head offset: ω does not count
         got = adm.check_cmd(wire.Cmd(99, 0, 1.0, omega), X, key, now=0.0, world_k=0)
         assert refused(got, K.UNKNOWN_AGENT, X, key, "agent 99")
@@ -177,7 +177,7 @@ def test_a_command_for_an_agent_the_scenario_does_not_have() -> None:
 
 def test_one_command_per_agent_and_tick() -> None:
     adm = started()
-    key = KEYS.cmd(2)
+    key = KEYS.host(2, "cmd")
     assert adm.check_cmd(wire.Cmd(2, 5, 1.0, 0.1), A2, key, now=0.0, world_k=5) is None
     assert adm.check_cmd(wire.Cmd(2, 5, 1.0, 0.1), A2, key, now=0.0, world_k=5) is None  # the same again: fine
     got = adm.check_cmd(wire.Cmd(2, 5, -3.0, 0.7), A2, key, now=0.0, world_k=5)
@@ -196,10 +196,11 @@ def test_conflicts_on_recent_ticks_are_still_seen_after_old_ticks_are_forgotten(
     sessions = {a: f"agent{a}-zid" for a in ids}
     for k in range(200):  # 200 ticks of every agent's command: far more than 64 per agent are remembered
         for a in ids:
-            assert adm.check_cmd(wire.Cmd(a, k, 1.0, 0.0), sessions[a], KEYS.cmd(a), now=0.001 * k, world_k=k) is None
+            key = KEYS.host(a, "cmd")
+            assert adm.check_cmd(wire.Cmd(a, k, 1.0, 0.0), sessions[a], key, now=0.001 * k, world_k=k) is None
         assert len(adm.cmds) <= 64 * n + n
     for back in (0, 10, 31):  # a different command for a recent tick of agent 2: a conflict
-        got = adm.check_cmd(wire.Cmd(2, 199 - back, 2.0, 0.0), sessions[2], KEYS.cmd(2), now=0.2, world_k=199)
+        got = adm.check_cmd(wire.Cmd(2, 199 - back, 2.0, 0.0), sessions[2], KEYS.host(2, "cmd"), now=0.2, world_k=199)
         assert got is not None and got.kind is K.CONFLICT, back
 
 
@@ -253,7 +254,7 @@ def test_a_clock_after_the_missions_last_tick_is_refused() -> None:
 
 def test_each_agent_has_its_own_pin() -> None:
     adm = started()
-    key1, key2 = KEYS.cmd(1), KEYS.cmd(2)
+    key1, key2 = KEYS.host(1, "cmd"), KEYS.host(2, "cmd")
     for k in range(5):  # two agents commanding every tick, each from its own session
         now = 0.05 * k
         assert adm.check_cmd(wire.Cmd(1, 0, 1.0, 0.0), A1, key1, now=now, world_k=0) is None
@@ -268,8 +269,8 @@ def test_an_unattributed_message_never_pins_an_agent() -> None:
     assert 3 not in pins.agents
     assert pins.agent(3, "agent3-zid", 0.1)  # the agent's own session pins it next
     adm = started()
-    got = adm.check_cmd(wire.Cmd(3, 0, 1.0, 0.0), UNATTRIBUTED, KEYS.cmd(3), now=0.0, world_k=0)
-    assert refused(got, K.IMPERSONATION, UNATTRIBUTED, KEYS.cmd(3), "agent 3 speaks from session nobody")
+    got = adm.check_cmd(wire.Cmd(3, 0, 1.0, 0.0), UNATTRIBUTED, KEYS.host(3, "cmd"), now=0.0, world_k=0)
+    assert refused(got, K.IMPERSONATION, UNATTRIBUTED, KEYS.host(3, "cmd"), "agent 3 speaks from session nobody")
 
 
 def test_refusals_name_the_sender_the_key_and_the_reason() -> None:
@@ -283,7 +284,7 @@ def test_refusals_name_the_sender_the_key_and_the_reason() -> None:
     assert adm.check_beacon(beacon(2, 40.0, 0.0, t=10.0, s=PAPER_S), A2, bkey, 0.0) is None
     assert refused(adm.check_beacon(beacon(2, 40.0, 0.0, t=10.0, s=PAPER_S), X, bkey, 0.1), K.IMPERSONATION, X, bkey,
                    "agent 2 speaks from session agent2-zid")
-    skey = KEYS.state(2)
+    skey = KEYS.host(2, "state")
     assert refused(adm.check_world_source(X, skey), K.NOT_FROM_WORLD, X, skey,
                    "the world speaks from session world-zid")
     fresh = Admission(PAPER_S)
@@ -390,7 +391,7 @@ def test_odometry_from_the_world_within_reach_of_the_last_pose() -> None:
     def odom(k: int, x: float, y: float) -> wire.State:
         return wire.State(2, k, k * dt, x, y, 0.0, x, y)
 
-    key = KEYS.state(2)
+    key = KEYS.host(2, "state")
     assert adm.check_odometry(odom(0, x0, y0), WORLD, key) is None
     step = 0.99 * (u * dt + 1.0)
     assert adm.check_odometry(odom(1, x0 + 0.6 * step, y0 + 0.8 * step), WORLD, key) is None

@@ -92,7 +92,7 @@ def test_the_receivers_clock_bounds_the_time_between_two_beacons_whatever_they_c
 
 def test_odometry_claiming_a_far_future_time_gets_the_bound_of_the_receivers_clock() -> None:
     g = gate_at(2000)
-    key = KEYS.state(8)
+    key = KEYS.host(8, "state")
     assert g.admit_odometry(wire.State(8, 2000, 100.0, 40.0, 20.0, 0.0, 40.0, 20.0), WORLD, key, 0.0)
     far = 40.0 + (1 + CLOCK_LEAD_TICKS) * STEP
     assert not g.admit_odometry(wire.State(8, 2001, 1e300, far, 20.0, 0.0, far, 20.0), WORLD, key, 0.1)

@@ -15,8 +15,8 @@ import time
 from typing import Any
 
 from agent.node import AgentNode
-from reconswarm.net import wire
 from reconswarm.net.batch import batch_to_wire
+from reconswarm.net.hostwire import state_batches
 from tests.support import wait_subscribed
 from tests.unit.test_agent_host_cases import make_host, state
 from tests.unit.test_agent_host_routing import KEYS, S, at_start
@@ -31,14 +31,14 @@ def test_a_burst_of_beacons_on_a_cell_reaches_the_inbox_before_the_state_put_aft
         h = make_host(z, (1,))
         try:
             home3 = AgentNode(S, 3, 0.0).nb.home
-            for key in (KEYS.state(1), KEYS.host_beacons(home3, 3)):  # (the host's declarations reach `out`)
+            for key in (KEYS.host(1, "state"), KEYS.host_beacons(home3, 3)):  # (the host's declarations reach `out`)
                 wait_subscribed(out, key)
             take_own_tokens(h.inbox, (1,))
             burst, marker = batch_to_wire(3, [at_start(3)]), batch_to_wire(3, [at_start(3, 1)])
             for rounds in range(ROUNDS):
                 for _ in range(BURST):
                     out.put(KEYS.host_beacons(home3, 3), burst)
-                out.put(KEYS.state(1), wire.state_to_wire(state(1, rounds)))
+                out.put(KEYS.host(1, "state"), state_batches(1, [state(1, rounds)])[0][0])
                 out.put(KEYS.host_beacons(home3, 3), marker)  # (once in, every one of the burst is: one subscription)
                 got: list[Any] = []
                 deadline = time.monotonic() + 60.0
@@ -46,7 +46,7 @@ def test_a_burst_of_beacons_on_a_cell_reaches_the_inbox_before_the_state_put_aft
                     got += h.inbox.take(None, 0.5, 1)  # (as the loop does: the state wakes it)
                 payloads = [it[1] for _tag, it in got]
                 assert marker in payloads, (rounds, len(payloads))
-                at = payloads.index(wire.state_to_wire(state(1, rounds)))
+                at = payloads.index(state_batches(1, [state(1, rounds)])[0][0])
                 late = sum(1 for p in payloads[at:] if p == burst)
                 assert late == 0, f"round {rounds}: {late} beacons put before the state came after it"
         finally:

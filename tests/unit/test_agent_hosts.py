@@ -134,12 +134,12 @@ def test_admission_takes_several_agents_from_one_session_and_refuses_others_for_
     host, lone, intruder = "host-zid", "lone-zid", "intruder-zid"
     for aid in (1, 2, 3, 4, 5):  # one host's session speaks for agents 1-5
         assert adm.check_beacon(_beacon(aid), host, KEYS.beacon((0, 0), aid), now=0.0) is None
-        assert adm.check_cmd(wire.Cmd(aid, 0, 0.1, 0.0), host, KEYS.cmd(aid), now=0.0, world_k=0) is None
+        assert adm.check_cmd(wire.Cmd(aid, 0, 0.1, 0.0), host, KEYS.host(1, "cmd"), now=0.0, world_k=0) is None
         assert adm.check_report(aid, host, KEYS.report(f"agent-{aid}"), now=0.0) is None
     assert adm.check_beacon(_beacon(6), lone, KEYS.beacon((0, 0), 6), now=0.0) is None  # and a lone agent beside it
     for aid in (1, 3, 5):  # nobody else speaks for a hosted agent while its host does
         for src in (intruder, lone):
-            got = adm.check_cmd(wire.Cmd(aid, 0, 0.1, 0.0), src, KEYS.cmd(aid), now=0.5, world_k=0)
+            got = adm.check_cmd(wire.Cmd(aid, 0, 0.1, 0.0), src, KEYS.host(1, "cmd"), now=0.5, world_k=0)
             assert got is not None and got.kind == IntrusionKind.IMPERSONATION
     # ... nor does the host speak for the lone agent.
     got = adm.check_beacon(_beacon(6), host, KEYS.beacon((0, 0), 6), now=0.5)
@@ -167,10 +167,12 @@ def test_secure_mode_gives_an_agent_host_one_credential_granted_exactly_its_agen
 
     r = "swarm/paper-0a1b2c"
     own = {k for i in (1, 2, 3, 4, 5) for k in (
-        f"{r}/agent/{i}/cmd", f"{r}/cell/*/agent/{i}/obstacles", f"{r}/report/agent-{i}", f"{r}/alive/agent/{i}")}
-    assert sent("agents-1-5") == {*own, f"{r}/cell/*/host/1/beacons"}  # (its beacon batches: under its lowest id)
-    assert set().union(*(sent(f"agent-{i}") for i in range(1, 6))) == {
-        *own, *(f"{r}/cell/*/host/{i}/beacons" for i in range(1, 6))}
+        f"{r}/cell/*/agent/{i}/obstacles", f"{r}/report/agent-{i}", f"{r}/alive/agent/{i}")}
+    # (its batches of beacons and commands under its lowest id, its token naming its agents)
+    assert sent("agents-1-5") == {*own, f"{r}/cell/*/host/1/beacons", f"{r}/host/1/cmd", f"{r}/alive/host/1/1-5"}
+    alone = {k for i in range(1, 6) for k in (f"{r}/cell/*/host/{i}/beacons", f"{r}/host/{i}/cmd",
+                                              f"{r}/alive/host/{i}/{i}")}
+    assert set().union(*(sent(f"agent-{i}") for i in range(1, 6))) == {*own, *alone}
     assert not any(f"/{i}/" in k or k.endswith(f"/{i}") or k.endswith(f"-{i}") for k in sent("agents-1-5")
                    for i in range(6, 11))
     assert "agents-6" not in {c for sub in acl["subjects"] for c in sub["cert_common_names"]}

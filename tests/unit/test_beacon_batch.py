@@ -106,11 +106,14 @@ def test_a_beacon_goes_out_before_the_command_its_agent_returns_after_it(host: A
     got = _catch(host, f"{KEYS.prefix}/**")  # (one subscription: what it hears, in the order put)
     host.act(1, at_start(1), 0.0)
     host.act(1, wire.Cmd(1, 0, 0.0, 0.0), 0.0)  # (a lone agent's: its law in its node, in the same round)
+    host.act(1, at_start(1, 1), 0.0)  # (a beacon after the command in the round: put before the round's commands)
+    assert host.answers(0.0) == {}  # the round is over: its commands go out, in one message
+
     def leaves() -> list[str]:
         return [leaf for key, _ in got if (leaf := key.rsplit("/", 1)[1]) in ("beacons", "cmd")]
 
-    wait_until(lambda: len(leaves()) == 2, 10, "the beacon and the command")
-    assert leaves() == ["beacons", "cmd"]
+    wait_until(lambda: len(leaves()) == 3, 10, "the beacons and the command")
+    assert leaves() == ["beacons", "beacons", "cmd"]
 
 
 def _sample(host_id: int, rows: list[wire.Beacon], source: str) -> tuple[str, bytes, str, str, float]:

@@ -15,6 +15,7 @@ from monitor.process import MonitorPort
 from reconswarm.net import decode as dec
 from reconswarm.net import wire
 from reconswarm.net.batch import batch_to_wire
+from reconswarm.net.hostwire import cmds_to_wire, state_batches
 from reconswarm.net.keys import Keys, ParsedKey, WireError
 from reconswarm.net.node import Invalid, Role, Token
 from reconswarm.net.report import Report, report_to_wire
@@ -27,16 +28,17 @@ K = Keys("t")
 S = load(PAPER)
 A = S.agents[0].id
 SAMPLES: dict[dec.Kind, tuple[str, bytes]] = {  # a well-formed sample of each kind
-    dec.STATE: (K.state(3), wire.state_to_wire(wire.State(3, 1, 0.05, 1.0, 2.0, 0.0, 1.0, 2.0))),
+    dec.HOST_STATE: (K.host(3, "state"), state_batches(3, [wire.State(3, 1, 0.05, 1.0, 2.0, 0.0, 1.0, 2.0)])[0][0]),
     dec.SCAN: (K.scan(3), wire.scan_to_wire(wire.Scan(3, 1, 0.05, ()))),
     dec.BEACON: (K.beacon((1, -2), 3), wire.beacon_to_wire(wire.Beacon(3, 1, 0.05, 1.0, 2.0, 0.5))),
     dec.HOST_BEACONS: (K.host_beacons((1, -2), 3), batch_to_wire(3, [wire.Beacon(3, 1, 0.05, 1.0, 2.0, 0.5)])),
     dec.OBSTACLES: (K.obstacles((0, 0), 3), wire.obstacles_to_wire(wire.ObstacleSet(3, 1, 0))),
-    dec.CMD: (K.cmd(3), wire.cmd_to_wire(wire.Cmd(3, 1, 0.5, 0.1))),
+    dec.HOST_CMD: (K.host(3, "cmd"), cmds_to_wire(3, [wire.Cmd(3, 1, 0.5, 0.1)])),
     dec.CLOCK: (K.clock, wire.clock_to_wire(wire.Clock(1, 0.05, (3,)))),
     dec.TRUTH: (K.truth, wire.truth_to_wire(wire.Truth(1, 0.05, (3,), (1.0,), (2.0,), (0.0,), (1.0,), (2.0,)))),
     dec.REPORT: (K.report("agent-3"), report_to_wire(Report("agent-3", None, 2))),
     dec.ALIVE_AGENT: (K.alive_agent(3), b""),
+    dec.ALIVE_HOST: (K.alive_host((3, 4)), b""),
     dec.ALIVE_WORLD: (K.alive_simworld, b""),
     dec.ALIVE_MONITOR: (K.alive_monitor, b""),
 }
@@ -63,7 +65,7 @@ def test_a_bad_key_or_payload_raises_the_one_wire_error_whatever_the_port_accept
     for accepts, key, payload in ((frozenset(), "swarm/other/clock", b""),
                                   (frozenset(), K.prefix + "/agent/03/state", b""),
                                   (frozenset(), K.prefix + "/cell/01_0/agent/3/beacon", b""),
-                                  (dec.AGENT, K.state(3), b"\x00")):
+                                  (dec.AGENT, K.host(3, "state"), b"\x00")):
         with pytest.raises(WireError):
             dec.decode(K, accepts, key, payload, "PUT")
 
@@ -71,7 +73,7 @@ def test_a_bad_key_or_payload_raises_the_one_wire_error_whatever_the_port_accept
 def test_a_cell_key_gives_its_cell_from_the_one_parse() -> None:
     assert K.parsed(K.beacon((-3, 4), 1)) == ParsedKey("agent", 1, "beacon", (-3, 4))
     assert K.parsed(K.obstacles((0, 12), 2)).cell == (0, 12)
-    assert K.parsed(K.state(2)).cell is None and K.parsed(K.clock).cell is None
+    assert K.parsed(K.host(2, "state")).cell is None and K.parsed(K.clock).cell is None
     assert K.parse(K.beacon((-3, 4), 1)) == ("agent", 1, "beacon")
     assert K.parsed(K.host_beacons((-3, 4), 7)) == ParsedKey("host", 7, "beacons", (-3, 4))
 

@@ -46,13 +46,14 @@ def test_each_kind_of_message_meets_its_own_rule(logged: pytest.LogCaptureFixtur
     assert g.admit(clock(3), WORLD, KEYS.clock, 0.1) and (g.world_k, g.t) == (3, 3 * DT)
     assert g.admit(clock(1), WORLD, KEYS.clock, 0.2) and (g.world_k, g.t) == (3, 3 * DT)  # (the newest stays)
     assert not g.admit(clock(4), X, KEYS.clock, 0.3)
-    assert not g.admit(_state(3), X, KEYS.state(2), 0.3) and g.admit(_state(3), WORLD, KEYS.state(2), 0.3)
+    sk = KEYS.host(2, "state")
+    assert not g.admit(_state(3), X, sk, 0.3) and g.admit(_state(3), WORLD, sk, 0.3)
     assert not g.admit(_beacon(999), X, KEYS.beacon((0, 0), 999), 0.4)
     assert g.admit(_beacon(2), A2, KEYS.beacon((0, 0), 2), 0.4)  # pins agent 2's session
     assert not g.admit(_beacon(2), X, KEYS.beacon((0, 0), 2), 0.5)
-    assert not g.admit(wire.Cmd(2, 4, 1.0, 0.0), A2, KEYS.cmd(2), 0.5)  # tick 4 is not out yet (newest: 3)
-    assert g.admit(wire.Cmd(2, 3, 1.0, 0.0), A2, KEYS.cmd(2), 0.5)
-    assert not g.admit(wire.Cmd(2, 3, 1.0, 0.0), X, KEYS.cmd(2), 0.6)
+    assert not g.admit(wire.Cmd(2, 4, 1.0, 0.0), A2, KEYS.host(2, "cmd"), 0.5)  # tick 4 is not out yet (newest: 3)
+    assert g.admit(wire.Cmd(2, 3, 1.0, 0.0), A2, KEYS.host(2, "cmd"), 0.5)
+    assert not g.admit(wire.Cmd(2, 3, 1.0, 0.0), X, KEYS.host(2, "cmd"), 0.6)
     assert not g.admit(wire.ObstacleSet(2, 3, 1, {"no-such-obstacle": ((0.0, 0.0),)}), X,
                        KEYS.obstacles((0, 0), 2), 0.6)
     assert g.admit(wire.ObstacleSet(2, 3, 1, {}), X, KEYS.obstacles((0, 0), 2), 0.6)  # its content decides
@@ -66,8 +67,8 @@ def test_each_kind_of_message_meets_its_own_rule(logged: pytest.LogCaptureFixtur
     assert g.count == 9
     # Each first refusal of a kind and source is one line naming the process, the source, the key and why.
     assert [line.split(": ")[2].split(" on ")[1] for line in logged.messages] == [
-        KEYS.clock, KEYS.beacon((0, 0), 999), KEYS.beacon((0, 0), 2), KEYS.cmd(2), KEYS.obstacles((0, 0), 2)]
-    assert logged.messages[3] == (f"agent-5: intrusion refused: command from {A2} on {KEYS.cmd(2)}: "
+        KEYS.clock, KEYS.beacon((0, 0), 999), KEYS.beacon((0, 0), 2), KEYS.host(2, "cmd"), KEYS.obstacles((0, 0), 2)]
+    assert logged.messages[3] == (f"agent-5: intrusion refused: command from {A2} on {KEYS.host(2, 'cmd')}: "
                                   "command for tick 4, newest tick is 3 [total 5]")
 
 
@@ -96,8 +97,9 @@ def test_a_report_or_a_state_from_the_wrong_session_is_logged_with_its_key(logge
     g = Gate(S, "monitor")
     assert g.admit(clock(0), WORLD, KEYS.clock, 0.0) and g.admit(_beacon(2), A2, KEYS.beacon((0, 0), 2), 0.0)
     assert not g.admit(Report("agent-2", None), X, KEYS.report("agent-2"), 0.1)
-    assert not g.admit(_state(0), X, KEYS.state(2), 0.2)
-    assert [m.split(" on ")[1].split(": ")[0] for m in logged.messages] == [KEYS.report("agent-2"), KEYS.state(2)]
+    assert not g.admit(_state(0), X, KEYS.host(2, "state"), 0.2)
+    assert [m.split(" on ")[1].split(": ")[0] for m in logged.messages] == [KEYS.report("agent-2"),
+                                                                            KEYS.host(2, "state")]
 
 
 def test_refusals_are_logged_at_most_once_a_second_with_the_held_back(logged: pytest.LogCaptureFixture) -> None:

@@ -38,7 +38,7 @@ def test_a_forged_command_long_after_the_first_pin_is_impersonation_while_the_ag
     adm = Admission(S)
     clock = wire.Clock(0, 0.0, tuple(a.id for a in S.agents))
     assert adm.check_clock(clock, "world-zid", KEYS.clock) is None
-    key = KEYS.cmd(2)
+    key = KEYS.host(2, "cmd")
     for k in range(60):  # 3 s of wall time at 20 Hz: the real agent commands every tick
         now = 0.05 * k
         assert adm.check_cmd(wire.Cmd(2, 0, 1.0, 0.0), REAL, key, now=now, world_k=0) is None

@@ -92,7 +92,7 @@ def test_may_matter_of_a_robot_at_the_float_limit_is_false_not_an_overflow() -> 
 
 def test_two_different_commands_for_one_agents_tick_conflict() -> None:
     adm = pinned()
-    key = Keys("r").cmd(2)
+    key = Keys("r").host(2, "cmd")
     assert adm.check_cmd(wire.Cmd(2, 4, 1.0, 0.0), "a2", key, 0.0, world_k=4) is None
     assert adm.check_cmd(wire.Cmd(2, 4, 1.0, 0.0), "a2", key, 0.1, world_k=4) is None  # the same again: fine
     got = adm.check_cmd(wire.Cmd(2, 4, -3.0, 0.2), "a2", key, 0.2, world_k=4)  # stamped with agent 2's id

@@ -120,8 +120,8 @@ def test_event_round_trip():
 
 def test_keys_parse_every_key():
     k = Keys("paper")
-    assert k.parse(k.state(3)) == ("agent", 3, "state")
-    assert k.parse(k.cmd(10)) == ("agent", 10, "cmd")
+    assert k.parse(k.scan(3)) == ("agent", 3, "scan")
+    assert k.parse(k.host(10, "cmd")) == ("host", 10, "cmd") and k.parse(k.host(3, "state")) == ("host", 3, "state")
     assert k.beacon((-3, 4), 1) == "swarm/paper/cell/-3_4/agent/1/beacon"
     assert k.parse(k.beacon((-3, 4), 1)) == ("agent", 1, "beacon")
     assert k.parse(k.obstacles((0, 12), 2)) == ("agent", 2, "obstacles")

@@ -12,10 +12,12 @@ import numpy as np
 import pytest
 import zenoh
 
-from agent.link import AgentLink
+from agent.link import AgentLink, decode_sample
 from agent.node import AgentNode
+from agent.robot_io import take_states
 from reconswarm.net import wire
 from reconswarm.net.gate import Gate
+from reconswarm.net.hostwire import STATE_ROW, state_batch_from_wire, state_batches
 from reconswarm.net.inbox import Rejections
 from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.node import Invalid
@@ -41,6 +43,9 @@ def test_a_non_finite_scan_point_is_refused_in_a_scan_and_in_a_state(bad: float,
         wire.scan_from_wire(wire._pack(scan), 1)
     with pytest.raises(WireError, match=f"point {'xy'[where]}: not finite"):
         wire.state_from_wire(wire._pack(_state_fields(points)), 1)
+    with pytest.raises(WireError, match=f"point {'xy'[where]}: not finite"):
+        state_batch_from_wire(wire._pack({"host": 1, "k": 0, "t": 0.0, "n": 1, "scans": [[0, points, []]],
+                                          "rows": STATE_ROW.pack(1, 0.0, 0.0, 0.0, 0.0, 0.0)}), 1)
 
 
 def test_non_finite_points_of_both_coordinates_and_integers_are_told_apart() -> None:
@@ -83,6 +88,15 @@ def _finite_sets(out: list[Any]) -> list[wire.ObstacleSet]:
     return sets
 
 
+def take(link: Any, payload: bytes, at_s: float) -> Any:
+    """The agent's state out of its host's batch of one, as its host takes it apart (agent/robot_io.py)."""
+    key = link.keys.host(A, "state")
+    batches: dict[int, list[Any]] = {A: []}
+    take_states(decode_sample(link.keys, key, payload, "PUT"), key, WORLD, at_s, {A: link}, {A}, link.gate, batches)
+    (got,) = batches[A]
+    return got
+
+
 @pytest.mark.parametrize("bad", BAD)
 def test_the_agent_drops_and_counts_a_state_with_a_non_finite_point_and_keeps_its_hull_finite(link: Any,
                                                                                                 bad: float) -> None:
@@ -90,7 +104,9 @@ def test_the_agent_drops_and_counts_a_state_with_a_non_finite_point_and_keeps_it
     clock = link.decode(keys.clock, wire.clock_to_wire(wire.Clock(0, 0.0, (A,))), "PUT", WORLD, 0.0)
     assert isinstance(clock, wire.Clock)  # the world's session is pinned by its first clock
     poisoned = [[130.0, 0.0, "diamond"], [bad, 1.0, "diamond"], [131.0, bad, "diamond"]]
-    got = link.decode(keys.state(A), wire._pack({"v": wire.VERSION, **_state_fields(poisoned)}), "PUT", WORLD, 0.0)
+    rows = STATE_ROW.pack(A, 99.5, 0.0, 0.0, 100.0, 0.0)
+    got = take(link, wire._pack({"v": wire.VERSION, "host": A, "k": 0, "t": 0.0, "n": 1, "rows": rows,
+                                 "scans": [[0, poisoned, []]]}), 0.0)
     assert isinstance(got, Invalid) and "not finite" in got.reason
     assert link.rej.count == 1  # dropped and counted
     out = node.step([clock, got], 0.0)
@@ -99,7 +115,7 @@ def test_the_agent_drops_and_counts_a_state_with_a_non_finite_point_and_keeps_it
     # The world's real state of tick 0 (finite) is taken; the hull and the shared set hold only its points.
     good = wire.State(A, 0, 0.0, 99.5, 0.0, 0.0, 100.0, 0.0,
                       wire.Scan(A, 0, 0.0, ((130.0, 0.0, "diamond"), (131.0, 1.0, "diamond"), (130.5, 3.0, "diamond"))))
-    st = link.decode(keys.state(A), wire.state_to_wire(good), "PUT", WORLD, 0.01)
+    st = take(link, state_batches(A, [good])[0][0], 0.01)
     assert st == good
     out = node.step([st], 0.01)
     assert [o.k for o in out if isinstance(o, wire.Cmd)] == [0]

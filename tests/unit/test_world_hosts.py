@@ -10,6 +10,7 @@ from reconswarm.net import wire
 from reconswarm.net.gate import Gate
 from reconswarm.net.hostwire import cmds_to_wire, state_batch_from_wire
 from reconswarm.net.keys import Keys
+from reconswarm.net.node import Role, Token
 from reconswarm.scenario.model import load
 from simworld.hosts import Hosts
 from simworld.robot_io import KeysIO
@@ -71,7 +72,7 @@ def keys_io() -> tuple[KeysIO, Session, Gate]:
     gate.world_k = 5
     io = KeysIO(z, KEYS, [a.id for a in S.agents], gate, None)  # type: ignore[arg-type]
     for hid, members in ((1, (1, 2, 3, 4, 5)), (6, (6, 7, 8, 9, 10))):
-        assert io.decode(KEYS.alive_host(members), b"", "PUT", f"host{hid}", 0.0) is None  # (the table's)
+        assert io.decode(KEYS.alive_host(members), b"", "PUT", f"host{hid}", 0.0) == []  # (the table's)
     return io, z, gate
 
 
@@ -111,3 +112,13 @@ def test_a_hosts_commands_are_believed_for_its_own_agents_a_batch_naming_another
     # a host whose token the world never saw speaks for nobody
     got = io.decode(KEYS.host(11, "cmd"), cmds_to_wire(11, [wire.Cmd(11, 5, 1.0, 0.0)]), "PUT", "x", 1.0)
     assert got == [] and gate.count == 3
+
+
+def test_an_agents_token_counts_for_the_world_once_a_host_speaks_for_it() -> None:
+    io = KeysIO(Session(), KEYS, [a.id for a in S.agents], Gate(S, "simworld"), None)  # type: ignore[arg-type]
+    up3 = Token(Role.AGENT, True, 3)
+    assert io.decode(KEYS.alive_agent(3), b"", "PUT", "h", 0.0) is None  # (no host yet: held)
+    assert io.decode(KEYS.alive_agent(4), b"", "PUT", "h", 0.0) is None
+    assert io.decode(KEYS.alive_agent(4), b"", "DELETE", "h", 0.0) == Token(Role.AGENT, False, 4)  # (gone: not held)
+    assert io.decode(KEYS.alive_host((1, 2, 3, 4)), b"", "PUT", "h", 0.0) == [up3]
+    assert io.decode(KEYS.alive_agent(2), b"", "PUT", "h", 0.0) == Token(Role.AGENT, True, 2)  # (its host known)

@@ -24,6 +24,7 @@ from typing import Any
 import zenoh
 
 from reconswarm.net import wire
+from reconswarm.net.hostwire import cmds_to_wire
 from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions
 from tests.support import (
@@ -51,7 +52,7 @@ class Stamper:
         self.ids: dict[str, Any] = {}  # "world" | "agent 2" -> the ZenohId its samples carry
         self.clock: wire.Clock | None = None
         self.subs = [self.z.declare_subscriber(self.keys.clock, self._on_clock, allowed_origin=zenoh.Locality.REMOTE),
-                     self.z.declare_subscriber(self.keys.cmd(2), self._on_cmd)]
+                     self.z.declare_subscriber(self.keys.host(2, "cmd"), self._on_cmd)]
 
     def _on_clock(self, s: Any) -> None:
         c = wire.clock_from_wire(s.payload.to_bytes())
@@ -102,7 +103,8 @@ def test_the_record_does_not_lie_about_commands_ends_or_the_dead(tmp_path: Path)
             c, world, agent2 = a.ready()
             if c.t > DURATION_S - 2.0:
                 break
-            a.put_as(agent2, a.keys.cmd(2), wire.cmd_to_wire(wire.Cmd(2, c.k, -0.7, 0.3)))  # not agent 2's command
+            # not agent 2's command (agent 2 is a host of one: its commands go under host 2's key)
+            a.put_as(agent2, a.keys.host(2, "cmd"), cmds_to_wire(2, [wire.Cmd(2, c.k, -0.7, 0.3)]))
             sent["cmd"] += 1
             a.z.put(a.keys.clock, wire.clock_to_wire(wire.Clock(c.k + 1, c.t + dt, c.alive)),  # our own session's
                     congestion_control=zenoh.CongestionControl.BLOCK)

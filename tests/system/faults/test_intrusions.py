@@ -27,6 +27,7 @@ import zenoh
 from reconswarm.net import wire
 from reconswarm.net.batch import batch_to_wire
 from reconswarm.net.cells import CellGrid
+from reconswarm.net.hostwire import cmds_to_wire
 from reconswarm.net.keys import Keys
 from reconswarm.net.session import ZenohOptions
 from reconswarm.plant.unicycle import inputs
@@ -115,7 +116,7 @@ def _attack(a: Attacker, until_t_s: float, timeout_s: float = 600.0) -> dict[str
         u = np.array([[40.0 * (p5[0] - p2[0]) / d, 40.0 * (p5[1] - p2[1]) / d]])  # 40 m/s into agent 5
         v, w = inputs(u, np.array([tr.theta[idx[2]]]), s.head_offsets[[s.agent_index(2)]])  # as a command
         for k in (c.k, c.k + 1):
-            put("cmd", a.keys.cmd(2), wire.cmd_to_wire(wire.Cmd(2, k, float(v[0]), float(w[0]))))
+            put("cmd", a.keys.host(2, "cmd"), cmds_to_wire(2, [wire.Cmd(2, k, float(v[0]), float(w[0]))]))
         cx, cy = sum(tr.px) / len(tr.px), sum(tr.py) / len(tr.py)
         here = CellGrid.for_scenario(s).cell_of(cx, cy)  # the agents near the centroid listen to its cell
         # beacon batches as a host would put them: a phantom host 99, and one under agent 4's host key naming
