@@ -83,6 +83,9 @@ class HostKeys:
         return self.z.declare_subscriber(self.keys.host(self.hid, "state"), handler(STATES, True, True))
 
     def add(self, c: wire.Cmd) -> None:
+        """An agent's command of this round; one it sends again in the same round (its tick seen again more than
+        once) replaces the earlier one of that tick."""
+        self.cmds = [x for x in self.cmds if (x.id, x.k) != (c.id, c.k)]
         self.cmds.append(c)
         trace.mark(trace.Mark.CMD_PUT, c.k, c.id)
 

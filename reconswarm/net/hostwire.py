@@ -16,9 +16,9 @@ is what is believed). A host's states of one tick go out in more than one messag
 than `POINTS_PER_MESSAGE` points and bodies (each message well under the wire's size limit).
 
 Decoding checks what a state or command's decoder checks of each row (finite numbers, ids and ticks in range,
-points and bodies) and what a batch adds: the host field equals the key's, n rows exactly, no id twice, no id below
-the host's (its lowest), scan rows in range and ascending. Who a host may speak for is the receiver's question
-(simworld/hosts.py, agent/host.py).
+points and bodies) and what a batch adds: the host field equals the key's, n rows exactly, no id twice (a command:
+no id and tick twice), no id below the host's (its lowest), scan rows in range and ascending. Who a host may speak
+for is the receiver's question (simworld/hosts.py, agent/robot_io.py).
 """
 
 from __future__ import annotations
@@ -120,12 +120,13 @@ def _unpack(payload: bytes, key_host: int | None, row: struct.Struct) -> tuple[d
     return o, host, n, raw
 
 
-def _check_id(aid: int, host: int, seen: set[int]) -> None:
-    if aid in seen:
+def _check_id(aid: int, host: int, seen: set[Any], once: Any) -> None:
+    """aid in range for its host, and `once` (a state's id, a command's id and tick) not seen before in the batch."""
+    if once in seen:
         raise WireError(f"field 'id': agent {aid} twice in one batch")
     if not host <= aid <= MAX_AGENT_ID:
         raise WireError(f"field 'id': agent {aid} below its host's lowest id {host} or out of range")
-    seen.add(aid)
+    seen.add(once)
 
 
 def state_batch_from_wire(payload: bytes, key_host: int | None = None) -> StateBatch:
@@ -148,9 +149,9 @@ def state_batch_from_wire(payload: bytes, key_host: int | None = None) -> StateB
             raise WireError("field 'scans': rows not ascending")
         scans[i] = wire.Scan(ids[i], k, t, wire._points({"points": entry[1]}), wire._bodies(entry[2]))
     out: list[wire.State] = []
-    seen: set[int] = set()
+    seen: set[Any] = set()
     for i, (aid, x, y, theta, px, py) in enumerate(STATE_ROW.iter_unpack(raw)):
-        _check_id(aid, host, seen)
+        _check_id(aid, host, seen, aid)
         if not (x - x == 0.0 and y - y == 0.0 and theta - theta == 0.0 and px - px == 0.0 and py - py == 0.0):
             raise WireError(f"agent {aid}: a number not finite")
         out.append(wire.State(aid, k, t, x, y, theta, px, py, scans.get(i)))
@@ -161,9 +162,9 @@ def cmd_batch_from_wire(payload: bytes, key_host: int | None = None) -> CmdBatch
     """The commands a payload carries; raises WireError for anything a command batch may not be."""
     _o, host, _n, raw = _unpack(payload, key_host, CMD_ROW)
     out: list[wire.Cmd] = []
-    seen: set[int] = set()
+    seen: set[Any] = set()
     for aid, k, v, w in CMD_ROW.iter_unpack(raw):
-        _check_id(aid, host, seen)
+        _check_id(aid, host, seen, (aid, k))
         if not 0 <= k <= MAX_TICK:
             raise WireError(f"field 'k' of agent {aid}: out of range")
         if not (v - v == 0.0 and w - w == 0.0):

@@ -281,9 +281,10 @@ def test_the_commands_of_a_round_go_out_in_one_message_once_the_round_is_over(ho
                                        "undeclare": lambda _self: None})()
     host.act(1, wire.Cmd(1, 0, 1.0, 0.0), 0.0)
     host.act(2, wire.Cmd(2, 0, 2.0, 0.5), 0.0)
+    host.act(1, wire.Cmd(1, 0, 1.0, 0.0), 0.0)  # (sent again in the round: its tick seen twice; one row)
     assert sent == []  # (not before the round is over)
     assert answers(host) == {} and len(sent) == 1
-    assert cmd_batch_from_wire(sent[0][0], 1).cmds == (wire.Cmd(1, 0, 1.0, 0.0), wire.Cmd(2, 0, 2.0, 0.5))
+    assert cmd_batch_from_wire(sent[0][0], 1).cmds == (wire.Cmd(2, 0, 2.0, 0.5), wire.Cmd(1, 0, 1.0, 0.0))
     assert answers(host) == {} and len(sent) == 1  # (nothing new: nothing put)
 
 

@@ -35,7 +35,7 @@ def test_a_hosts_states_and_commands_come_back_as_they_went_every_row_with_its_i
     ((payload, n),) = state_batches(3, states)
     got = state_batch_from_wire(payload, 3)
     assert n == 3 and got.host == 3 and got.states == tuple(states)
-    cmds = [wire.Cmd(3, 7, 1.25, -0.5), wire.Cmd(4, 6, 0.0, 0.0)]  # (ticks of their own: realtime)
+    cmds = [wire.Cmd(3, 7, 1.25, -0.5), wire.Cmd(4, 6, 0.0, 0.0), wire.Cmd(3, 8, 1.0, 0.0)]  # (ticks of their own)
     back = cmd_batch_from_wire(cmds_to_wire(3, cmds), 3)
     assert back.host == 3 and back.cmds == tuple(cmds)
     # the decode table: the agents take state batches, the world command batches and host tokens
@@ -86,7 +86,7 @@ def test_a_malformed_state_batch_is_refused_saying_why(fields: dict[str, object]
 
 @pytest.mark.parametrize(("fields", "why"), [
     ({"host": 3, "n": 1, "rows": CMD_ROW.pack(3, 0, 1.0, 0.0)[:-1]}, "packed rows"),
-    ({"host": 3, "n": 2, "rows": CMD_ROW.pack(5, 0, 1.0, 0.0) * 2}, "twice"),
+    ({"host": 3, "n": 2, "rows": CMD_ROW.pack(5, 0, 1.0, 0.0) * 2}, "twice"),  # (one agent's tick twice)
     ({"host": 3, "n": 1, "rows": CMD_ROW.pack(1, 0, 1.0, 0.0)}, "below its host"),
     ({"host": 3, "n": 1, "rows": CMD_ROW.pack(3, -2, 1.0, 0.0)}, "out of range"),
     ({"host": 3, "n": 1, "rows": CMD_ROW.pack(3, 0, float("inf"), 0.0)}, "not finite"),
