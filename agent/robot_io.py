@@ -92,8 +92,8 @@ class HostKeys:
     def flush(self) -> None:
         """Put the commands of this round, in one message."""
         if self.cmds and self.pub is not None:
-            self.pub.put(cmds_to_wire(self.hid, self.cmds))
             trace.mark(trace.Mark.HOST_CMD_PUT, self.cmds[0].k, self.hid)
+            self.pub.put(cmds_to_wire(self.hid, self.cmds))
         self.cmds = []
 
     def close(self) -> None:

@@ -121,11 +121,11 @@ class KeysIO:
                 pub = self.pub_state[hid] = self.z.declare_publisher(self.keys.host(hid, "state"),
                                                                      congestion_control=zenoh.CongestionControl.BLOCK)
             states = [by_id[a] for a in ids]
-            for payload, n in state_batches(hid, states):
-                pub.put(payload, attachment=attachment(n))
-                trace.mark(trace.Mark.HOST_STATE_PUT, states[0].k, hid)
-            for st in states:
+            for st in states:  # (marked before the put: its arrival is never stamped earlier)
                 trace.mark(trace.Mark.STATE_PUT, st.k, st.id)
+            for payload, n in state_batches(hid, states):
+                trace.mark(trace.Mark.HOST_STATE_PUT, states[0].k, hid)
+                pub.put(payload, attachment=attachment(n))
 
     def dropped(self) -> list[tuple[str, str]]:
         return []
