@@ -1,4 +1,4 @@
-"""A host's beacons on the wire: one batch per cell and round out (reconswarm/net/batch.py), each batch's rows admitted
+"""A host's beacons on the wire: one batch per cell and round out (net/wire/batch.py), each batch's rows admitted
 one by one in (agent/host.py hands them to the agents listening to its cell).
 
 Out: the beacons the hosted agents returned in a round of the runtime, grouped by the cell each was published from
@@ -23,12 +23,13 @@ import zenoh
 
 from agent.link import AgentLink
 from agent.messages import Input
-from reconswarm.net import trace, wire
-from reconswarm.net.batch import BeaconBatch, batch_to_wire
-from reconswarm.net.cells import Cell
-from reconswarm.net.gate import Gate
-from reconswarm.net.keys import Keys
 from reconswarm.net.node import Invalid
+from reconswarm.net.runtime import trace
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import BeaconBatch, batch_to_wire
+from reconswarm.net.wire.cells import Cell
+from reconswarm.net.wire.keys import Keys
 
 
 class BeaconOut:

@@ -40,15 +40,16 @@ from agent.link import OWN, PASSED, PEER_MESSAGES, AgentLink, Decoded, decode_sa
 from agent.messages import Input, Law, Reconnect
 from agent.neighbours import Cells
 from agent.tagged_inbox import ALL, Tag, TaggedInbox
-from reconswarm.net import trace, wire
-from reconswarm.net.admission import Intrusion
-from reconswarm.net.batch import BeaconBatch
-from reconswarm.net.cells import Cell
-from reconswarm.net.inbox import Item
-from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.lifecycle import Stopper
 from reconswarm.net.node import Exit, Invalid
-from reconswarm.net.runtime import Runtime
+from reconswarm.net.runtime import trace
+from reconswarm.net.runtime.inbox import Item
+from reconswarm.net.runtime.lifecycle import Stopper
+from reconswarm.net.runtime.runtime import Runtime
+from reconswarm.net.trust.admission import Intrusion
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import BeaconBatch
+from reconswarm.net.wire.cells import Cell
+from reconswarm.net.wire.keys import Keys, WireError
 
 log = logging.getLogger("reconswarm.agent")
 RECONNECT = -1  # AgentHost.run's answer when the session must be opened again
@@ -273,7 +274,7 @@ class AgentHost:
     # ------------------------------------------------------------------------------ the runtime's port
 
     def run(self, stop: Stopper, who: str) -> int:
-        """Feed the nodes (reconswarm/net/runtime.py) until all exited (the largest exit code) or one asks for a new
+        """Feed the nodes (net/runtime/runtime.py) until all exited (the largest exit code) or one asks for a new
         session (RECONNECT); a signal stops each (0)."""
         nodes = {aid: link.node for aid, link in self.links.items()}
         poll_s = min(n.timing.agent_poll_s for n in nodes.values())

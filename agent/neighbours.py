@@ -1,7 +1,7 @@
 """Who an agent hears and waits for: its cells and its lockstep wait set, pure (no zenoh).
 
 Beacons and obstacle sets are published under the cell of the sender's head point
-(`swarm/<run>/cell/<cx>_<cy>/agent/<id>/...`, reconswarm/net/cells.py). An agent listens to every cell
+(`swarm/<run>/cell/<cx>_<cy>/agent/<id>/...`, reconswarm/net/wire/cells.py). An agent listens to every cell
 that meets the disk of radius reach + 3 V dt around its head point, V the scenario's speed bound:
 
 - at tick k, as soon as its state is in (before its beacon and long before its command), it adds the cells
@@ -38,8 +38,8 @@ from collections.abc import Container, Iterable, Mapping
 from collections.abc import Set as AbstractSet
 from dataclasses import dataclass
 
-from reconswarm.net import wire
-from reconswarm.net.cells import Cell, CellGrid
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.cells import Cell, CellGrid
 from reconswarm.scenario.model import PlannerKind, Scenario
 
 XY = tuple[float, float]

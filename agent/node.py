@@ -30,10 +30,10 @@ from agent.messages import Input, Law, Output
 from agent.neighbours import Neighbourhood
 from agent.sets import PeerSets, own_set, scan_sets
 from agent.watch import watch
-from reconswarm.net import wire
-from reconswarm.net.membership import Policy, silent
 from reconswarm.net.node import Exit, Invalid, Role, RouterLink, Stop, Token
 from reconswarm.net.timing import TIMING, Timing
+from reconswarm.net.trust.membership import Policy, silent
+from reconswarm.net.wire import wire
 from reconswarm.scenario.model import Scenario
 
 log = logging.getLogger("reconswarm.agent")

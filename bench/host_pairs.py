@@ -38,16 +38,16 @@ from agent.host import AgentHost, TaggedInbox
 from agent.link import AgentLink
 from agent.neighbours import Cells
 from agent.node import AgentNode
-from reconswarm.net import wire
-from reconswarm.net.admission import Admission
-from reconswarm.net.cells import CellGrid
-from reconswarm.net.gate import Gate
-from reconswarm.net.inbox import Rejections
-from reconswarm.net.keys import Keys
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.trust.admission import Admission
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.cells import CellGrid
+from reconswarm.net.wire.keys import Keys
 
 try:  # one beacon message per host and cell (a checkout before it: a sample per beacon)
-    from reconswarm.net.batch import batch_to_wire
+    from reconswarm.net.wire.batch import batch_to_wire
 except ImportError:
     batch_to_wire = None  # type: ignore[assignment]
 

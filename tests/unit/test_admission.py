@@ -1,4 +1,4 @@
-"""Admission rules (reconswarm/net/admission.py) against the attacks of issue 11 and against what the run
+"""Admission rules (reconswarm/net/trust/admission.py) against the attacks of issue 11 and against what the run
 really sends (real commands, real shared hulls, the world's real clock): the attacks are refused with the
 right kind, the run's own messages are all admitted."""
 
@@ -12,18 +12,18 @@ import pytest
 
 from reconswarm.geometry.pairs import pairs_within
 from reconswarm.geometry.plane import convex_hull, norm2
-from reconswarm.net import wire
-from reconswarm.net.admission import (
+from reconswarm.net.timing import Timing
+from reconswarm.net.trust.admission import (
     UNATTRIBUTED,
     Admission,
     Intrusion,
     IntrusionKind,
     command_bound_mps,
 )
-from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.membership import Membership, Policy
-from reconswarm.net.tally import IntrusionTally
-from reconswarm.net.timing import Timing
+from reconswarm.net.trust.membership import Membership, Policy
+from reconswarm.net.trust.tally import IntrusionTally
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys, WireError
 from reconswarm.paper.planner import command, neighbour_table
 from reconswarm.plant.sensing import ContourField
 from reconswarm.scenario.model import load
@@ -308,7 +308,7 @@ def test_tally_counts_per_kind_and_source() -> None:
 
 
 def test_report_round_trip_and_key() -> None:
-    from reconswarm.net.report import Report, report_from_wire, report_to_wire
+    from reconswarm.net.wire.report import Report, report_from_wire, report_to_wire
 
     tally = IntrusionTally()
     tally.add(Intrusion(K.COMMAND, X, KEYS.cmd(2), "x"), 1.5)
@@ -334,7 +334,7 @@ def test_report_round_trip_and_key() -> None:
 
 
 def test_gate_delivers_the_runs_messages_and_counts_logs_and_reports_the_rest(caplog: pytest.LogCaptureFixture) -> None:
-    from reconswarm.net.gate import Gate
+    from reconswarm.net.trust.gate import Gate
 
     g = Gate(S, "agent-3")
     assert g.admit(clock(0), WORLD, KEYS.clock, 0.0) and g.world_k == 0
@@ -358,7 +358,7 @@ def test_gate_delivers_the_runs_messages_and_counts_logs_and_reports_the_rest(ca
 
 
 def test_an_agents_report_is_its_heartbeat_and_says_a_guess_at_once() -> None:
-    from reconswarm.net.gate import Gate
+    from reconswarm.net.trust.gate import Gate
 
     g = Gate(S, "agent-3")
     first = g.report(0.0, counters=(0, -1), every_s=0.5)

@@ -1,4 +1,4 @@
-"""Admission's rules (reconswarm/net/admission.py) at their edges, each against what the module's docstring
+"""Admission's rules (reconswarm/net/trust/admission.py) at their edges, each against what the module's docstring
 says: the reachable area (the scenario's extent grown by the largest head offset + 1 m, plus the reach
 u_max dt + 1 m), the bound on |u| for each planner kind, one command an agent a tick, the radius and clock
 tolerances, who holds an agent's pin, the hull checks and their bounded memory, odometry and reports; and
@@ -12,10 +12,11 @@ from dataclasses import replace
 
 import pytest
 
-from reconswarm.net import admission, wire
-from reconswarm.net.admission import UNATTRIBUTED, Admission, Intrusion, IntrusionKind, Pins, command_bound_mps
-from reconswarm.net.gate import Gate
-from reconswarm.net.keys import Keys
+from reconswarm.net.trust import admission
+from reconswarm.net.trust.admission import UNATTRIBUTED, Admission, Intrusion, IntrusionKind, Pins, command_bound_mps
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm.plant import unicycle
 from reconswarm.scenario.model import AgentSpec, ObstacleSpec, PlannerKind, load
 from tests.support import PAPER

@@ -6,10 +6,10 @@ next one's bound; a claimed time going back widens nothing either."""
 
 from __future__ import annotations
 
-from reconswarm.net import wire
-from reconswarm.net.admission import CLOCK_LEAD_TICKS, Admission, IntrusionKind
-from reconswarm.net.gate import Gate
-from reconswarm.net.keys import Keys
+from reconswarm.net.trust.admission import CLOCK_LEAD_TICKS, Admission, IntrusionKind
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm.scenario.model import load
 from tests.support import PAPER
 

@@ -16,13 +16,13 @@ from agent.host import AgentHost, TaggedInbox
 from agent.link import AgentLink
 from agent.neighbours import Cells
 from agent.node import AgentNode
-from reconswarm.net import wire
-from reconswarm.net.batch import batch_to_wire
-from reconswarm.net.gate import Gate
-from reconswarm.net.inbox import Rejections
-from reconswarm.net.keys import Keys
 from reconswarm.net.node import Exit, Invalid
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import batch_to_wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm.scenario.model import load
 from tests import support
 from tests.support import PAPER, free_port

@@ -12,9 +12,9 @@ import pytest
 
 from agent.process import parse_ids
 from reconswarm.errors import BadInput
-from reconswarm.net import wire
-from reconswarm.net.admission import Admission, IntrusionKind
-from reconswarm.net.keys import Keys
+from reconswarm.net.trust.admission import Admission, IntrusionKind
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm.scenario.model import load
 from reconswarm.scenario.wire_limits import MAX_AGENT_ID, MAX_IDS
 from reconswarm_bringup import packing, secure

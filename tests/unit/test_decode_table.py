@@ -1,4 +1,4 @@
-"""The one decode table (reconswarm/net/decode.py): each kind's decoder gives its type, a port takes only the kinds
+"""The one decode table (reconswarm/net/wire/decode.py): each kind's decoder gives its type, a port takes only the kinds
 it accepts, a cell key's cell comes from the key's one parse, and the live view's obstacle sets go through the
 monitor's port: decoded by the same table, admitted (or refused and counted) by the monitor's gate."""
 
@@ -12,13 +12,13 @@ import pytest
 import zenoh
 
 from monitor.process import MonitorPort
-from reconswarm.net import decode as dec
-from reconswarm.net import wire
-from reconswarm.net.batch import batch_to_wire
-from reconswarm.net.keys import Keys, ParsedKey, WireError
 from reconswarm.net.node import Invalid, Role, Token
-from reconswarm.net.report import Report, report_to_wire
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.wire import decode as dec
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import batch_to_wire
+from reconswarm.net.wire.keys import Keys, ParsedKey, WireError
+from reconswarm.net.wire.report import Report, report_to_wire
 from reconswarm.record.store import RunWriter
 from reconswarm.scenario.model import load
 from tests.support import PAPER, free_port

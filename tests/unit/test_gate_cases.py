@@ -1,4 +1,4 @@
-"""A process's gate (reconswarm/net/gate.py): each kind of message goes through its own admission rule, and a
+"""A process's gate (reconswarm/net/trust/gate.py): each kind of message goes through its own admission rule, and a
 refusal is counted under its kind and source, logged with its key (the first of each kind and source at once,
 then at most a line a second with how many were held back), and reported."""
 
@@ -8,10 +8,10 @@ import logging
 
 import pytest
 
-from reconswarm.net import wire
-from reconswarm.net.gate import Gate
-from reconswarm.net.keys import Keys
-from reconswarm.net.report import Report
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys
+from reconswarm.net.wire.report import Report
 from reconswarm.scenario.model import load
 from tests.support import PAPER, beacon
 from tests.unit.test_admission import clock

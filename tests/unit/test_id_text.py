@@ -9,9 +9,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from reconswarm.errors import BadInput
-from reconswarm.net import ros2
-from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.report import Report
+from reconswarm.net.ros2 import ros2
+from reconswarm.net.wire.keys import Keys, WireError
+from reconswarm.net.wire.report import Report
 from reconswarm.scenario.wire_limits import MAX_AGENT_ID, agent_id_from_text, int_from_text
 from reconswarm_bringup import faults
 

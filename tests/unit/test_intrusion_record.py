@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from reconswarm.net.admission import Intrusion, IntrusionKind
-from reconswarm.net.keys import Keys
-from reconswarm.net.tally import IntrusionTally
+from reconswarm.net.trust.admission import Intrusion, IntrusionKind
+from reconswarm.net.trust.tally import IntrusionTally
+from reconswarm.net.wire.keys import Keys
 from reconswarm.record.store import RunRecord, RunWriter
 from reconswarm.record.summary import summarize
 from reconswarm.scenario.model import load

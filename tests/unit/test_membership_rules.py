@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from reconswarm.net import wire
-from reconswarm.net.admission import Admission, IntrusionKind, Pins
-from reconswarm.net.keys import Keys
+from reconswarm.net.trust.admission import Admission, IntrusionKind, Pins
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm.paper.events import EventKind
 from reconswarm.scenario.model import load
 from tests.support import PAPER

@@ -18,9 +18,9 @@ from agent.brain import AgentBrain, Peer
 from agent.messages import Output
 from agent.neighbours import Cells, Neighbourhood
 from agent.node import AgentNode
-from reconswarm.net import wire
-from reconswarm.net.cells import CellGrid
 from reconswarm.net.timing import TIMING
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.cells import CellGrid
 from reconswarm.scenario.model import PlannerKind, load
 from tests.support import PAPER, joined, left
 

@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from reconswarm.net import wire
-from reconswarm.net.keys import Keys, WireError
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys, WireError
 from reconswarm.paper.events import Event, EventKind
 from reconswarm.scenario.wire_limits import MAX_AGENT_ID, MAX_PAYLOAD_BYTES
 

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from reconswarm.net.cells import Cell, cell_chunk, chunk_cell
+from reconswarm.net.wire.cells import Cell, cell_chunk, chunk_cell
 from reconswarm.scenario.wire_limits import agent_id_from_text
 
 CELL_LEAVES = ("beacon", "obstacles")  # an agent's keys under a cell of its position (`beacon`: in-process only)
-HOST_BEACONS = "beacons"  # a host's batch of its agents' beacons in a cell (reconswarm/net/batch.py)
+HOST_BEACONS = "beacons"  # a host's batch of its agents' beacons in a cell (reconswarm/net/wire/batch.py)
 
 
 class WireError(ValueError):
@@ -51,7 +51,7 @@ class Keys:
         return self.agent(agent_id, "cmd")
 
     def in_cell(self, cell: Cell, agent_id: int, leaf: str) -> str:
-        """A key published under the spatial cell of the sender's position (reconswarm/net/cells.py)."""
+        """A key published under the spatial cell of the sender's position (reconswarm/net/wire/cells.py)."""
         return f"{self.prefix}/cell/{cell_chunk(cell)}/agent/{agent_id}/{leaf}"
 
     def beacon(self, cell: Cell, agent_id: int) -> str:

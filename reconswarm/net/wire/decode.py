@@ -12,11 +12,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
-from reconswarm.net import wire
-from reconswarm.net.batch import BeaconBatch, batch_from_wire
-from reconswarm.net.keys import Keys, ParsedKey, WireError
 from reconswarm.net.node import Role, Token
-from reconswarm.net.report import Report, report_from_wire
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import BeaconBatch, batch_from_wire
+from reconswarm.net.wire.keys import Keys, ParsedKey, WireError
+from reconswarm.net.wire.report import Report, report_from_wire
 
 Kind = tuple[str, str]  # (the key's kind, its leaf); a report key's leaf is ""
 Message = (wire.State | wire.Scan | wire.Beacon | BeaconBatch | wire.ObstacleSet | wire.Cmd | wire.Clock | wire.Truth
