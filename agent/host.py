@@ -34,7 +34,7 @@ from typing import Any
 import zenoh
 from zenoh import ext
 
-from agent.beacons import BeaconOut, take_batch
+from agent.beacons import BeaconOut, handover_cell, handover_label, take_batch
 from agent.brain import Plan, commands
 from agent.link import OWN, PASSED, PEER_MESSAGES, AgentLink, Decoded, decode_sample
 from agent.messages import Input, Law, Reconnect
@@ -145,9 +145,10 @@ class AgentHost:
         return heard_by
 
     def _others(self, sender: int, key: str) -> list[int]:
-        """Whom a co-hosted agent's beacon or set under `key` is for: the running agents that listen to its cell,
-        but not its sender."""
-        return [a for a in self._listeners(self._cell(key)) if a != sender]
+        """Whom a co-hosted agent's beacon (under its handover label) or set (under its key) is for: the running
+        agents that listen to its cell, but not its sender."""
+        cell = handover_cell(key)
+        return [a for a in self._listeners(self._cell(key) if cell is None else cell) if a != sender]
 
     @staticmethod
     def _hears(listen: frozenset[Cell] | None, cell: Cell | None) -> bool:
@@ -338,7 +339,7 @@ class AgentHost:
             home = self.links[aid].home
             assert home is not None
             self.out.add(home, out)
-            put: tuple[str, bytes] | None = (self.keys.beacon(home, aid), b"")  # (its label in the process)
+            put: tuple[str, bytes] | None = (handover_label(home, aid), b"")  # (its label in the process)
         else:
             if isinstance(out, wire.Cmd):
                 self._flush()

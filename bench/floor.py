@@ -109,7 +109,7 @@ def agent_main(port: int, run: str, s: Scenario, ids: list[int], pattern: str, s
         subs = [z.declare_subscriber(keys.host_beacons(c, None), inbox.handler(("cell", c)), allowed_origin=remote)
                 for c in cells]
     elif pattern == "cells":
-        pub_beacon = {a: z.declare_publisher(keys.beacon(grid.cell_of(*pts[a]), a), congestion_control=block)
+        pub_beacon = {a: z.declare_publisher(keys.in_cell(grid.cell_of(*pts[a]), a, "beacon"), congestion_control=block)
                       for a in ids}
         cells = sorted(set().union(*(grid.listen_cells(*pts[a]) for a in ids)))
         subs = [z.declare_subscriber(keys.cell_agents(c, "beacon"), inbox.handler(("cell", c)), allowed_origin=remote)

@@ -84,8 +84,8 @@ def measure(z: zenoh.Session, n: int, k: int, reps: int) -> tuple[int, int, floa
                 if cell in heard:
                     b = wire.Beacon(spec.id, tick, 0.05 * tick, x, y, spec.radius_m, 0)
                     if batch_to_wire is None:  # (a checkout before the batches: a sample per beacon)
-                        items.append((("cell", cell), (keys.beacon(cell, spec.id), wire.beacon_to_wire(b), "PUT",
-                                                       "peer", 0.0)))
+                        key = keys.in_cell(cell, spec.id, "beacon")
+                        items.append((("cell", cell), (key, wire.beacon_to_wire(b), "PUT", "peer", 0.0)))
                     by_host.setdefault((hid, cell), []).append(b)
             if batch_to_wire is not None:
                 items = [(("cell", cell), (keys.host_beacons(cell, hid), batch_to_wire(hid, rows), "PUT", "peer", 0.0))

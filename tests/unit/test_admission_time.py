@@ -19,7 +19,7 @@ KEYS = Keys("paper-0a1b2c")
 WORLD, A8 = "world-zid", "host-zid"
 IDS = tuple(a.id for a in S.agents)
 K = IntrusionKind
-BKEY = KEYS.beacon((0, 0), 8)
+BKEY = KEYS.host_beacons((0, 0), 8)
 STEP = Admission(S).reach_m(DT)  # how far a beacon may move in one tick (u_max dt + 1 m)
 
 

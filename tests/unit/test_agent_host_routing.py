@@ -12,6 +12,7 @@ from typing import Any
 import pytest
 import zenoh
 
+from agent.beacons import handover_label
 from agent.host import AgentHost, TaggedInbox
 from agent.link import AgentLink
 from agent.neighbours import Cells
@@ -133,7 +134,7 @@ def test_a_co_hosted_agents_beacon_reaches_the_others_as_the_message_it_put(host
     sent = at_start(1)
     host.act(1, sent, 0.0)
     [(tag, (key, _payload, *_rest), message)] = host.local
-    assert tag == ("local", 1) and key == KEYS.beacon(A, 1) and message is sent
+    assert tag == ("local", 1) and key == handover_label(A, 1) and message is sent
     assert host.out.pending == {A: {1: sent}}  # (on the wire in the round's batch of cell A)
     got = host.route([])
     assert got[1] == [] and len(got[2]) == 1 and got[2][0] is sent and host.local == []
