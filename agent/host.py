@@ -87,13 +87,12 @@ class AgentHost:
         # The cells around the hosted agents' starts, declared with every cell's subscription: an agent that listens
         # to every cell until its first command then finds its own cells declared (not declared all at once, on
         # the mission's first tick, when every hosted agent commands for the first time).
-        self.warm: frozenset[Cell] = frozenset().union(*(
-            link.node.nb.grid.listen_cells(*link.node.nb.start[aid]) for aid, link in links.items()
-            if not link.node.nb.everyone))
+        start = {aid: link.node.cells() for aid, link in links.items()}  # (what each node says it needs now)
+        self.warm: frozenset[Cell] = frozenset().union(*(c.warm for c in start.values()))
         z, k = session, keys
         self.subs: list[Any] = []
         for aid, link in links.items():
-            self.listen(aid, link.node.nb.current())
+            self.listen(aid, start[aid])
             # Our state starts a tick: it wakes the loop at once; the rest wakes it only once the nodes' count of
             # what they still need is in.
             self.subs += [z.declare_subscriber(key, inbox.handler(("own", aid), urgent=urgent))

@@ -71,7 +71,7 @@ class AgentLink(Member):
         self.robot = (robot or keys_robot)(session, keys, self.id, l_m, node.s.meta.dt_s, node.timing,
                                            odometry or (lambda _sample: None))
         self.pub_report = session.declare_publisher(keys.report(gate.process))
-        self.cells(node.nb.current())
+        self.cells(node.cells())
         self.token: Any = None  # declared by `announce`, once the host listens for us
 
     def announce(self) -> None:

@@ -47,10 +47,13 @@ XY = tuple[float, float]
 
 @dataclass(frozen=True)
 class Cells:
-    """Output of the node: publish from `home` from now on; listen to `listen` (None: every cell)."""
+    """Output of the node: publish from `home` from now on; listen to `listen` (None: every cell). What a new
+    session must declare (`AgentNode.cells`) also says `warm`: the cells around our start, declared with every
+    cell's subscription, so that our first command finds its cells declared."""
 
     home: Cell
     listen: frozenset[Cell] | None
+    warm: frozenset[Cell] = frozenset()
 
 
 class Neighbourhood:
@@ -85,6 +88,12 @@ class Neighbourhood:
     def current(self) -> Cells:
         """What a new session must declare (every cell until our first command)."""
         return Cells(self.home, self.listen)
+
+    def session_cells(self) -> Cells:
+        """`current`, with the cells around our start (`warm`; none when we listen to every cell for good: the
+        virtual leader's law)."""
+        warm = frozenset() if self.everyone else self.grid.listen_cells(*self.start[self.id])
+        return Cells(self.home, self.listen, warm)
 
     def on_state(self, k: int, p: XY) -> Cells | None:
         """Our state of tick k is in: add the cells around p (keep the old ones until our command is out) and

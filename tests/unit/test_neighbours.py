@@ -127,6 +127,13 @@ def test_the_virtual_leader_waits_for_everyone_and_hears_every_cell() -> None:
 
 # ------------------------------------------------------------------------------------------ the cells
 
+def test_a_node_says_the_cells_a_new_session_declares() -> None:
+    """Its link and host ask the node (`AgentNode.cells`), not its neighbourhood: every cell until its first
+    command, from its start's cell, the cells around its start warm (none under the virtual leader's law)."""
+    assert AgentNode(S, A, 0.0).cells() == Cells(G.cell_of(*HEAD[A]), None, G.listen_cells(*HEAD[A]))
+    assert AgentNode(S.with_planner(PlannerKind.VIRTUAL_LEADER), A, 0.0).cells().warm == frozenset()
+
+
 def test_cells_follow_the_agent_new_before_the_command_old_after_it() -> None:
     nb = Neighbourhood(S, A)
     # Every cell until the first command (a restarted agent does not know where its robot is), then around it...
