@@ -4,7 +4,7 @@
 implement it:
 
 - `KeysRobot`, the project's keys: the robot's state (its scan inside) on `agent/<id>/state`, the command on
-  `agent/<id>/cmd` (reconswarm/net/keys.py, docs/wire.md);
+  `agent/<id>/cmd` (reconswarm/net/wire/keys.py, docs/wire.md);
 - `agent/ros2_io.AgentRos2`, ROS 2 topics through rmw_zenoh: `/robot_<i>/odom` in (its own subscription), the
   scan on the project's `scan` key, `/robot_<i>/cmd_vel` out (docs/ros2.md).
 """
@@ -17,12 +17,13 @@ from typing import Any, Protocol
 import zenoh
 
 from agent.messages import Received
-from reconswarm.net import trace, wire
-from reconswarm.net.gate import Gate
-from reconswarm.net.inbox import Rejections
-from reconswarm.net.keys import Keys
 from reconswarm.net.node import Invalid
+from reconswarm.net.runtime import trace
+from reconswarm.net.runtime.inbox import Rejections
 from reconswarm.net.timing import Timing
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys
 
 
 class RobotIO(Protocol):

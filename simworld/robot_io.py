@@ -3,7 +3,7 @@
 `RobotIO` is what the world's port (simworld/process.py) needs of it; two interfaces implement it:
 
 - `KeysIO`, the project's keys: each robot's state (its scan inside) on `agent/<id>/state`, each agent's command
-  on `agent/<id>/cmd` (reconswarm/net/keys.py, docs/wire.md);
+  on `agent/<id>/cmd` (reconswarm/net/wire/keys.py, docs/wire.md);
 - `simworld/ros2_io.Ros2IO`, ROS 2 topics through rmw_zenoh: `/robot_<i>/odom` out, `/robot_<i>/cmd_vel` in, the
   scan on the project's `scan` key (docs/ros2.md).
 
@@ -18,12 +18,13 @@ from typing import Any, Protocol
 
 import zenoh
 
-from reconswarm.net import trace, wire
-from reconswarm.net.decode import WORLD as ACCEPTS
-from reconswarm.net.decode import decode
-from reconswarm.net.gate import Gate
-from reconswarm.net.keys import Keys
 from reconswarm.net.node import Token
+from reconswarm.net.runtime import trace
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.decode import WORLD as ACCEPTS
+from reconswarm.net.wire.decode import decode
+from reconswarm.net.wire.keys import Keys
 from simworld.world import Command, WorldInput
 
 

@@ -19,7 +19,7 @@ from typing import Any
 import pytest
 import zenoh
 
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.session import ZenohOptions
 from reconswarm.scenario.generate import generate
 from reconswarm.scenario.model import to_toml
 from tests.support import (

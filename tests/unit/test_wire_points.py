@@ -14,12 +14,12 @@ import zenoh
 
 from agent.link import AgentLink
 from agent.node import AgentNode
-from reconswarm.net import wire
-from reconswarm.net.gate import Gate
-from reconswarm.net.inbox import Rejections
-from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.node import Invalid
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys, WireError
 from reconswarm.scenario.model import load
 from tests.support import PAPER, free_port
 

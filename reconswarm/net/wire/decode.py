@@ -12,19 +12,18 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
-from reconswarm.net import wire
-from reconswarm.net.batch import BeaconBatch, batch_from_wire
-from reconswarm.net.keys import Keys, ParsedKey, WireError
 from reconswarm.net.node import Role, Token
-from reconswarm.net.report import Report, report_from_wire
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import BeaconBatch, batch_from_wire
+from reconswarm.net.wire.keys import Keys, ParsedKey, WireError
+from reconswarm.net.wire.report import Report, report_from_wire
 
 Kind = tuple[str, str]  # (the key's kind, its leaf); a report key's leaf is ""
-Message = (wire.State | wire.Scan | wire.Beacon | BeaconBatch | wire.ObstacleSet | wire.Cmd | wire.Clock | wire.Truth
+Message = (wire.State | wire.Scan | BeaconBatch | wire.ObstacleSet | wire.Cmd | wire.Clock | wire.Truth
            | Report | Token)
 
 STATE: Kind = ("agent", "state")
 SCAN: Kind = ("agent", "scan")
-BEACON: Kind = ("agent", "beacon")
 HOST_BEACONS: Kind = ("host", "beacons")
 OBSTACLES: Kind = ("agent", "obstacles")
 CMD: Kind = ("agent", "cmd")
@@ -51,7 +50,6 @@ def _id(p: ParsedKey) -> int:
 TABLE: dict[Kind, Entry] = {
     STATE: Entry(lambda b, p, _put: wire.state_from_wire(b, _id(p)), wire.State),
     SCAN: Entry(lambda b, p, _put: wire.scan_from_wire(b, _id(p)), wire.Scan),
-    BEACON: Entry(lambda b, p, _put: wire.beacon_from_wire(b, _id(p)), wire.Beacon),
     HOST_BEACONS: Entry(lambda b, p, _put: batch_from_wire(b, _id(p)), BeaconBatch),
     OBSTACLES: Entry(lambda b, p, _put: wire.obstacles_from_wire(b, _id(p)), wire.ObstacleSet),
     CMD: Entry(lambda b, p, _put: wire.cmd_from_wire(b, _id(p)), wire.Cmd),
