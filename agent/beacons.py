@@ -1,4 +1,4 @@
-"""A host's beacons on the wire: one batch per cell and round out (reconswarm/net/batch.py), each batch's rows admitted
+"""A host's beacons on the wire: one batch per cell and round out (net/wire/batch.py), each batch's rows admitted
 one by one in (agent/host.py hands them to the agents listening to its cell).
 
 Out: the beacons the hosted agents returned in a round of the runtime, grouped by the cell each was published from
@@ -12,23 +12,46 @@ is a batch of one.
 In: `take_batch` takes a peer host's decoded batch apart for the agents listening to its cell: each row judged by
 the rules of a beacon, once for all of them (the host's one admission); a row in the name of an agent hosted here
 is forged; a batch of more rows than the scenario has agents is malformed (counted by each agent it was for).
+
+In the process: a co-hosted agent's beacon is handed to the others that listen to its cell as the message itself,
+under a label that is no key of the run (`handover_label`: the wire has no per-agent beacon key).
 """
 
 from __future__ import annotations
 
 import time
+from functools import lru_cache
 from typing import Any
 
 import zenoh
 
 from agent.link import AgentLink
 from agent.messages import Input
-from reconswarm.net import trace, wire
-from reconswarm.net.batch import BeaconBatch, batch_to_wire
-from reconswarm.net.cells import Cell
-from reconswarm.net.gate import Gate
-from reconswarm.net.keys import Keys
 from reconswarm.net.node import Invalid
+from reconswarm.net.runtime import trace
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import BeaconBatch, batch_to_wire
+from reconswarm.net.wire.cells import Cell, cell_chunk, chunk_cell
+from reconswarm.net.wire.keys import Keys
+
+HANDOVER = "handover"  # the head of a co-hosted beacon's label: outside `swarm/<run>/`, so no key of the run
+
+
+def handover_label(cell: Cell, aid: int) -> str:
+    """The label a co-hosted agent's beacon is handed over with in the process: `handover/<cx>_<cy>/<id>`, the cell
+    it was returned in (whom it is for: the co-hosted agents listening to that cell). Not a key: beacons travel in
+    host batches, and a put on a per-agent beacon key is an unexpected key (dropped and counted)."""
+    return f"{HANDOVER}/{cell_chunk(cell)}/{aid}"
+
+
+@lru_cache(maxsize=4096)
+def handover_cell(label: str) -> Cell | None:
+    """The cell a handover label names (None: not a label)."""
+    head, _, rest = label.partition("/")
+    if head != HANDOVER:
+        return None
+    return chunk_cell(rest.partition("/")[0])
 
 
 class BeaconOut:

@@ -11,7 +11,7 @@ import typer
 
 from reconswarm.cli import help_style
 from reconswarm.cli.options import Connect, Listen, Mode, Ros2, RosDomain, RunId, ZConfig, ros2_domain, run_node
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.session import ZenohOptions
 
 help_style.install()
 

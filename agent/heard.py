@@ -1,7 +1,7 @@
 """What an agent has heard, by tick (pure: no clock, no I/O): the world's states, scans and clocks for it, the
 peers' beacons and each peer's newest, when each peer was last heard, and who is alive.
 
-"Alive" is decided here once (`living`, by the agent's rule in reconswarm/net/membership.py): by its token; once a
+"Alive" is decided here once (`living`, by the agent's rule in reconswarm/net/trust/membership.py): by its token; once a
 clock says, counted by the world's clock and not seen going by its token. Not the tokens alone there: the world saw
 a token whose news to us may come after the clock (a token's declaration and the world's data need not come in
 the order the world saw them), and a forged token does not fool the world's clock.
@@ -13,7 +13,8 @@ import math
 from collections.abc import Callable, Mapping
 from collections.abc import Set as AbstractSet
 
-from reconswarm.net import membership, wire
+from reconswarm.net.trust import membership
+from reconswarm.net.wire import wire
 
 
 class Heard:

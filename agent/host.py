@@ -38,23 +38,24 @@ from typing import Any
 import zenoh
 from zenoh import ext
 
-from agent.beacons import BeaconOut, take_batch
+from agent.beacons import BeaconOut, handover_cell, handover_label, take_batch
 from agent.brain import Plan, commands
 from agent.link import OWN, PASSED, PEER_MESSAGES, AgentLink, Decoded, decode_sample
 from agent.messages import Input, Law, Reconnect
 from agent.neighbours import Cells
 from agent.robot_io import HostKeys, KeysRobot, take_states
 from agent.tagged_inbox import ALL, Tag, TaggedInbox
-from reconswarm.net import trace, wire
-from reconswarm.net.admission import Intrusion
-from reconswarm.net.batch import BeaconBatch
-from reconswarm.net.cells import Cell
-from reconswarm.net.hostwire import StateBatch
-from reconswarm.net.inbox import Item
-from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.lifecycle import Stopper
 from reconswarm.net.node import Exit, Invalid
-from reconswarm.net.runtime import Runtime
+from reconswarm.net.runtime import trace
+from reconswarm.net.runtime.inbox import Item
+from reconswarm.net.runtime.lifecycle import Stopper
+from reconswarm.net.runtime.runtime import Runtime
+from reconswarm.net.trust.admission import Intrusion
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import BeaconBatch
+from reconswarm.net.wire.cells import Cell
+from reconswarm.net.wire.hostwire import StateBatch
+from reconswarm.net.wire.keys import Keys, WireError
 
 log = logging.getLogger("reconswarm.agent")
 RECONNECT = -1  # AgentHost.run's answer when the session must be opened again
@@ -92,13 +93,12 @@ class AgentHost:
         # The cells around the hosted agents' starts, declared with every cell's subscription: an agent that listens
         # to every cell until its first command then finds its own cells declared (not declared all at once, on
         # the mission's first tick, when every hosted agent commands for the first time).
-        self.warm: frozenset[Cell] = frozenset().union(*(
-            link.node.nb.grid.listen_cells(*link.node.nb.start[aid]) for aid, link in links.items()
-            if not link.node.nb.everyone))
+        start = {aid: link.node.cells() for aid, link in links.items()}  # (what each node says it needs now)
+        self.warm: frozenset[Cell] = frozenset().union(*(c.warm for c in start.values()))
         z, k = session, keys
         self.subs: list[Any] = []
         for aid, link in links.items():
-            self.listen(aid, link.node.nb.current())
+            self.listen(aid, start[aid])
             # Our state starts a tick: it wakes the loop at once; the rest wakes it only once the nodes' count of
             # what they still need is in.
             self.subs += [z.declare_subscriber(key, inbox.handler(("own", aid), urgent=urgent))
@@ -159,9 +159,10 @@ class AgentHost:
         return heard_by
 
     def _others(self, sender: int, key: str) -> list[int]:
-        """Whom a co-hosted agent's beacon or set under `key` is for: the running agents that listen to its cell,
-        but not its sender."""
-        return [a for a in self._listeners(self._cell(key)) if a != sender]
+        """Whom a co-hosted agent's beacon (under its handover label) or set (under its key) is for: the running
+        agents that listen to its cell, but not its sender."""
+        cell = handover_cell(key)
+        return [a for a in self._listeners(self._cell(key) if cell is None else cell) if a != sender]
 
     @staticmethod
     def _hears(listen: frozenset[Cell] | None, cell: Cell | None) -> bool:
@@ -294,7 +295,7 @@ class AgentHost:
     # ------------------------------------------------------------------------------ the runtime's port
 
     def run(self, stop: Stopper, who: str) -> int:
-        """Feed the nodes (reconswarm/net/runtime.py) until all exited (the largest exit code) or one asks for a new
+        """Feed the nodes (net/runtime/runtime.py) until all exited (the largest exit code) or one asks for a new
         session (RECONNECT); a signal stops each (0)."""
         nodes = {aid: link.node for aid, link in self.links.items()}
         poll_s = min(n.timing.agent_poll_s for n in nodes.values())
@@ -361,7 +362,7 @@ class AgentHost:
             home = self.links[aid].home
             assert home is not None
             self.out.add(home, out)
-            put: tuple[str, bytes] | None = (self.keys.beacon(home, aid), b"")  # (its label in the process)
+            put: tuple[str, bytes] | None = (handover_label(home, aid), b"")  # (its label in the process)
         else:
             if isinstance(out, wire.Cmd):
                 self._flush()

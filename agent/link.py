@@ -21,18 +21,18 @@ from agent.messages import Output, Received
 from agent.neighbours import Cells
 from agent.node import AgentNode
 from agent.robot_io import Decoded, RobotFactory, keys_robot
-from reconswarm.net import wire
-from reconswarm.net.admission import Intrusion, IntrusionKind
-from reconswarm.net.batch import BeaconBatch
-from reconswarm.net.cells import Cell
-from reconswarm.net.decode import AGENT, decode
-from reconswarm.net.gate import Gate
-from reconswarm.net.hostwire import StateBatch
-from reconswarm.net.inbox import Rejections
-from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.node import Invalid, RouterLink, Stop, Token
-from reconswarm.net.report import report_to_wire
-from reconswarm.net.session import Member
+from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.session import Member
+from reconswarm.net.trust.admission import Intrusion, IntrusionKind
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import BeaconBatch
+from reconswarm.net.wire.cells import Cell
+from reconswarm.net.wire.decode import AGENT, decode
+from reconswarm.net.wire.hostwire import StateBatch
+from reconswarm.net.wire.keys import Keys, WireError
+from reconswarm.net.wire.report import report_to_wire
 
 log = logging.getLogger("reconswarm.agent")
 # (the kinds `AgentLink.take` sorts a sample by, as tuples: `isinstance` with `A | B` builds the union each call)
@@ -71,7 +71,7 @@ class AgentLink(Member):
         self.robot = (robot or keys_robot)(session, keys, self.id, l_m, node.s.meta.dt_s, node.timing,
                                            odometry or (lambda _sample: None))
         self.pub_report = session.declare_publisher(keys.report(gate.process))
-        self.cells(node.nb.current())
+        self.cells(node.cells())
         self.token: Any = None  # declared by `announce`, once the host listens for us
 
     def announce(self) -> None:

@@ -7,8 +7,8 @@ from dataclasses import dataclass
 
 from agent.brain import Plan
 from agent.neighbours import Cells
-from reconswarm.net import wire
 from reconswarm.net.node import Exit, Invalid, RouterLink, Stop, Token
+from reconswarm.net.wire import wire
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """Who an agent hears and waits for: its cells and its lockstep wait set, pure (no zenoh).
 
 Beacons and obstacle sets are published under the cell of the sender's head point
-(`swarm/<run>/cell/<cx>_<cy>/agent/<id>/...`, reconswarm/net/cells.py). An agent listens to every cell
+(`swarm/<run>/cell/<cx>_<cy>/agent/<id>/...`, reconswarm/net/wire/cells.py). An agent listens to every cell
 that meets the disk of radius reach + 3 V dt around its head point, V the scenario's speed bound:
 
 - at tick k, as soon as its state is in (before its beacon and long before its command), it adds the cells
@@ -38,8 +38,8 @@ from collections.abc import Container, Iterable, Mapping
 from collections.abc import Set as AbstractSet
 from dataclasses import dataclass
 
-from reconswarm.net import wire
-from reconswarm.net.cells import Cell, CellGrid
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.cells import Cell, CellGrid
 from reconswarm.scenario.model import PlannerKind, Scenario
 
 XY = tuple[float, float]
@@ -47,10 +47,13 @@ XY = tuple[float, float]
 
 @dataclass(frozen=True)
 class Cells:
-    """Output of the node: publish from `home` from now on; listen to `listen` (None: every cell)."""
+    """Output of the node: publish from `home` from now on; listen to `listen` (None: every cell). What a new
+    session must declare (`AgentNode.cells`) also says `warm`: the cells around our start, declared with every
+    cell's subscription, so that our first command finds its cells declared."""
 
     home: Cell
     listen: frozenset[Cell] | None
+    warm: frozenset[Cell] = frozenset()
 
 
 class Neighbourhood:
@@ -85,6 +88,12 @@ class Neighbourhood:
     def current(self) -> Cells:
         """What a new session must declare (every cell until our first command)."""
         return Cells(self.home, self.listen)
+
+    def session_cells(self) -> Cells:
+        """`current`, with the cells around our start (`warm`; none when we listen to every cell for good: the
+        virtual leader's law)."""
+        warm = frozenset() if self.everyone else self.grid.listen_cells(*self.start[self.id])
+        return Cells(self.home, self.listen, warm)
 
     def on_state(self, k: int, p: XY) -> Cells | None:
         """Our state of tick k is in: add the cells around p (keep the old ones until our command is out) and

@@ -27,13 +27,13 @@ import numpy as np
 from agent.brain import AgentBrain, Body, commands
 from agent.heard import Heard
 from agent.messages import Input, Law, Output
-from agent.neighbours import Neighbourhood
+from agent.neighbours import Cells, Neighbourhood
 from agent.sets import PeerSets, own_set, scan_sets
 from agent.watch import watch
-from reconswarm.net import wire
-from reconswarm.net.membership import Policy, silent
 from reconswarm.net.node import Exit, Invalid, Role, RouterLink, Stop, Token
 from reconswarm.net.timing import TIMING, Timing
+from reconswarm.net.trust.membership import Policy, silent
+from reconswarm.net.wire import wire
 from reconswarm.scenario.model import Scenario
 
 log = logging.getLogger("reconswarm.agent")
@@ -93,6 +93,10 @@ class AgentNode:
             watch(self, now_s)  # (the safety nets: agent/watch.py)
         out, self._out = self._out, []
         return out
+
+    def cells(self) -> Cells:
+        """The cells a session must declare for us before any step (our link and host ask; then `Cells` outputs)."""
+        return self.nb.session_cells()
 
     def reconnected(self, now_s: float) -> None:
         """A new session: `resubscribe_s` to bring the commands back; our set in its cache at the next step."""

@@ -20,12 +20,12 @@ from agent.node import AgentNode
 from agent.robot_io import keys_robot
 from agent.ros2_io import ros2_robot
 from reconswarm.errors import BadInput
-from reconswarm.net.admission import Admission
-from reconswarm.net.gate import Gate
-from reconswarm.net.inbox import Rejections
-from reconswarm.net.keys import Keys
-from reconswarm.net.session import ZenohOptions, serving
+from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.session import ZenohOptions, serving
 from reconswarm.net.timing import TIMING, Timing
+from reconswarm.net.trust.admission import Admission
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire.keys import Keys
 from reconswarm.scenario.model import load
 from reconswarm.scenario.wire_limits import MAX_AGENT_ID, MAX_IDS, agent_id_from_text
 

@@ -5,7 +5,7 @@ implement it:
 
 - `KeysRobot`, the project's keys, through its host's `HostKeys`: one message per host and tick each way, the
   states of the host's agents (their scans inside) on `host/<hid>/state`, their commands of a round of the host's
-  loop on `host/<hid>/cmd` (reconswarm/net/hostwire.py, docs/wire.md);
+  loop on `host/<hid>/cmd` (reconswarm/net/wire/hostwire.py, docs/wire.md);
 - `agent/ros2_io.AgentRos2`, ROS 2 topics through rmw_zenoh: `/robot_<i>/odom` in (its own subscription), the
   scan on the project's `scan` key, `/robot_<i>/cmd_vel` out (docs/ros2.md).
 """
@@ -20,15 +20,16 @@ import zenoh
 
 from agent.messages import Input, Received
 from agent.tagged_inbox import Tag
-from reconswarm.net import trace, wire
-from reconswarm.net.admission import Intrusion, IntrusionKind
-from reconswarm.net.batch import BeaconBatch
-from reconswarm.net.gate import Gate
-from reconswarm.net.hostwire import StateBatch, cmds_to_wire
-from reconswarm.net.inbox import Rejections
-from reconswarm.net.keys import Keys
 from reconswarm.net.node import Invalid
+from reconswarm.net.runtime import trace
+from reconswarm.net.runtime.inbox import Rejections
 from reconswarm.net.timing import Timing
+from reconswarm.net.trust.admission import Intrusion, IntrusionKind
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import BeaconBatch
+from reconswarm.net.wire.hostwire import StateBatch, cmds_to_wire
+from reconswarm.net.wire.keys import Keys
 
 Decoded = Received | BeaconBatch | StateBatch | None  # what a sample decodes to (None: a key no agent reads)
 

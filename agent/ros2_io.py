@@ -3,7 +3,7 @@
 Instead of its state and command keys, agent i reads `/robot_<i>/odom` (nav_msgs/Odometry: the body pose
 s, θ and the simulated time) and publishes `/robot_<i>/cmd_vel` (geometry_msgs/Twist: linear.x = v,
 angular.z = ω), as node `agent_<i>` with rmw_zenoh's keys, attachments and liveliness tokens
-(reconswarm/net/ros2_node.py). The node (agent/node.py) does not change: an odometry becomes the state it
+(reconswarm/net/ros2/ros2_node.py). The node (agent/node.py) does not change: an odometry becomes the state it
 knows (head point p = s + l [cos θ, sin θ], tick k = round(t / dt)), and its command u becomes the Twist a robot
 base holds: the (v, ω) whose arc over the step, from the state it was planned from, moves the head point by
 exactly u dt, as the project's own plant moves it (not the continuous inverse (v, ω) = M(θ)⁻¹ u of eq. 3: held
@@ -16,7 +16,7 @@ attachments' source timestamps), and the agent keeps to that: a command planned 
 longer ago is not sent (`stale`; the robot then holds its last cmd_vel under the plant's rules, then stops). Once
 that hold is over the agent says so itself: a stop (a zero Twist), then one every `ros2_stop_every_s` while it
 sends nothing else, so that the world keeps hearing from it (it counts an agent alive while its cmd_vels come,
-reconswarm/net/membership.py): on a machine behind the clock the robots stand and their agents stay alive.
+reconswarm/net/trust/membership.py): on a machine behind the clock the robots stand and their agents stay alive.
 """
 
 from __future__ import annotations
@@ -29,13 +29,14 @@ from dataclasses import dataclass
 from typing import Any
 
 from agent.messages import Received
-from reconswarm.net import ros2, wire
-from reconswarm.net.gate import Gate
-from reconswarm.net.inbox import Rejections
-from reconswarm.net.keys import Keys
 from reconswarm.net.node import Invalid
-from reconswarm.net.ros2_node import Ros2Node
+from reconswarm.net.ros2 import ros2
+from reconswarm.net.ros2.ros2_node import Ros2Node
+from reconswarm.net.runtime.inbox import Rejections
 from reconswarm.net.timing import TIMING, Timing
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm.plant import unicycle
 
 log = logging.getLogger("reconswarm.agent")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from reconswarm.net import wire
+from reconswarm.net.wire import wire
 
 ObstacleSets = dict[str, np.ndarray]
 

@@ -11,7 +11,7 @@ from typing import Any
 
 import zenoh
 
-from reconswarm.net.inbox import Inbox, Item, to_item
+from reconswarm.net.runtime.inbox import Inbox, Item, to_item
 
 ALL = ("all", None)  # the tag of a sample for every hosted agent (clock, liveliness)
 # ALL | ("own", agent id) | ("cell", cell or None) | ("states", None): the subscription a sample came through

@@ -8,9 +8,9 @@ from typing import Protocol
 
 from agent.heard import Heard
 from agent.messages import Output, Reconnect
-from reconswarm.net import wire
 from reconswarm.net.node import Exit
 from reconswarm.net.timing import Timing
+from reconswarm.net.wire import wire
 
 log = logging.getLogger("reconswarm.agent")
 

@@ -18,7 +18,7 @@ scenario file's (`--scenario`). Per tick:
   `all`: every beacon to everyone (`swarm/<run>/agent/<id>/beacon`, heard as `swarm/<run>/agent/*/beacon`);
   `batch`: the cells of `cells`, one message per process and cell carrying the beacons of its agents whose
   state came in that round (`swarm/<run>/cell/<cx>_<cy>/host/<hid>/beacons`, the protocol in force:
-  reconswarm/net/batch.py), heard as `cell/<c>/host/*/beacons`.
+  reconswarm/net/wire/batch.py), heard as `cell/<c>/host/*/beacons`.
 
 CPU per tick is measured over a window of ticks after a warm-up (start-up does not count): each agent and
 the world read their own rusage (CPU, context switches: every thread of the process) at the window's
@@ -53,10 +53,10 @@ from _common import machine, median
 from floor_pattern import beacon_bytes, clock_bytes, cmd_bytes, head_points, heard, state_bytes
 from grid import grid_scenario
 
-from reconswarm.net.cells import CellGrid
-from reconswarm.net.inbox import Inbox
-from reconswarm.net.keys import Keys
-from reconswarm.net.session import ZenohOptions, open_session
+from reconswarm.net.runtime.inbox import Inbox
+from reconswarm.net.runtime.session import ZenohOptions, open_session
+from reconswarm.net.wire.cells import CellGrid
+from reconswarm.net.wire.keys import Keys
 from reconswarm.scenario.model import Scenario, load
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -109,7 +109,7 @@ def agent_main(port: int, run: str, s: Scenario, ids: list[int], pattern: str, s
         subs = [z.declare_subscriber(keys.host_beacons(c, None), inbox.handler(("cell", c)), allowed_origin=remote)
                 for c in cells]
     elif pattern == "cells":
-        pub_beacon = {a: z.declare_publisher(keys.beacon(grid.cell_of(*pts[a]), a), congestion_control=block)
+        pub_beacon = {a: z.declare_publisher(keys.in_cell(grid.cell_of(*pts[a]), a, "beacon"), congestion_control=block)
                       for a in ids}
         cells = sorted(set().union(*(grid.listen_cells(*pts[a]) for a in ids)))
         subs = [z.declare_subscriber(keys.cell_agents(c, "beacon"), inbox.handler(("cell", c)), allowed_origin=remote)

@@ -8,8 +8,8 @@ from typing import Any
 
 import msgpack
 
-from reconswarm.net.cells import CellGrid
-from reconswarm.net.wire import VERSION
+from reconswarm.net.wire.cells import CellGrid
+from reconswarm.net.wire.wire import VERSION
 from reconswarm.scenario.model import Scenario
 
 XY = tuple[float, float]
@@ -73,15 +73,15 @@ def sources(s: Scenario, agent_id: int, per_process: int) -> int:
 
 
 def batch_bytes(hid: int, beacons: list[tuple[int, int, float, XY, float]]) -> bytes:
-    """Same map as reconswarm/net/batch.py's batch_to_wire: (id, k, t, p, radius) rows in packed columns."""
-    from reconswarm.net import wire
-    from reconswarm.net.batch import batch_to_wire
+    """Same map as reconswarm/net/wire/batch.py's batch_to_wire: (id, k, t, p, radius) rows in packed columns."""
+    from reconswarm.net.wire import wire
+    from reconswarm.net.wire.batch import batch_to_wire
 
     return batch_to_wire(hid, [wire.Beacon(a, k, t, p[0], p[1], r, 0) for a, k, t, p, r in beacons])
 
 
 def batch_rows(m: dict[str, Any]) -> list[tuple[int, int]]:
     """(id, k) of each beacon of an unpacked batch (its rows read, as a receiver reads them)."""
-    from reconswarm.net.batch import ROW
+    from reconswarm.net.wire.batch import ROW
 
     return [(r[0], r[1]) for r in ROW.iter_unpack(m["rows"])]

@@ -38,16 +38,16 @@ from agent.host import AgentHost, TaggedInbox
 from agent.link import AgentLink
 from agent.neighbours import Cells
 from agent.node import AgentNode
-from reconswarm.net import wire
-from reconswarm.net.admission import Admission
-from reconswarm.net.cells import CellGrid
-from reconswarm.net.gate import Gate
-from reconswarm.net.inbox import Rejections
-from reconswarm.net.keys import Keys
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.trust.admission import Admission
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.cells import CellGrid
+from reconswarm.net.wire.keys import Keys
 
 try:  # one beacon message per host and cell (a checkout before it: a sample per beacon)
-    from reconswarm.net.batch import batch_to_wire
+    from reconswarm.net.wire.batch import batch_to_wire
 except ImportError:
     batch_to_wire = None  # type: ignore[assignment]
 
@@ -84,8 +84,8 @@ def measure(z: zenoh.Session, n: int, k: int, reps: int) -> tuple[int, int, floa
                 if cell in heard:
                     b = wire.Beacon(spec.id, tick, 0.05 * tick, x, y, spec.radius_m, 0)
                     if batch_to_wire is None:  # (a checkout before the batches: a sample per beacon)
-                        items.append((("cell", cell), (keys.beacon(cell, spec.id), wire.beacon_to_wire(b), "PUT",
-                                                       "peer", 0.0)))
+                        key = keys.in_cell(cell, spec.id, "beacon")
+                        items.append((("cell", cell), (key, wire.beacon_to_wire(b), "PUT", "peer", 0.0)))
                     by_host.setdefault((hid, cell), []).append(b)
             if batch_to_wire is not None:
                 items = [(("cell", cell), (keys.host_beacons(cell, hid), batch_to_wire(hid, rows), "PUT", "peer", 0.0))

@@ -4,7 +4,7 @@
 Each tick the world puts its clock and every robot's state; a state reaches its agent's process (its host); the
 host puts each of its agents' beacons; the beacons of agents in other processes come back; the host plans and
 puts the commands; the commands reach the world, which steps the robots and puts the next tick. The run's
-processes stamp each put and each arrival with the monotonic clock (reconswarm/net/trace.py, on while
+processes stamp each put and each arrival with the monotonic clock (reconswarm/net/runtime/trace.py, on while
 RECONSWARM_TRACE_DIR names a directory); this script runs the mission with that on and prints each segment's
 median and mean over the ticks (past the first `--skip-ticks`) and the hosts, one column per
 `--agents-per-process` value, with the run's wall time and the tracing's own cost left in it (a row per mark).
@@ -34,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import command_line, machine, median
 from bench_deploy import PAPER, free_port, launch
 
-from reconswarm.net.trace import ENV, Mark
+from reconswarm.net.runtime.trace import ENV, Mark
 
 Events = dict[tuple[str, int], dict[int, float]]  # (mark, tick) -> agent -> seconds (the first, if several)
 

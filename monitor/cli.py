@@ -233,8 +233,8 @@ def record_cmd(
     try:
         from monitor.process import MonitorConfig, run
         from reconswarm.cli.options import profiled
-        from reconswarm.net.lifecycle import bind_to_parent, setup_logging
-        from reconswarm.net.session import ZenohOptions
+        from reconswarm.net.runtime.lifecycle import bind_to_parent, setup_logging
+        from reconswarm.net.runtime.session import ZenohOptions
 
         setup_logging()
         bind_to_parent()

@@ -37,8 +37,8 @@ from zenoh import ext
 from monitor import scene
 from monitor.messages import Scene
 from reconswarm.errors import BadInput
-from reconswarm.net import wire
-from reconswarm.net.keys import Keys
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm.paper.events import Event
 from reconswarm.paper.topology import labels
 from reconswarm.scenario.model import Scenario

@@ -16,9 +16,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from monitor.rows import Record
-from reconswarm.net import wire
 from reconswarm.net.node import Exit, Invalid, RouterLink, Stop, Token
-from reconswarm.net.report import Report
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.report import Report
 from reconswarm.paper.events import Event
 
 

@@ -25,11 +25,11 @@ from typing import Any
 from monitor.messages import ClockFrom, Input, Output, RefusedEnd, Scene
 from monitor.presence import Presence
 from monitor.rows import Close, Commit, Counters, Gap, Intrusions, Meta, Resume, RowSink
-from reconswarm.net import wire
-from reconswarm.net.admission import IntrusionKind
 from reconswarm.net.node import Exit, Invalid, Role, RouterLink, Stop, Token
-from reconswarm.net.report import Report
 from reconswarm.net.timing import TIMING, Timing
+from reconswarm.net.trust.admission import IntrusionKind
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.report import Report
 from reconswarm.paper.events import Event, EventKind
 from reconswarm.record.extra import WORLD_END_REASONS, world_stats
 from reconswarm.record.recorder import Recorder

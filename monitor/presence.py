@@ -1,7 +1,7 @@
 """Who is there, for the monitor's node (monitor/node.py): the one place the monitor decides which agents are alive.
 
 An agent is alive while its liveliness token is there AND its own reports (its heartbeat) keep coming
-(net/membership.Membership, fed by the node with the tokens, the reports and our own router link). A change
+(net/trust/membership.Membership, fed by the node with the tokens, the reports and our own router link). A change
 is an event: an agent that goes is `agent_lost`, one that comes back `agent_joined` (the first tokens are not
 joins); several lost within `burst_s` while others stay is the network splitting (a `split`, cause
 "network"), their return a `merge`. Changes are not judged once the mission ended (agents leave then), and
@@ -14,8 +14,8 @@ import logging
 
 import numpy as np
 
-from reconswarm.net.membership import Membership, Policy
 from reconswarm.net.timing import Timing
+from reconswarm.net.trust.membership import Membership, Policy
 from reconswarm.paper.events import Event, EventKind, Groups
 
 log = logging.getLogger("reconswarm.monitor")

@@ -1,6 +1,6 @@
 """`reconswarm monitor record`: the monitor process, `monitor.node.MonitorNode` on the one runtime.
 
-`MonitorPort` is the role's declarations (reconswarm/net/runtime.Port): it subscribes to the truth, the clock,
+`MonitorPort` is the role's declarations (reconswarm/net/runtime/runtime.Port): it subscribes to the truth, the clock,
 the reports and the liveliness tokens (not to the agents' beacons: their counters and heartbeat come in their
 reports, about twice a second, whatever N is), routes each sample through its codec and the gate's admission
 to the node (a malformed one is logged and handed over as `Invalid`, counted by the node), publishes on
@@ -29,20 +29,20 @@ from monitor.messages import ClockFrom, Input, Output, RefusedEnd, Scene
 from monitor.node import MonitorNode
 from monitor.rows import Close, Commit, Resume, write
 from reconswarm.errors import ProcessFailure
-from reconswarm.net import wire
-from reconswarm.net.admission import Intrusion, IntrusionKind
-from reconswarm.net.batch import BeaconBatch
-from reconswarm.net.decode import LIVE_VIEW, MONITOR, decode
-from reconswarm.net.gate import Gate
-from reconswarm.net.hostwire import CmdBatch, StateBatch
-from reconswarm.net.inbox import Inbox, Item, Rejections
-from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.lifecycle import Stopper
 from reconswarm.net.node import Exit, Invalid, Token
-from reconswarm.net.report import Report
-from reconswarm.net.runtime import Runtime
-from reconswarm.net.session import Member, ZenohOptions, serving
+from reconswarm.net.runtime.inbox import Inbox, Item, Rejections
+from reconswarm.net.runtime.lifecycle import Stopper
+from reconswarm.net.runtime.runtime import Runtime
+from reconswarm.net.runtime.session import Member, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
+from reconswarm.net.trust.admission import Intrusion, IntrusionKind
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import BeaconBatch
+from reconswarm.net.wire.decode import LIVE_VIEW, MONITOR, decode
+from reconswarm.net.wire.hostwire import CmdBatch, StateBatch
+from reconswarm.net.wire.keys import Keys, WireError
+from reconswarm.net.wire.report import Report
 from reconswarm.paper.events import Event
 from reconswarm.record.store import RunWriter
 from reconswarm.scenario.model import Scenario, load

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from reconswarm.net.report import Row
+from reconswarm.net.wire.report import Row
 from reconswarm.paper.events import Event
 from reconswarm.record.safety import Episode
 from reconswarm.record.store import RunWriter

@@ -1,5 +1,5 @@
 """The launcher, the command line and their checks. A process a launch started (RECONSWARM_DIE_WITH_PARENT set)
-ends quietly on SIGINT until its node installs its own handler (reconswarm/net/lifecycle.Stopper): exit 130,
+ends quietly on SIGINT until its node installs its own handler (reconswarm/net/runtime/lifecycle.Stopper): exit 130,
 no KeyboardInterrupt traceback in its log, whenever the signal comes during its start."""
 
 import os as _os

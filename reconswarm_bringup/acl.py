@@ -35,7 +35,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from reconswarm.net.keys import Keys
+from reconswarm.net.wire.keys import Keys
 from reconswarm_bringup.deployment import Deployment, Host
 from reconswarm_bringup.packing import ids_spec
 

@@ -94,7 +94,7 @@ def launch_cmd(
     debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False,
 ) -> None:
     """Run the mission as separate processes over Zenoh on this machine (router, simworld, monitor, agents)."""
-    from reconswarm.net.ros2 import resolve_domain_id
+    from reconswarm.net.ros2.ros2 import resolve_domain_id
     from reconswarm.scenario.model import PLANNERS
     from reconswarm_bringup import faults as faults_mod
     from reconswarm_bringup import packing, validate

@@ -13,7 +13,7 @@ from typing import Annotated
 import typer
 
 from reconswarm.cli.options import Connect, Listen, Mode, ZConfig, run_node
-from reconswarm.net.session import ZenohOptions, serving
+from reconswarm.net.runtime.session import ZenohOptions, serving
 
 log = logging.getLogger("reconswarm.router")
 
@@ -23,7 +23,7 @@ def router_cmd(
 ) -> None:
     """A zenoh router (Python-hosted) for local and multi-host runs; default tcp/127.0.0.1:7447. It forwards no
     payload over the wire's 1 MiB limit (unless its --zenoh-config sets a low_pass_filter of its own)."""
-    from reconswarm.net.session import DEFAULT_ROUTER
+    from reconswarm.net.runtime.session import DEFAULT_ROUTER
 
     def go() -> int:
         opts = ZenohOptions.build(connect, listen or ([] if zenoh_config else [DEFAULT_ROUTER]), "router", zenoh_config)

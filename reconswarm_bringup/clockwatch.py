@@ -14,11 +14,11 @@ from dataclasses import dataclass
 
 import zenoh
 
-from reconswarm.net import wire
-from reconswarm.net.admission import Admission
-from reconswarm.net.inbox import sample_source
-from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.session import ZenohOptions, open_session
+from reconswarm.net.runtime.inbox import sample_source
+from reconswarm.net.runtime.session import ZenohOptions, open_session
+from reconswarm.net.trust.admission import Admission
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys, WireError
 from reconswarm.scenario.model import Scenario
 
 log = logging.getLogger("reconswarm.launch")

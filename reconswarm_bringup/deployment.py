@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from reconswarm.errors import BadInput
-from reconswarm.net.ros2 import MAX_DOMAIN_ID
+from reconswarm.net.ros2.ros2 import MAX_DOMAIN_ID
 from reconswarm.scenario.toml_reader import TableReader, kind_of
 from reconswarm.scenario.wire_limits import MAX_AGENT_ID
 from reconswarm_bringup import packing

@@ -3,7 +3,7 @@
 Every payload is invalid by construction, one of several kinds: random bytes, truncated msgpack, a wrong
 schema version, NaN / inf numbers, wrong types, another agent's id, an oversized payload. A valid message
 is never sent, so the run's outcome must not change; every receiver must drop and count each one it receives
-(the run's router forwards no payload over the wire's limit: reconswarm/net/session.py PAYLOAD_CAP).
+(the run's router forwards no payload over the wire's limit: reconswarm/net/runtime/session.py PAYLOAD_CAP).
 A host's keys are flooded under every agent's id (each a host id when it is a host's lowest or alone).
 Beacons and obstacle sets go under the cell each agent is in when the flood starts (heard from the run's
 beacons for up to 2 s; else the cell of its start), so the agents listening there receive them too.
@@ -24,10 +24,10 @@ from typing import Any
 
 import msgpack
 
-from reconswarm.net.batch import batch_from_wire
-from reconswarm.net.cells import Cell, CellGrid, chunk_cell
-from reconswarm.net.keys import Keys
-from reconswarm.net.session import ZenohOptions, open_session
+from reconswarm.net.runtime.session import ZenohOptions, open_session
+from reconswarm.net.wire.batch import batch_from_wire
+from reconswarm.net.wire.cells import Cell, CellGrid, chunk_cell
+from reconswarm.net.wire.keys import Keys
 from reconswarm.scenario.model import load
 from reconswarm.scenario.wire_limits import MAX_PAYLOAD_BYTES
 

@@ -25,7 +25,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from reconswarm.cli import outputs
 from reconswarm.errors import BadInput
-from reconswarm.net.session import DEFAULT_ROUTER
+from reconswarm.net.runtime.session import DEFAULT_ROUTER
 from reconswarm.net.timing import TIMING
 from reconswarm.planners import registry
 from reconswarm.scenario.generate import generate
@@ -222,7 +222,7 @@ def _supervise(cfg: LaunchConfig, s: Scenario, fleet: Fleet, world: Proc, mon: P
                             timers.append((now + delay, lambda p=p: fleet.restart(p)))
                     elif p.role == "router" and world.popen.poll() is None:
                         # The same endpoint again: every client reconnects by itself (the world and the monitor
-                        # judge nobody while their own link is gone: reconswarm/net/uplink.py).
+                        # judge nobody while their own link is gone: reconswarm/net/runtime/uplink.py).
                         if (delay := router_restarts.after_death()) is None:
                             fatal = f"the router died {router_restarts.done + 1} times (last: exit {rc}: " \
                                     f"{outcome.last_line(p.log_path)})"

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from reconswarm.errors import BadInput, ProcessFailure
-from reconswarm.net.session import DEFAULT_ROUTER, ZenohOptions
+from reconswarm.net.runtime.session import DEFAULT_ROUTER, ZenohOptions
 from reconswarm.scenario.model import Scenario
 from reconswarm_bringup import netns, packing, runid, secure_net
 from reconswarm_bringup.config import LaunchConfig

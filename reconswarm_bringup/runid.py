@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from reconswarm.errors import BadInput
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.session import ZenohOptions
 from reconswarm_bringup.endpoints import socket_names
 
 RUN_ID_FILE = "run_id"

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from reconswarm.errors import BadInput
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.session import ZenohOptions
 from reconswarm.net.timing import TIMING
 from reconswarm.scenario.model import Scenario
 from reconswarm_bringup import acl, creddir

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from reconswarm.errors import BadInput
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.session import ZenohOptions
 from reconswarm.scenario.model import Scenario
 from reconswarm_bringup import netns, packing, secure
 from reconswarm_bringup.config import LaunchConfig

@@ -1,6 +1,6 @@
 """`reconswarm simworld`: the world process, its node (simworld/world.WorldNode) on the runtime.
 
-The process is the runtime's loop (reconswarm/net/runtime.py) around one node and `WorldPort`, the world's
+The process is the runtime's loop (reconswarm/net/runtime/runtime.py) around one node and `WorldPort`, the world's
 declarations: the clock, the truth, its reports and token, every liveliness token, and the robot interface chosen
 once for the process (simworld/robot_io.py: the project's keys, or ROS 2 topics); `route` turns each sample into
 the node's input (a token, a command its gate admitted, or Invalid, counted); `act` puts what the node returns:
@@ -21,16 +21,18 @@ import zenoh
 from zenoh import ext
 
 from reconswarm.errors import BadInput
-from reconswarm.net import ros2, trace, wire
-from reconswarm.net.gate import Gate
-from reconswarm.net.inbox import Inbox, Item, Rejections
-from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.node import Exit, Invalid
-from reconswarm.net.report import report_to_wire
-from reconswarm.net.runtime import Runtime
-from reconswarm.net.session import Member, ZenohOptions, serving
+from reconswarm.net.ros2 import ros2
+from reconswarm.net.runtime import trace
+from reconswarm.net.runtime.inbox import Inbox, Item, Rejections
+from reconswarm.net.runtime.runtime import Runtime
+from reconswarm.net.runtime.session import Member, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
-from reconswarm.net.wire import ClockMode
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys, WireError
+from reconswarm.net.wire.report import report_to_wire
+from reconswarm.net.wire.wire import ClockMode
 from reconswarm.scenario.model import load
 from simworld.robot_io import KeysIO, RobotIO
 from simworld.ros2_io import Ros2IO, Ros2Robots, ros2_world

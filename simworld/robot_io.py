@@ -3,7 +3,7 @@
 `RobotIO` is what the world's port (simworld/process.py) needs of it; two interfaces implement it:
 
 - `KeysIO`, the project's keys: one message per agent host and tick each way, the states of its agents (their
-  scans inside) on `host/<hid>/state`, their commands on `host/<hid>/cmd` (reconswarm/net/hostwire.py,
+  scans inside) on `host/<hid>/state`, their commands on `host/<hid>/cmd` (reconswarm/net/wire/hostwire.py,
   docs/wire.md); who a host speaks for is its liveliness token's (simworld/hosts.py);
 - `simworld/ros2_io.Ros2IO`, ROS 2 topics through rmw_zenoh: `/robot_<i>/odom` out, `/robot_<i>/cmd_vel` in, the
   scan on the project's `scan` key (docs/ros2.md).
@@ -21,14 +21,15 @@ from typing import Any, Protocol
 
 import zenoh
 
-from reconswarm.net import trace, wire
-from reconswarm.net.admission import Intrusion, IntrusionKind
-from reconswarm.net.decode import WORLD as ACCEPTS
-from reconswarm.net.decode import decode
-from reconswarm.net.gate import Gate
-from reconswarm.net.hostwire import CmdBatch, attachment, state_batches
-from reconswarm.net.keys import Keys
 from reconswarm.net.node import Role, Token
+from reconswarm.net.runtime import trace
+from reconswarm.net.trust.admission import Intrusion, IntrusionKind
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.decode import WORLD as ACCEPTS
+from reconswarm.net.wire.decode import decode
+from reconswarm.net.wire.hostwire import CmdBatch, attachment, state_batches
+from reconswarm.net.wire.keys import Keys
 from simworld.hosts import Hosts
 from simworld.world import Command, WorldInput
 

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from reconswarm.net import wire
-from reconswarm.net.cells import CellGrid
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.cells import CellGrid
 from reconswarm.paper.planner import errors
 from reconswarm.plant import unicycle
 from reconswarm.plant.sensing import ContourField

@@ -4,7 +4,7 @@ Per robot i the plant publishes `/robot_<i>/odom` (nav_msgs/Odometry: body pose 
 child frame `robot_<i>/base_link`, stamp = simulated time, twist = the (v, ω) it moved with) instead of
 its state key, and takes `/robot_<i>/cmd_vel` (geometry_msgs/Twist: linear.x = v, angular.z = ω) instead
 of the command key, as node `simworld` with rmw_zenoh's keys, attachments and liveliness tokens
-(reconswarm/net/ros2_node.py). Scans, clock and truth stay on the project's keys.
+(reconswarm/net/ros2/ros2_node.py). Scans, clock and truth stay on the project's keys.
 
 In this mode the world's state machine (simworld/world.py) has the plant a robot base is (`Ros2Robots`): it
 holds the latest (v, ω) of each robot and moves the body on the exact arc (`unicycle.step_vw`, saturated to
@@ -28,13 +28,14 @@ from typing import Any
 import numpy as np
 import zenoh
 
-from reconswarm.net import ros2, wire
-from reconswarm.net.gate import Gate
-from reconswarm.net.keys import Keys
 from reconswarm.net.node import Token
-from reconswarm.net.ros2_node import Ros2Node
+from reconswarm.net.ros2 import ros2
+from reconswarm.net.ros2.ros2_node import Ros2Node
 from reconswarm.net.timing import TIMING, Timing
-from reconswarm.net.wire import ClockMode
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys
+from reconswarm.net.wire.wire import ClockMode
 from reconswarm.plant import unicycle
 from reconswarm.scenario.model import Scenario
 from simworld.robot_io import token_or_cmd

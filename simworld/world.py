@@ -6,7 +6,7 @@ what to publish, in order: a tick's clock, truth and every robot's state (with i
 reason)` once the mission ends. It owns the robots (the plant: simworld/robots.py) and every rule of the world:
 
 - membership: an agent is alive while its token is there AND its commands keep coming (a token alone can be
-  forged; reconswarm/net/membership.py): a token that goes is gone `token_confirm_s` later; a token whose agent
+  forged; reconswarm/net/trust/membership.py): a token that goes is gone `token_confirm_s` later; a token whose agent
   sends nothing stops holding a lockstep tick up after a grace; while our own session has no router nobody is
   judged; after the world itself stalled, tokens that flap are kept for a while;
 - readiness barrier: the mission starts when every agent of the scenario and the monitor are up;
@@ -35,11 +35,11 @@ from enum import Enum, auto
 import numpy as np
 
 from reconswarm.errors import ProcessFailure
-from reconswarm.net import wire
-from reconswarm.net.membership import Membership, Policy
 from reconswarm.net.node import Exit, Invalid, Role, RouterLink, Stop, Token
 from reconswarm.net.timing import TIMING, Timing
-from reconswarm.net.wire import ClockMode
+from reconswarm.net.trust.membership import Membership, Policy
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.wire import ClockMode
 from reconswarm.scenario.model import Scenario
 from simworld.robots import Robots
 

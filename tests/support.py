@@ -20,8 +20,8 @@ import numpy as np
 import zenoh
 
 from reconswarm.geometry.plane import Edges
-from reconswarm.net import wire
 from reconswarm.net.node import Role, Token
+from reconswarm.net.wire import wire
 from reconswarm.paper.knowledge import obstacle_view
 from reconswarm.paper.planner import ObstacleView
 

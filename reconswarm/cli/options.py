@@ -16,8 +16,8 @@ import typer
 
 from reconswarm.cli.console import fail
 from reconswarm.errors import BadInput, ReconswarmError
-from reconswarm.net.lifecycle import bind_to_parent, setup_logging
-from reconswarm.net.ros2 import resolve_domain_id
+from reconswarm.net.ros2.ros2 import resolve_domain_id
+from reconswarm.net.runtime.lifecycle import bind_to_parent, setup_logging
 
 Connect = Annotated[list[str] | None, typer.Option("--connect", help="Zenoh endpoint to connect to (repeatable).")]
 Listen = Annotated[list[str] | None, typer.Option("--listen", help="Zenoh endpoint to listen on (repeatable).")]

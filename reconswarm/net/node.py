@@ -55,7 +55,7 @@ class Invalid:
 
 @dataclass(frozen=True)
 class RouterLink:
-    """Our own session lost (up=False) or regained its router: nobody else's loss (net/uplink.py)."""
+    """Our own session lost (up=False) or regained its router: nobody else's loss (net/runtime/uplink.py)."""
 
     up: bool
 

@@ -1,5 +1,5 @@
 """Every protocol timing constant of the three roles (agent, simworld, monitor), in one place (who is alive:
-each role's `Policy` in reconswarm/net/membership.py, built from these).
+each role's `Policy` in reconswarm/net/trust/membership.py, built from these).
 
 All of them are wall-clock durations (the processes measure them with `time.monotonic()`), except where
 the name says simulated time (`_sim_s`) or a fraction of the realtime period. The defaults are the values

@@ -145,7 +145,7 @@ def arc_twist(v_mps: float, omega_radps: float, l_m: float, dt: float) -> tuple[
 def arc_head_speed(v_mps: float, omega_radps: float, l_m: float, dt: float) -> float:
     """How fast the head point goes over a step of dt under a twist held: the length of its displacement (which
     the heading does not change) over dt. `step_vw`'s arc (no limits) for one twist, in scalars: the world bounds
-    each cmd_vel by it (reconswarm/net/admission.py): 0.3 µs, where `step_vw` on arrays of one takes 20 µs."""
+    each cmd_vel by it (reconswarm/net/trust/admission.py): 0.3 µs, where `step_vw` on arrays of one takes 20 µs."""
     half = omega_radps * dt / 2.0
     chord = v_mps * dt * _sinc(half)
     a = 2.0 * half

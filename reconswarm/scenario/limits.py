@@ -8,7 +8,7 @@ Refusals (the loader raises them as `FILE: field.path: what is wrong`, exit 2), 
 - **Discrete-time stability** of the control law, where a violation makes positions grow without bound.
 - **The wire must carry every message the run can produce** (`wire_problems`, only where a wire is used: the
   distributed run's processes and `launch`; the in-process `sim` has none). Counts, lengths and ids against the
-  wire's limits (reconswarm/scenario/wire_limits.py, which reconswarm/net/wire.py's decoders enforce), and the
+  wire's limits (reconswarm/scenario/wire_limits.py, which reconswarm/net/wire/wire.py's decoders enforce), and the
   encoded size of the largest message of each kind this scenario can produce (tests check these sizes against
   the wire's own encoder, byte for byte): whatever the wire would drop in the distributed run is refused
   there first.
@@ -218,7 +218,7 @@ def _keys(*names: str) -> int:  # a map of these keys: header and key strings ("
 
 def largest_messages(s: Scenario, scan: dict[str, int], hull: dict[str, int]) -> list[tuple[str, str, int]]:
     """(field path, message, encoded bytes) of the largest message of each growing kind this scenario can
-    produce, as reconswarm.net.wire encodes it (tests check these sizes against its encoder, byte for byte).
+    produce, as reconswarm.net.wire.wire encodes it (tests check these sizes against its encoder, byte for byte).
 
     Worst values where the scenario leaves them open: tick k and time at the end of the duration, counters
     (rev, rejected) at 2^53, the longest end reason and MAX_STATS statistics of the longest keys, the event

@@ -1,4 +1,4 @@
-"""The wire's limits, in one place below everything that needs them: reconswarm.net.wire's decoders
+"""The wire's limits, in one place below everything that needs them: reconswarm.net.wire.wire's decoders
 enforce them, and the scenario loader (reconswarm/scenario/limits.py) refuses a scenario whose own messages
 would exceed them. (Here rather than in reconswarm.net so that the scenario layer may import them.)
 

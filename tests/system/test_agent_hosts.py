@@ -17,11 +17,11 @@ from typing import Any
 import pytest
 import zenoh
 
-from reconswarm.net.batch import batch_from_wire
-from reconswarm.net.hostwire import cmd_batch_from_wire
-from reconswarm.net.inbox import sample_source
-from reconswarm.net.keys import Keys
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.inbox import sample_source
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.wire.batch import batch_from_wire
+from reconswarm.net.wire.hostwire import cmd_batch_from_wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm_bringup.fleet import allowed_cpus
 from tests.support import (
     PAPER,

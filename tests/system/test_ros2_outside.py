@@ -15,9 +15,9 @@ from typing import Any
 
 from rosbags.typesys import Stores, get_typestore
 
-from reconswarm.net import ros2
-from reconswarm.net import ros2_graph as graph
-from reconswarm.net.session import ZenohOptions, open_session
+from reconswarm.net.ros2 import ros2
+from reconswarm.net.ros2 import ros2_graph as graph
+from reconswarm.net.runtime.session import ZenohOptions, open_session
 from tests.support import ROOT, free_port
 
 SAMPLES = 20

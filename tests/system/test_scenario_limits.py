@@ -1,7 +1,7 @@
 """Scenario limits (reconswarm/scenario/limits.py): what the wire refuses is refused by `scenario check` first,
 magnitudes that broke `sim` are refused, and the physics warnings fire where runs collide.
 
-The wire's limits are reconswarm.net.wire's; the bounds on scans and hulls are checked against the real
+The wire's limits are reconswarm.net.wire.wire's; the bounds on scans and hulls are checked against the real
 sensing (reconswarm.plant.sensing) and knowledge (reconswarm.paper.knowledge) code, message by message, and
 the sizes the check computes against the wire's encoder, byte for byte.
 """
@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from reconswarm.errors import BadInput
-from reconswarm.net import wire
-from reconswarm.net.keys import Keys, WireError
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys, WireError
 from reconswarm.paper.events import Event, EventKind
 from reconswarm.paper.knowledge import KnownObstacles
 from reconswarm.plant.sensing import ContourField

@@ -10,7 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from reconswarm.net.trace import ENV, Mark
+from reconswarm.net.runtime.trace import ENV, Mark
 from tests.support import PAPER, ROOT, launcher_cmd, scenario_with
 
 sys.path.insert(0, str(ROOT / "bench"))

@@ -11,8 +11,8 @@ from typing import Any
 
 import zenoh
 
-from reconswarm.net.session import ZenohOptions, open_session
-from reconswarm.net.uplink import neighbours
+from reconswarm.net.runtime.session import ZenohOptions, open_session
+from reconswarm.net.runtime.uplink import neighbours
 from reconswarm.scenario.model import load
 from reconswarm.scenario.wire_limits import MAX_PAYLOAD_BYTES
 from reconswarm_bringup.config import LaunchConfig

@@ -12,10 +12,10 @@ import numpy as np
 from monitor.messages import ClockFrom, Input, RefusedEnd, Scene
 from monitor.node import MonitorNode
 from monitor.rows import Resume, write
-from reconswarm.net import wire
 from reconswarm.net.node import Exit, Role, Stop, Token
-from reconswarm.net.report import Report, Row
 from reconswarm.net.timing import Timing
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.report import Report, Row
 from reconswarm.paper.events import Event
 from reconswarm.record.store import RunRecord, RunWriter
 from reconswarm.scenario.model import load

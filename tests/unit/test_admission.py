@@ -1,4 +1,4 @@
-"""Admission rules (reconswarm/net/admission.py) against the attacks of issue 11 and against what the run
+"""Admission rules (reconswarm/net/trust/admission.py) against the attacks of issue 11 and against what the run
 really sends (real commands, real shared hulls, the world's real clock): the attacks are refused with the
 right kind, the run's own messages are all admitted."""
 
@@ -12,18 +12,18 @@ import pytest
 
 from reconswarm.geometry.pairs import pairs_within
 from reconswarm.geometry.plane import convex_hull, norm2
-from reconswarm.net import wire
-from reconswarm.net.admission import (
+from reconswarm.net.timing import Timing
+from reconswarm.net.trust.admission import (
     UNATTRIBUTED,
     Admission,
     Intrusion,
     IntrusionKind,
     command_bound_mps,
 )
-from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.membership import Membership, Policy
-from reconswarm.net.tally import IntrusionTally
-from reconswarm.net.timing import Timing
+from reconswarm.net.trust.membership import Membership, Policy
+from reconswarm.net.trust.tally import IntrusionTally
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys, WireError
 from reconswarm.paper.planner import command, neighbour_table
 from reconswarm.plant.sensing import ContourField
 from reconswarm.scenario.model import load
@@ -51,7 +51,7 @@ def clock(k: int, **kw: object) -> wire.Clock:
 def started() -> Admission:
     adm = Admission(S)
     assert adm.check_clock(clock(0), WORLD, KEYS.clock) is None  # pins the world
-    assert adm.check_beacon(beacon(2, 40.0, 0.0), A2, KEYS.beacon((0, 0), 2), now=0.0) is None  # pins agent 2
+    assert adm.check_beacon(beacon(2, 40.0, 0.0), A2, KEYS.host_beacons((0, 0), 2), now=0.0) is None  # pins agent 2
     assert adm.check_cmd(wire.Cmd(2, 0, 1.0, 0.0), A2, KEYS.host(2, "cmd"), now=0.0, world_k=0) is None
     return adm
 
@@ -75,18 +75,20 @@ def test_forged_cmd_for_agent_2_is_refused() -> None:
 
 def test_phantom_beacons_are_refused() -> None:
     adm = started()
-    got = adm.check_beacon(beacon(99, 100.0, 0.0, radius=1e6), X, KEYS.beacon((0, 0), 99), now=1.0)
+    got = adm.check_beacon(beacon(99, 100.0, 0.0, radius=1e6), X, KEYS.host_beacons((0, 0), 99), now=1.0)
     assert kind(got) is K.UNKNOWN_AGENT
-    assert kind(adm.check_beacon(beacon(3, 100.0, 0.0, radius=1e6), X, KEYS.beacon((0, 0), 3), now=1.0)) is K.RADIUS
+    got = adm.check_beacon(beacon(3, 100.0, 0.0, radius=1e6), X, KEYS.host_beacons((0, 0), 3), now=1.0)
+    assert kind(got) is K.RADIUS
     # A phantom 60 m ahead of the swarm: an unknown id, or a real one from another session.
-    got = adm.check_beacon(beacon(99, 100.0, 0.0, radius=2.6), X, KEYS.beacon((0, 0), 99), now=1.0)
+    got = adm.check_beacon(beacon(99, 100.0, 0.0, radius=2.6), X, KEYS.host_beacons((0, 0), 99), now=1.0)
     assert kind(got) is K.UNKNOWN_AGENT
-    assert kind(adm.check_beacon(beacon(2, 100.0, 0.0, t=12.0), X, KEYS.beacon((0, 0), 2), now=0.5)) is K.IMPERSONATION
+    got = adm.check_beacon(beacon(2, 100.0, 0.0, t=12.0), X, KEYS.host_beacons((0, 0), 2), now=0.5)
+    assert kind(got) is K.IMPERSONATION
     # Impossible positions: 1,000 km away at t = 10 s; a jump no robot can make between two beacons.
-    assert kind(adm.check_beacon(beacon(5, 1e6, 0.0), A5, KEYS.beacon((0, 0), 5), now=1.0)) is K.POSITION
-    assert adm.check_beacon(beacon(5, 40.0, 20.0, t=10.0), A5, KEYS.beacon((0, 0), 5), now=1.0) is None
+    assert kind(adm.check_beacon(beacon(5, 1e6, 0.0), A5, KEYS.host_beacons((0, 0), 5), now=1.0)) is K.POSITION
+    assert adm.check_beacon(beacon(5, 40.0, 20.0, t=10.0), A5, KEYS.host_beacons((0, 0), 5), now=1.0) is None
     jump = adm.reach_m(0.05) + 1.0
-    got = adm.check_beacon(beacon(5, 40.0 + jump, 20.0, t=10.05), A5, KEYS.beacon((0, 0), 5), now=1.1)
+    got = adm.check_beacon(beacon(5, 40.0 + jump, 20.0, t=10.05), A5, KEYS.host_beacons((0, 0), 5), now=1.1)
     assert kind(got) is K.POSITION
 
 
@@ -308,7 +310,7 @@ def test_tally_counts_per_kind_and_source() -> None:
 
 
 def test_report_round_trip_and_key() -> None:
-    from reconswarm.net.report import Report, report_from_wire, report_to_wire
+    from reconswarm.net.wire.report import Report, report_from_wire, report_to_wire
 
     tally = IntrusionTally()
     tally.add(Intrusion(K.COMMAND, X, KEYS.host(2, "cmd"), "x"), 1.5)
@@ -334,18 +336,18 @@ def test_report_round_trip_and_key() -> None:
 
 
 def test_gate_delivers_the_runs_messages_and_counts_logs_and_reports_the_rest(caplog: pytest.LogCaptureFixture) -> None:
-    from reconswarm.net.gate import Gate
+    from reconswarm.net.trust.gate import Gate
 
     g = Gate(S, "agent-3")
     assert g.admit(clock(0), WORLD, KEYS.clock, 0.0) and g.world_k == 0
     assert g.admit(wire.State(3, 0, 0.0, 0.0, 0.0, 0.0, 0.5, 0.0), WORLD, KEYS.host(3, "state"), 0.0)
-    assert g.admit(beacon(2, 40.0, 0.0, t=0.0), A2, KEYS.beacon((0, 0), 2), 0.0)
+    assert g.admit(beacon(2, 40.0, 0.0, t=0.0), A2, KEYS.host_beacons((0, 0), 2), 0.0)
     assert g.report(0.0) is None  # nothing refused yet
     with caplog.at_level("WARNING", logger="reconswarm.admission"):
         assert not g.admit(wire.State(3, 1, 0.05, 9.0, 9.0, 0.0, 9.5, 9.0), X, KEYS.host(3, "state"), 0.1)
         for n in range(5):
             assert not g.admit(clock(2 + n, end=True, reason="converged"), X, KEYS.clock, 0.2 + 0.01 * n)
-        assert not g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.beacon((0, 0), 99), 0.3)
+        assert not g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.host_beacons((0, 0), 99), 0.3)
     assert g.count == 7 and g.world_k == 0  # the spoofed clocks did not advance the world's tick
     lines = [r.getMessage() for r in caplog.records]
     assert len(lines) == 2 and all(X in ln for ln in lines)  # first of each (kind, source) at once, rest quiet
@@ -353,12 +355,12 @@ def test_gate_delivers_the_runs_messages_and_counts_logs_and_reports_the_rest(ca
     assert r is not None and r.process == "agent-3" and r.rows is not None
     assert {(k, s, n) for k, s, n, _ in r.rows} == {("not_from_world", X, 6), ("unknown_agent", X, 1)}
     assert g.report(1.6) is None  # unchanged
-    g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.beacon((0, 0), 99), 1.7)
+    g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.host_beacons((0, 0), 99), 1.7)
     assert g.report(1.8) is None and g.report(2.6) is not None  # changed, but at most once a second
 
 
 def test_an_agents_report_is_its_heartbeat_and_says_a_guess_at_once() -> None:
-    from reconswarm.net.gate import Gate
+    from reconswarm.net.trust.gate import Gate
 
     g = Gate(S, "agent-3")
     first = g.report(0.0, counters=(0, -1), every_s=0.5)
@@ -369,7 +371,7 @@ def test_an_agents_report_is_its_heartbeat_and_says_a_guess_at_once() -> None:
     guess = g.report(0.6, counters=(2, 40), every_s=0.5)  # the first guess: at once
     assert guess is not None and guess.guessed_k == 40
     assert g.report(0.7, counters=(2, 40), every_s=0.5) is None
-    assert not g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.beacon((0, 0), 99), 0.8)
+    assert not g.admit(beacon(99, 40.0, 0.0, t=0.0, radius=2.0), X, KEYS.host_beacons((0, 0), 99), 0.8)
     rows = g.report(1.1, counters=(2, 40), every_s=0.5)  # the beat, with the tally that changed
     assert rows is not None and rows.rows is not None and [r[0] for r in rows.rows] == ["unknown_agent"]
     final = g.report(1.2, final=True, counters=(3, 40), every_s=0.5)

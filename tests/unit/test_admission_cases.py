@@ -1,4 +1,4 @@
-"""Admission's rules (reconswarm/net/admission.py) at their edges, each against what the module's docstring
+"""Admission's rules (reconswarm/net/trust/admission.py) at their edges, each against what the module's docstring
 says: the reachable area (the scenario's extent grown by the largest head offset + 1 m, plus the reach
 u_max dt + 1 m), the bound on |u| for each planner kind, one command an agent a tick, the radius and clock
 tolerances, who holds an agent's pin, the hull checks and their bounded memory, odometry and reports; and
@@ -12,10 +12,11 @@ from dataclasses import replace
 
 import pytest
 
-from reconswarm.net import admission, wire
-from reconswarm.net.admission import UNATTRIBUTED, Admission, Intrusion, IntrusionKind, Pins, command_bound_mps
-from reconswarm.net.gate import Gate
-from reconswarm.net.keys import Keys
+from reconswarm.net.trust import admission
+from reconswarm.net.trust.admission import UNATTRIBUTED, Admission, Intrusion, IntrusionKind, Pins, command_bound_mps
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm.plant import unicycle
 from reconswarm.scenario.model import AgentSpec, ObstacleSpec, PlannerKind, load
 from tests.support import PAPER
@@ -45,7 +46,7 @@ def beacon(aid: int, px: float, py: float, t: float = 0.0, radius: float | None 
 
 
 def admits_at_start(px: float, py: float) -> bool:
-    got = Admission(S).check_beacon(beacon(1, px, py), A1, KEYS.beacon((0, 0), 1), now=0.0)
+    got = Admission(S).check_beacon(beacon(1, px, py), A1, KEYS.host_beacons((0, 0), 1), now=0.0)
     assert got is None or got.kind is K.POSITION
     return got is None
 
@@ -77,17 +78,17 @@ def test_the_area_grows_by_u_max_per_second() -> None:
     adm = Admission(S)
     u = command_bound_mps(S)
     t = 2.0
-    ok = adm.check_beacon(beacon(1, X_HI + u * t - 0.05, 0.0, t=t), A1, KEYS.beacon((0, 0), 1), now=0.0)
+    ok = adm.check_beacon(beacon(1, X_HI + u * t - 0.05, 0.0, t=t), A1, KEYS.host_beacons((0, 0), 1), now=0.0)
     assert ok is None
-    far = Admission(S).check_beacon(beacon(1, X_HI + u * t + 0.05, 0.0, t=t), A1, KEYS.beacon((0, 0), 1), now=0.0)
-    assert refused(far, K.POSITION, A1, KEYS.beacon((0, 0), 1), "outside the reachable area")
+    far = Admission(S).check_beacon(beacon(1, X_HI + u * t + 0.05, 0.0, t=t), A1, KEYS.host_beacons((0, 0), 1), now=0.0)
+    assert refused(far, K.POSITION, A1, KEYS.host_beacons((0, 0), 1), "outside the reachable area")
 
 
 def test_a_beacon_may_move_u_max_dt_plus_1_m_from_the_last_one_in_any_direction() -> None:
     adm = Admission(PAPER_S)
     u, dt = command_bound_mps(PAPER_S), 0.05
     step = u * dt + 1.0  # reach_m(dt)
-    key = KEYS.beacon((0, 0), 2)
+    key = KEYS.host_beacons((0, 0), 2)
     x, y, t = 40.0, 20.0, 10.0
     assert adm.check_beacon(beacon(2, x, y, t=t, s=PAPER_S), A2, key, now=0.0) is None
     for k, ang in enumerate((0.7, 2.0, -1.2, math.pi / 2)):  # just inside the reach, diagonally and along y
@@ -208,7 +209,7 @@ def test_conflicts_on_recent_ticks_are_still_seen_after_old_ticks_are_forgotten(
 
 
 def test_the_radius_tolerance_is_relative_above_1_m_and_absolute_below() -> None:
-    key = KEYS.beacon((0, 0), 2)
+    key = KEYS.host_beacons((0, 0), 2)
     big = replace(S, agents=(S.agents[0], replace(S.agents[1], radius_m=50.0)))
     assert Admission(big).check_beacon(beacon(2, 20.0, 5.0, radius=50.0 * (1 + 0.8e-9), s=big), A2, key, 0.0) is None
     got = Admission(big).check_beacon(beacon(2, 20.0, 5.0, radius=50.0 * (1 + 1.2e-9), s=big), A2, key, 0.0)
@@ -275,7 +276,7 @@ def test_an_unattributed_message_never_pins_an_agent() -> None:
 
 def test_refusals_name_the_sender_the_key_and_the_reason() -> None:
     adm = started()
-    bkey = KEYS.beacon((0, 0), 2)
+    bkey = KEYS.host_beacons((0, 0), 2)
     phantom = beacon(99, 40.0, 0.0, radius=2.0, s=PAPER_S)
     assert refused(adm.check_beacon(phantom, X, bkey, 0.0), K.UNKNOWN_AGENT, X, bkey, "agent 99 is not in the scenario")
     assert refused(adm.check_beacon(beacon(2, 40.0, 0.0, radius=9.0, s=PAPER_S), X, bkey, 0.0), K.RADIUS, X, bkey,

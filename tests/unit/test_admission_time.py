@@ -6,10 +6,10 @@ next one's bound; a claimed time going back widens nothing either."""
 
 from __future__ import annotations
 
-from reconswarm.net import wire
-from reconswarm.net.admission import CLOCK_LEAD_TICKS, Admission, IntrusionKind
-from reconswarm.net.gate import Gate
-from reconswarm.net.keys import Keys
+from reconswarm.net.trust.admission import CLOCK_LEAD_TICKS, Admission, IntrusionKind
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm.scenario.model import load
 from tests.support import PAPER
 
@@ -19,7 +19,7 @@ KEYS = Keys("paper-0a1b2c")
 WORLD, A8 = "world-zid", "host-zid"
 IDS = tuple(a.id for a in S.agents)
 K = IntrusionKind
-BKEY = KEYS.beacon((0, 0), 8)
+BKEY = KEYS.host_beacons((0, 0), 8)
 STEP = Admission(S).reach_m(DT)  # how far a beacon may move in one tick (u_max dt + 1 m)
 
 

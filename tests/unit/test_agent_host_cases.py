@@ -21,13 +21,13 @@ from agent.messages import Law, Reconnect
 from agent.neighbours import Cells
 from agent.node import AgentNode
 from agent.robot_io import STATES
-from reconswarm.net import wire
-from reconswarm.net.batch import batch_to_wire
-from reconswarm.net.gate import Gate
-from reconswarm.net.hostwire import cmd_batch_from_wire, state_batches
-from reconswarm.net.inbox import Rejections
 from reconswarm.net.node import Exit, Role, Token
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import batch_to_wire
+from reconswarm.net.wire.hostwire import cmd_batch_from_wire, state_batches
 from tests.support import free_port
 from tests.unit.test_agent_host_routing import KEYS, PEER, S, beacon, obstacle_set
 from tests.unit.test_agent_node import A as NODE_AGENT

@@ -15,8 +15,8 @@ import time
 from typing import Any
 
 from agent.node import AgentNode
-from reconswarm.net.batch import batch_to_wire
-from reconswarm.net.hostwire import state_batches
+from reconswarm.net.wire.batch import batch_to_wire
+from reconswarm.net.wire.hostwire import state_batches
 from tests.support import wait_subscribed
 from tests.unit.test_agent_host_cases import make_host, state
 from tests.unit.test_agent_host_routing import KEYS, S, at_start

@@ -12,17 +12,18 @@ from typing import Any
 import pytest
 import zenoh
 
+from agent.beacons import handover_label
 from agent.host import AgentHost, TaggedInbox
 from agent.link import AgentLink
 from agent.neighbours import Cells
 from agent.node import AgentNode
-from reconswarm.net import wire
-from reconswarm.net.batch import batch_to_wire
-from reconswarm.net.gate import Gate
-from reconswarm.net.inbox import Rejections
-from reconswarm.net.keys import Keys
 from reconswarm.net.node import Exit, Invalid
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import batch_to_wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm.scenario.model import load
 from tests import support
 from tests.support import PAPER, free_port
@@ -133,7 +134,7 @@ def test_a_co_hosted_agents_beacon_reaches_the_others_as_the_message_it_put(host
     sent = at_start(1)
     host.act(1, sent, 0.0)
     [(tag, (key, _payload, *_rest), message)] = host.local
-    assert tag == ("local", 1) and key == KEYS.beacon(A, 1) and message is sent
+    assert tag == ("local", 1) and key == handover_label(A, 1) and message is sent
     assert host.out.pending == {A: {1: sent}}  # (on the wire in the round's batch of cell A)
     got = host.route([])
     assert got[1] == [] and len(got[2]) == 1 and got[2][0] is sent and host.local == []

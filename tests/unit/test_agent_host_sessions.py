@@ -20,15 +20,15 @@ from agent.neighbours import Cells
 from agent.node import AgentNode
 from agent.robot_io import STATES
 from agent.ros2_io import AgentRos2, ros2_robot
-from reconswarm.net import ros2_graph as graph
-from reconswarm.net import wire
-from reconswarm.net.batch import batch_to_wire
-from reconswarm.net.gate import Gate
-from reconswarm.net.hostwire import attachment, state_batches
-from reconswarm.net.inbox import Rejections
 from reconswarm.net.node import Exit
-from reconswarm.net.report import report_from_wire
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.ros2 import ros2_graph as graph
+from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import batch_to_wire
+from reconswarm.net.wire.hostwire import attachment, state_batches
+from reconswarm.net.wire.report import report_from_wire
 from tests.support import free_port, wait_subscribed, wait_token, wait_until
 from tests.unit.test_agent_host_cases import OTHER, A, B, Item, kinds, make_host, route, state
 from tests.unit.test_agent_host_routing import KEYS, PEER, C, S, at_start, beacon, obstacle_set

@@ -12,9 +12,9 @@ import pytest
 
 from agent.process import parse_ids
 from reconswarm.errors import BadInput
-from reconswarm.net import wire
-from reconswarm.net.admission import Admission, IntrusionKind
-from reconswarm.net.keys import Keys
+from reconswarm.net.trust.admission import Admission, IntrusionKind
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm.scenario.model import load
 from reconswarm.scenario.wire_limits import MAX_AGENT_ID, MAX_IDS
 from reconswarm_bringup import packing, secure
@@ -133,16 +133,17 @@ def test_admission_takes_several_agents_from_one_session_and_refuses_others_for_
     adm = Admission(S)
     host, lone, intruder = "host-zid", "lone-zid", "intruder-zid"
     for aid in (1, 2, 3, 4, 5):  # one host's session speaks for agents 1-5
-        assert adm.check_beacon(_beacon(aid), host, KEYS.beacon((0, 0), aid), now=0.0) is None
-        assert adm.check_cmd(wire.Cmd(aid, 0, 0.1, 0.0), host, KEYS.host(1, "cmd"), now=0.0, world_k=0) is None
+        assert adm.check_beacon(_beacon(aid), host, KEYS.host_beacons((0, 0), aid), now=0.0) is None
+        assert adm.check_cmd(wire.Cmd(aid, 0, 0.1, 0.0), host, KEYS.host(aid, "cmd"), now=0.0, world_k=0) is None
         assert adm.check_report(aid, host, KEYS.report(f"agent-{aid}"), now=0.0) is None
-    assert adm.check_beacon(_beacon(6), lone, KEYS.beacon((0, 0), 6), now=0.0) is None  # and a lone agent beside it
+    # and a lone agent beside it
+    assert adm.check_beacon(_beacon(6), lone, KEYS.host_beacons((0, 0), 6), now=0.0) is None
     for aid in (1, 3, 5):  # nobody else speaks for a hosted agent while its host does
         for src in (intruder, lone):
             got = adm.check_cmd(wire.Cmd(aid, 0, 0.1, 0.0), src, KEYS.host(1, "cmd"), now=0.5, world_k=0)
             assert got is not None and got.kind == IntrusionKind.IMPERSONATION
     # ... nor does the host speak for the lone agent.
-    got = adm.check_beacon(_beacon(6), host, KEYS.beacon((0, 0), 6), now=0.5)
+    got = adm.check_beacon(_beacon(6), host, KEYS.host_beacons((0, 0), 6), now=0.5)
     assert got is not None and got.kind == IntrusionKind.IMPERSONATION
 
 

@@ -17,9 +17,9 @@ from agent.brain import AgentBrain, Peer
 from agent.messages import Output, Reconnect
 from agent.neighbours import Cells
 from agent.node import AgentNode
-from reconswarm.net import wire
 from reconswarm.net.node import Exit, Invalid, Stop
 from reconswarm.net.timing import Timing
+from reconswarm.net.wire import wire
 from reconswarm.scenario.model import PlannerKind, Scenario, load
 from tests.support import PAPER, joined, left, world_token
 
@@ -470,7 +470,7 @@ def test_while_waiting_the_node_logs_what_it_lacks(caplog: pytest.LogCaptureFixt
 def test_dropped_messages_are_counted_for_the_report_not_the_beacon() -> None:
     node = started(peers=())
     out = node.step([Invalid("k", "bad"), Invalid("k", "bad"), clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
-    assert node.rejected == 2  # (the link's report carries it: reconswarm/net/gate.py)
+    assert node.rejected == 2  # (the link's report carries it: reconswarm/net/trust/gate.py)
     assert beacons(out) == [wire.Beacon(A, 0, 0.0, 100.0, 0.0, RADIUS[A], 0)]  # no telemetry on the beacon
 
 

@@ -8,7 +8,7 @@ from typing import Any
 from agent.brain import Plan, commands
 from agent.messages import Law
 from agent.node import AgentNode
-from reconswarm.net import wire
+from reconswarm.net.wire import wire
 from tests.support import joined
 from tests.unit.test_agent_node import A, B, C, S, T, beacon, clock, cmds, state
 

@@ -13,7 +13,7 @@ import numpy as np
 from agent.brain import AgentBrain, Peer
 from agent.messages import Output
 from agent.node import AgentNode
-from reconswarm.net import wire
+from reconswarm.net.wire import wire
 from tests.support import joined, left
 from tests.unit.test_agent_node import DT, RADIUS, A, B, C, S, T, beacon, beacons, clock, cmds, started, state
 

@@ -9,7 +9,7 @@ could give) leaves the peer out, and its beacon of k within reach is said: locks
 from __future__ import annotations
 
 from agent.node import AgentNode
-from reconswarm.net import wire
+from reconswarm.net.wire import wire
 from tests.unit.test_agent_node import DT, RADIUS, A, clock, cmds, started, state
 
 D = 4  # a peer closing in on us along +x (far at its start in the scenario)

@@ -15,7 +15,7 @@ import pytest
 from agent.brain import AgentBrain
 from agent.neighbours import Cells
 from agent.node import AgentNode
-from reconswarm.net import wire
+from reconswarm.net.wire import wire
 from reconswarm.scenario.model import PlannerKind
 from tests.support import joined, world_token
 from tests.unit.test_agent_node import DT, A, B, C, S, T, beacon, beacons, clock, cmds, started, state

@@ -63,20 +63,24 @@ def _layer_map() -> str:
 
 def _unmapped() -> list[str]:
     block, missing = _layer_map(), []
-    # reconswarm/'s subpackages: one entry each (`   net/  ...` up to the next entry), naming its modules as words.
+    # reconswarm/'s subpackages: one entry each (`   net/  ...` up to the next entry), naming its modules as words;
+    # a subpackage's own subpackages indented two more (`     wire/  ...`, its entry `net/wire`).
     entries: dict[str, str] = {}
-    current = None
+    top = current = None
     for line in block.split(" reconswarm/ ", 1)[1].splitlines():
-        head = re.match(r"^   (\w+)/\s", line)
-        current = head.group(1) if head else current
+        head = re.match(r"^( {3}| {5})(\w+)/\s", line)
+        if head and len(head.group(1)) == 3:
+            top = current = head.group(2)
+        elif head:
+            current = f"{top}/{head.group(2)}"
         if current is not None:
             entries[current] = entries.get(current, "") + line + "\n"
     for p in _sources():
         rel = p.relative_to(ROOT)
         if p.name.startswith("__"):
             continue
-        if rel.parts[0] == "reconswarm" and len(rel.parts) == 3:
-            if not re.search(rf"\b{p.stem}\b", entries.get(rel.parts[1], "")):
+        if rel.parts[0] == "reconswarm" and len(rel.parts) >= 3:
+            if not re.search(rf"\b{p.stem}\b", entries.get("/".join(rel.parts[1:-1]), "")):
                 missing.append(str(rel))
         elif not re.search(rf"\b{re.escape(p.name)}\b", block):
             missing.append(str(rel))

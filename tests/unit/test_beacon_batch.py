@@ -1,4 +1,4 @@
-"""One beacon message per host, cell and round (reconswarm/net/batch.py, agent/beacons.py, agent/host.py): the codec
+"""One beacon message per host, cell and round (net/wire/batch.py, agent/beacons.py, agent/host.py): the codec
 refuses what a batch may not be; a host puts its round's beacons as one message per cell, before any command of
 the round; a receiving host judges each row as a beacon (each id pinned to the session it speaks from), counts a
 batch larger than the scenario's swarm as malformed, and a row in a co-hosted agent's name as forged."""
@@ -14,9 +14,9 @@ import pytest
 
 from agent.host import AgentHost
 from agent.neighbours import Cells
-from reconswarm.net import wire
-from reconswarm.net.batch import ROW, batch_from_wire, batch_to_wire
-from reconswarm.net.keys import WireError
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import ROW, batch_from_wire, batch_to_wire
+from reconswarm.net.wire.keys import WireError
 from tests.support import wait_until
 from tests.unit.test_agent_host_cases import OTHER, kinds, lone_host, route
 from tests.unit.test_agent_host_routing import KEYS, PEER, at_start

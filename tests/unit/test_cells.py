@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from reconswarm.net.cells import CellGrid, cell_chunk, chunk_cell, speed_bound_mps
+from reconswarm.net.wire.cells import CellGrid, cell_chunk, chunk_cell, speed_bound_mps
 from reconswarm.scenario.model import load
 
 PAPER = Path(__file__).resolve().parents[2] / "deploy" / "scenarios" / "paper.toml"

@@ -1,4 +1,4 @@
-"""Cells of the key space (reconswarm/net/cells.py), case by case: the speed bound (the world's limit, however
+"""Cells of the key space (reconswarm/net/wire/cells.py), case by case: the speed bound (the world's limit, however
 small, else the planner's with the stall push added), the reach set by the robots' bodies when they reach
 farther than a link, a peer that may matter by its distance on both axes, and cell names in keys."""
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from reconswarm.net.cells import CellGrid, chunk_cell, speed_bound_mps
+from reconswarm.net.wire.cells import CellGrid, chunk_cell, speed_bound_mps
 from reconswarm.paper.link import HYSTERESIS_M
 from reconswarm.scenario.model import load
 

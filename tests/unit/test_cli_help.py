@@ -103,7 +103,7 @@ def test_simworld_command_defaults_to_real_time(tiny: Path, monkeypatch: pytest.
 
 
 def test_world_node_defaults_to_real_time(tiny: Path) -> None:
-    from reconswarm.net.wire import ClockMode
+    from reconswarm.net.wire.wire import ClockMode
     from reconswarm.scenario.model import load
     from simworld.world import WorldNode
 

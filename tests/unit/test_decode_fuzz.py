@@ -29,16 +29,16 @@ from agent.node import AgentNode
 from agent.robot_io import STATES
 from monitor.node import MonitorNode
 from monitor.process import MonitorPort
-from reconswarm.net import wire
-from reconswarm.net.batch import FIELDS as BATCH_FIELDS
-from reconswarm.net.batch import batch_to_wire
-from reconswarm.net.gate import Gate
-from reconswarm.net.hostwire import cmds_to_wire, state_batches
-from reconswarm.net.inbox import Item, Rejections
-from reconswarm.net.keys import Keys, ParsedKey, WireError
 from reconswarm.net.node import Invalid, Role, Token
-from reconswarm.net.report import Report, report_to_wire
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.inbox import Item, Rejections
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import FIELDS as BATCH_FIELDS
+from reconswarm.net.wire.batch import batch_to_wire
+from reconswarm.net.wire.hostwire import cmds_to_wire, state_batches
+from reconswarm.net.wire.keys import Keys, ParsedKey, WireError
+from reconswarm.net.wire.report import Report, report_to_wire
 from reconswarm.record.store import RunWriter
 from reconswarm.scenario.model import load
 from reconswarm.scenario.wire_limits import MAX_AGENT_ID

@@ -1,4 +1,4 @@
-"""The one decode table (reconswarm/net/decode.py): each kind's decoder gives its type, a port takes only the kinds
+"""The one decode table (reconswarm/net/wire/decode.py): each kind's decoder gives its type, a port takes only the kinds
 it accepts, a cell key's cell comes from the key's one parse, and the live view's obstacle sets go through the
 monitor's port: decoded by the same table, admitted (or refused and counted) by the monitor's gate."""
 
@@ -11,15 +11,16 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from agent.beacons import handover_cell, handover_label
 from monitor.process import MonitorPort
-from reconswarm.net import decode as dec
-from reconswarm.net import wire
-from reconswarm.net.batch import batch_to_wire
-from reconswarm.net.hostwire import cmds_to_wire, state_batches
-from reconswarm.net.keys import Keys, ParsedKey, WireError
 from reconswarm.net.node import Invalid, Role, Token
-from reconswarm.net.report import Report, report_to_wire
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.wire import decode as dec
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import batch_to_wire
+from reconswarm.net.wire.hostwire import cmds_to_wire, state_batches
+from reconswarm.net.wire.keys import Keys, ParsedKey, WireError
+from reconswarm.net.wire.report import Report, report_to_wire
 from reconswarm.record.store import RunWriter
 from reconswarm.scenario.model import load
 from tests.support import PAPER, free_port
@@ -30,7 +31,6 @@ A = S.agents[0].id
 SAMPLES: dict[dec.Kind, tuple[str, bytes]] = {  # a well-formed sample of each kind
     dec.HOST_STATE: (K.host(3, "state"), state_batches(3, [wire.State(3, 1, 0.05, 1.0, 2.0, 0.0, 1.0, 2.0)])[0][0]),
     dec.SCAN: (K.scan(3), wire.scan_to_wire(wire.Scan(3, 1, 0.05, ()))),
-    dec.BEACON: (K.beacon((1, -2), 3), wire.beacon_to_wire(wire.Beacon(3, 1, 0.05, 1.0, 2.0, 0.5))),
     dec.HOST_BEACONS: (K.host_beacons((1, -2), 3), batch_to_wire(3, [wire.Beacon(3, 1, 0.05, 1.0, 2.0, 0.5)])),
     dec.OBSTACLES: (K.obstacles((0, 0), 3), wire.obstacles_to_wire(wire.ObstacleSet(3, 1, 0))),
     dec.HOST_CMD: (K.host(3, "cmd"), cmds_to_wire(3, [wire.Cmd(3, 1, 0.5, 0.1)])),
@@ -64,18 +64,34 @@ def test_tokens_carry_their_role_id_and_whether_they_came_or_went() -> None:
 def test_a_bad_key_or_payload_raises_the_one_wire_error_whatever_the_port_accepts() -> None:
     for accepts, key, payload in ((frozenset(), "swarm/other/clock", b""),
                                   (frozenset(), K.prefix + "/agent/03/state", b""),
-                                  (frozenset(), K.prefix + "/cell/01_0/agent/3/beacon", b""),
+                                  (frozenset(), K.prefix + "/cell/01_0/agent/3/obstacles", b""),
                                   (dec.AGENT, K.host(3, "state"), b"\x00")):
         with pytest.raises(WireError):
             dec.decode(K, accepts, key, payload, "PUT")
 
 
 def test_a_cell_key_gives_its_cell_from_the_one_parse() -> None:
-    assert K.parsed(K.beacon((-3, 4), 1)) == ParsedKey("agent", 1, "beacon", (-3, 4))
+    assert K.parsed(K.obstacles((-3, 4), 1)) == ParsedKey("agent", 1, "obstacles", (-3, 4))
     assert K.parsed(K.obstacles((0, 12), 2)).cell == (0, 12)
     assert K.parsed(K.host(2, "state")).cell is None and K.parsed(K.clock).cell is None
-    assert K.parse(K.beacon((-3, 4), 1)) == ("agent", 1, "beacon")
     assert K.parsed(K.host_beacons((-3, 4), 7)) == ParsedKey("host", 7, "beacons", (-3, 4))
+
+
+def test_no_per_agent_beacon_key_a_put_on_one_is_unexpected() -> None:
+    """Beacons travel in host batches: `cell/<c>/agent/<id>/beacon` is no key of the run, whatever port hears it."""
+    key = K.in_cell((1, -2), 3, "beacon")
+    with pytest.raises(WireError, match="unexpected key"):
+        K.parsed(key)
+    for accepts in (EVERY, dec.AGENT, dec.WORLD, dec.MONITOR, dec.LIVE_VIEW):
+        with pytest.raises(WireError, match="unexpected key"):
+            dec.decode(K, accepts, key, wire.beacon_to_wire(wire.Beacon(3, 1, 0.05, 1.0, 2.0, 0.5)), "PUT")
+
+
+def test_a_co_hosted_beacons_label_names_its_cell_and_is_no_key() -> None:
+    label = handover_label((-3, 4), 1)
+    assert handover_cell(label) == (-3, 4) and handover_cell(K.obstacles((-3, 4), 1)) is None
+    with pytest.raises(WireError):
+        K.parsed(label)
 
 
 @dataclass

@@ -12,8 +12,8 @@ import msgpack
 import pytest
 
 from agent.neighbours import Neighbourhood
-from reconswarm.net import wire
-from reconswarm.net.batch import batch_from_wire
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import batch_from_wire
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 import floor_pattern as floor

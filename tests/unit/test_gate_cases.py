@@ -1,4 +1,4 @@
-"""A process's gate (reconswarm/net/gate.py): each kind of message goes through its own admission rule, and a
+"""A process's gate (reconswarm/net/trust/gate.py): each kind of message goes through its own admission rule, and a
 refusal is counted under its kind and source, logged with its key (the first of each kind and source at once,
 then at most a line a second with how many were held back), and reported."""
 
@@ -8,10 +8,10 @@ import logging
 
 import pytest
 
-from reconswarm.net import wire
-from reconswarm.net.gate import Gate
-from reconswarm.net.keys import Keys
-from reconswarm.net.report import Report
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys
+from reconswarm.net.wire.report import Report
 from reconswarm.scenario.model import load
 from tests.support import PAPER, beacon
 from tests.unit.test_admission import clock
@@ -48,9 +48,9 @@ def test_each_kind_of_message_meets_its_own_rule(logged: pytest.LogCaptureFixtur
     assert not g.admit(clock(4), X, KEYS.clock, 0.3)
     sk = KEYS.host(2, "state")
     assert not g.admit(_state(3), X, sk, 0.3) and g.admit(_state(3), WORLD, sk, 0.3)
-    assert not g.admit(_beacon(999), X, KEYS.beacon((0, 0), 999), 0.4)
-    assert g.admit(_beacon(2), A2, KEYS.beacon((0, 0), 2), 0.4)  # pins agent 2's session
-    assert not g.admit(_beacon(2), X, KEYS.beacon((0, 0), 2), 0.5)
+    assert not g.admit(_beacon(999), X, KEYS.host_beacons((0, 0), 999), 0.4)
+    assert g.admit(_beacon(2), A2, KEYS.host_beacons((0, 0), 2), 0.4)  # pins agent 2's session
+    assert not g.admit(_beacon(2), X, KEYS.host_beacons((0, 0), 2), 0.5)
     assert not g.admit(wire.Cmd(2, 4, 1.0, 0.0), A2, KEYS.host(2, "cmd"), 0.5)  # tick 4 is not out yet (newest: 3)
     assert g.admit(wire.Cmd(2, 3, 1.0, 0.0), A2, KEYS.host(2, "cmd"), 0.5)
     assert not g.admit(wire.Cmd(2, 3, 1.0, 0.0), X, KEYS.host(2, "cmd"), 0.6)
@@ -67,7 +67,8 @@ def test_each_kind_of_message_meets_its_own_rule(logged: pytest.LogCaptureFixtur
     assert g.count == 9
     # Each first refusal of a kind and source is one line naming the process, the source, the key and why.
     assert [line.split(": ")[2].split(" on ")[1] for line in logged.messages] == [
-        KEYS.clock, KEYS.beacon((0, 0), 999), KEYS.beacon((0, 0), 2), KEYS.host(2, "cmd"), KEYS.obstacles((0, 0), 2)]
+        KEYS.clock, KEYS.host_beacons((0, 0), 999), KEYS.host_beacons((0, 0), 2), KEYS.host(2, "cmd"),
+        KEYS.obstacles((0, 0), 2)]
     assert logged.messages[3] == (f"agent-5: intrusion refused: command from {A2} on {KEYS.host(2, 'cmd')}: "
                                   "command for tick 4, newest tick is 3 [total 5]")
 
@@ -95,7 +96,7 @@ def test_a_cmd_vel_beyond_the_bound_is_refused_with_its_key(logged: pytest.LogCa
 
 def test_a_report_or_a_state_from_the_wrong_session_is_logged_with_its_key(logged: pytest.LogCaptureFixture) -> None:
     g = Gate(S, "monitor")
-    assert g.admit(clock(0), WORLD, KEYS.clock, 0.0) and g.admit(_beacon(2), A2, KEYS.beacon((0, 0), 2), 0.0)
+    assert g.admit(clock(0), WORLD, KEYS.clock, 0.0) and g.admit(_beacon(2), A2, KEYS.host_beacons((0, 0), 2), 0.0)
     assert not g.admit(Report("agent-2", None), X, KEYS.report("agent-2"), 0.1)
     assert not g.admit(_state(0), X, KEYS.host(2, "state"), 0.2)
     assert [m.split(" on ")[1].split(": ")[0] for m in logged.messages] == [KEYS.report("agent-2"),
@@ -111,8 +112,9 @@ def test_refusals_are_logged_at_most_once_a_second_with_the_held_back(logged: py
     assert logged.messages == [f"agent-5: intrusion refused: {why} [total 1]",  # the first at once
                      f"agent-5: intrusion refused: {why} (+2 more since the last line) [total 4]"]  # 1.0 s on
     # A new kind or source is logged at once, with what was held back since the last line.
-    assert not g.admit(_beacon(999), X, KEYS.beacon((0, 0), 999), 11.6)
-    assert logged.messages[2] == (f"agent-5: intrusion refused: unknown_agent from {X} on {KEYS.beacon((0, 0), 999)}: "
+    assert not g.admit(_beacon(999), X, KEYS.host_beacons((0, 0), 999), 11.6)
+    on = KEYS.host_beacons((0, 0), 999)
+    assert logged.messages[2] == (f"agent-5: intrusion refused: unknown_agent from {X} on {on}: "
                         "agent 999 is not in the scenario (+1 more since the last line) [total 6]")
 
 

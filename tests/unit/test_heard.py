@@ -5,7 +5,7 @@ tick lacks."""
 from __future__ import annotations
 
 from agent.heard import Heard
-from reconswarm.net import wire
+from reconswarm.net.wire import wire
 
 
 def clock(k: int, alive: tuple[int, ...]) -> wire.Clock:

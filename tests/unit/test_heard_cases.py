@@ -5,7 +5,7 @@ the clock counting only peers whose token never came, stale places forgotten, an
 from __future__ import annotations
 
 from agent.heard import Heard
-from reconswarm.net import wire
+from reconswarm.net.wire import wire
 from tests.support import beacon
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reconswarm.net import wire
+from reconswarm.net.wire import wire
 from reconswarm.record.summary import summarize
 from reconswarm_bringup.clockwatch import ClockFollow
 from tests.unit.monitor_run import DT, S, clock, started, truth, world, world_report

@@ -1,14 +1,15 @@
-"""One message per host and tick each way (reconswarm/net/hostwire.py): the world's states of a host's agents, the
-host's commands; their keys and the host token's members (reconswarm/net/keys.py, wire_limits.py)."""
+"""One message per host and tick each way (reconswarm/net/wire/hostwire.py): the world's states of a host's agents, the
+host's commands; their keys and the host token's members (reconswarm/net/wire/keys.py, wire_limits.py)."""
 
 from __future__ import annotations
 
 import msgpack
 import pytest
 
-from reconswarm.net import wire
-from reconswarm.net.decode import AGENT, WORLD, decode
-from reconswarm.net.hostwire import (
+from reconswarm.net.node import Role, Token
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.decode import AGENT, WORLD, decode
+from reconswarm.net.wire.hostwire import (
     CMD_ROW,
     POINTS_PER_MESSAGE,
     STATE_ROW,
@@ -17,8 +18,7 @@ from reconswarm.net.hostwire import (
     state_batch_from_wire,
     state_batches,
 )
-from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.node import Role, Token
+from reconswarm.net.wire.keys import Keys, WireError
 from reconswarm.scenario.wire_limits import ids_from_text, ids_to_text
 
 KEYS = Keys("hw")

@@ -9,9 +9,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from reconswarm.errors import BadInput
-from reconswarm.net import ros2
-from reconswarm.net.keys import Keys, WireError
-from reconswarm.net.report import Report
+from reconswarm.net.ros2 import ros2
+from reconswarm.net.wire.keys import Keys, WireError
+from reconswarm.net.wire.report import Report
 from reconswarm.scenario.wire_limits import MAX_AGENT_ID, agent_id_from_text, int_from_text
 from reconswarm_bringup import faults
 
@@ -47,8 +47,8 @@ def test_signed_range() -> None:
 @pytest.mark.parametrize("bad", [f"agent/{t}/state" for t in ("²", "٣", "03", "+3", "")]
                          + [f"alive/agent/{t}" for t in ("²", "٣", "03", "00", str(MAX_AGENT_ID + 1))]
                          + [f"report/agent-{t}" for t in ("²", "٣", "03", "")]
-                         + [f"cell/0_0/agent/{t}/beacon" for t in ("²", "٣", "03")]
-                         + ["cell/00_0/agent/3/beacon", "cell/-0_0/agent/3/obstacles", "cell/²_0/agent/3/beacon"])
+                         + [f"cell/0_0/agent/{t}/obstacles" for t in ("²", "٣", "03")]
+                         + ["cell/00_0/agent/3/obstacles", "cell/-0_0/agent/3/obstacles", "cell/²_0/host/3/beacons"])
 def test_keys_with_a_non_canonical_id_are_wire_errors(bad: str) -> None:
     with pytest.raises(WireError, match=r"^bad "):
         Keys("paper").parse(f"swarm/paper/{bad}")
@@ -58,7 +58,7 @@ def test_keys_read_the_largest_id() -> None:
     k = Keys("paper")
     assert k.parse(k.alive_agent(MAX_AGENT_ID)) == ("alive", MAX_AGENT_ID, "agent")
     assert k.parse(k.report(f"agent-{MAX_AGENT_ID}")) == ("report", MAX_AGENT_ID, f"agent-{MAX_AGENT_ID}")
-    assert k.parse(k.beacon((-1, 0), 0)) == ("agent", 0, "beacon")
+    assert k.parse(k.host_beacons((-1, 0), 0)) == ("host", 0, "beacons")
 
 
 @pytest.mark.parametrize("process", ["agent-²", "agent-03", "agent-", "world"])

@@ -1,4 +1,4 @@
-"""The inbox (reconswarm/net/session.py) that hands zenoh's samples to a process's loop in batches: who wakes
+"""The inbox (reconswarm/net/runtime/session.py) that hands zenoh's samples to a process's loop in batches: who wakes
 the loop and when. Driven by hand with sample-shaped objects (the zenoh side is exercised by tests/system)."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import threading
 import time
 from dataclasses import dataclass
 
-from reconswarm.net.inbox import Inbox
+from reconswarm.net.runtime.inbox import Inbox
 
 
 @dataclass

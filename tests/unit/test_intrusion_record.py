@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from reconswarm.net.admission import Intrusion, IntrusionKind
-from reconswarm.net.keys import Keys
-from reconswarm.net.tally import IntrusionTally
+from reconswarm.net.trust.admission import Intrusion, IntrusionKind
+from reconswarm.net.trust.tally import IntrusionTally
+from reconswarm.net.wire.keys import Keys
 from reconswarm.record.store import RunRecord, RunWriter
 from reconswarm.record.summary import summarize
 from reconswarm.scenario.model import load
@@ -26,7 +26,7 @@ def _record(db: Path) -> None:
     for _ in range(5):
         world.add(Intrusion(IntrusionKind.IMPERSONATION, "zid-x", keys.host(2, "cmd"), "agent 2 speaks from zid-2"),
                   3.5)
-    agent3.add(Intrusion(IntrusionKind.UNKNOWN_AGENT, "zid-x", keys.beacon((0, 0), 99), "agent 99"), 4.0)
+    agent3.add(Intrusion(IntrusionKind.UNKNOWN_AGENT, "zid-x", keys.host_beacons((0, 0), 99), "agent 99"), 4.0)
     agent3.add(Intrusion(IntrusionKind.NOT_FROM_WORLD, "zid-y", keys.clock, "end"), 6.0)
     w.intrusions("simworld", world.as_rows())
     w.intrusions("agent-3", agent3.as_rows())

@@ -1,11 +1,11 @@
-"""Who is alive (reconswarm/net/membership.py), rule by rule with wall and simulated time on different scales
+"""Who is alive (reconswarm/net/trust/membership.py), rule by rule with wall and simulated time on different scales
 (wall about 1,000 s of monotonic time, sim a few seconds), so that a rule reading one clock for the other shows:
 fresh data in either clock, the grace after a token appears, the bounds inclusive, and the guards of `awaited`."""
 
 from __future__ import annotations
 
-from reconswarm.net.membership import Membership, Policy
 from reconswarm.net.timing import Timing
+from reconswarm.net.trust.membership import Membership, Policy
 
 P = Policy.world(Timing(token_confirm_s=0.0))  # fresh 2 s / 2 s, grace 10 s / 5 s, await 4 s, confirmed at once
 

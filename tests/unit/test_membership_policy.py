@@ -1,4 +1,4 @@
-"""Each role's policy of who is alive (reconswarm/net/membership.py), as a state machine: joined, silent past the
+"""Each role's policy of who is alive (reconswarm/net/trust/membership.py), as a state machine: joined, silent past the
 role's threshold -> lost, token gone -> lost only as the policy says, back -> joined again. Thresholds from the
 one `Timing`; their order across roles as the timing notes state it."""
 
@@ -9,10 +9,10 @@ import math
 import pytest
 
 from agent.heard import Heard
-from reconswarm.net import wire
-from reconswarm.net.membership import Membership, Policy, living, silent
 from reconswarm.net.node import Role
 from reconswarm.net.timing import TIMING, Timing
+from reconswarm.net.trust.membership import Membership, Policy, living, silent
+from reconswarm.net.wire import wire
 
 T = Timing()
 

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from reconswarm.net import wire
-from reconswarm.net.admission import Admission, IntrusionKind, Pins
-from reconswarm.net.keys import Keys
+from reconswarm.net.trust.admission import Admission, IntrusionKind, Pins
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm.paper.events import EventKind
 from reconswarm.scenario.model import load
 from tests.support import PAPER
@@ -47,7 +47,7 @@ def test_a_forged_command_long_after_the_first_pin_is_impersonation_while_the_ag
     # The same holds for the agent's beacons (the one pin per agent covers every message it sends).
     b = wire.Beacon(2, 0, 0.0, float(S.starts[S.agent_index(2), 0]), float(S.starts[S.agent_index(2), 1]),
                     float(S.radii[S.agent_index(2)]))
-    got = adm.check_beacon(b, OTHER, KEYS.beacon((0, 0), 2), now=2.97)
+    got = adm.check_beacon(b, OTHER, KEYS.host_beacons((0, 0), 2), now=2.97)
     assert got is not None and got.kind is IntrusionKind.IMPERSONATION
 
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from monitor.rows import Commit, Counters, Meta
-from reconswarm.net import wire
 from reconswarm.net.node import Invalid, RouterLink
+from reconswarm.net.wire import wire
 from reconswarm.paper.events import MEMBERSHIP, EventKind
 from reconswarm.record.summary import summarize
 from tests.unit.monitor_run import (

@@ -18,9 +18,9 @@ from agent.brain import AgentBrain, Peer
 from agent.messages import Output
 from agent.neighbours import Cells, Neighbourhood
 from agent.node import AgentNode
-from reconswarm.net import wire
-from reconswarm.net.cells import CellGrid
 from reconswarm.net.timing import TIMING
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.cells import CellGrid
 from reconswarm.scenario.model import PlannerKind, load
 from tests.support import PAPER, joined, left
 
@@ -126,6 +126,13 @@ def test_the_virtual_leader_waits_for_everyone_and_hears_every_cell() -> None:
 
 
 # ------------------------------------------------------------------------------------------ the cells
+
+def test_a_node_says_the_cells_a_new_session_declares() -> None:
+    """Its link and host ask the node (`AgentNode.cells`), not its neighbourhood: every cell until its first
+    command, from its start's cell, the cells around its start warm (none under the virtual leader's law)."""
+    assert AgentNode(S, A, 0.0).cells() == Cells(G.cell_of(*HEAD[A]), None, G.listen_cells(*HEAD[A]))
+    assert AgentNode(S.with_planner(PlannerKind.VIRTUAL_LEADER), A, 0.0).cells().warm == frozenset()
+
 
 def test_cells_follow_the_agent_new_before_the_command_old_after_it() -> None:
     nb = Neighbourhood(S, A)

@@ -11,9 +11,9 @@ import math
 import numpy as np
 
 from agent.neighbours import Neighbourhood
-from reconswarm.net.cells import CellGrid
-from reconswarm.net.membership import Policy
 from reconswarm.net.timing import TIMING
+from reconswarm.net.trust.membership import Policy
+from reconswarm.net.wire.cells import CellGrid
 from reconswarm.plant import unicycle
 from reconswarm.scenario.model import load
 from tests.support import PAPER, beacon

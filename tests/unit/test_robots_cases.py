@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from reconswarm.net.cells import CellGrid
+from reconswarm.net.wire.cells import CellGrid
 from reconswarm.plant import unicycle
 from simworld.robots import Robots
 from tests.unit.test_world_node import IDS, S

@@ -1,4 +1,4 @@
-"""The ROS 2 face (reconswarm.net.ros2): bytes checked by rosbags' own CDR decoder and by the CDR layout,
+"""The ROS 2 face (reconswarm.net.ros2.ros2): bytes checked by rosbags' own CDR decoder and by the CDR layout,
 keys, attachment and liveliness tokens checked against the example lines of rmw_zenoh's docs/design.md
 (github.com/ros2/rmw_zenoh, docs/design.md, sections "Topic and Service name mapping to Zenoh key
 expressions", "Graph Cache" and "Publishers"), quoted verbatim below, not against our own output."""
@@ -16,8 +16,8 @@ from hypothesis import strategies as st
 from rosbags.typesys import Stores, get_typestore
 
 from reconswarm.errors import BadInput
-from reconswarm.net import ros2
-from reconswarm.net import ros2_graph as graph
+from reconswarm.net.ros2 import ros2
+from reconswarm.net.ros2 import ros2_graph as graph
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
 T: Any = STORE.types

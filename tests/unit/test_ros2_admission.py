@@ -9,13 +9,14 @@ import math
 
 import pytest
 
-from reconswarm.net import ros2, wire
-from reconswarm.net.admission import Admission, IntrusionKind
-from reconswarm.net.cells import CellGrid
-from reconswarm.net.gate import Gate
-from reconswarm.net.keys import Keys
-from reconswarm.net.membership import Membership, Policy
+from reconswarm.net.ros2 import ros2
 from reconswarm.net.timing import Timing
+from reconswarm.net.trust.admission import Admission, IntrusionKind
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.trust.membership import Membership, Policy
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.cells import CellGrid
+from reconswarm.net.wire.keys import Keys
 from reconswarm.record.summary import distinct_intrusions
 from reconswarm.scenario.model import load
 from tests.support import PAPER

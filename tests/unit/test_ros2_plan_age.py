@@ -18,13 +18,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from agent.ros2_io import KEEP_TICKS, AgentRos2, Odometry
-from reconswarm.net import ros2, wire
-from reconswarm.net.gate import Gate
-from reconswarm.net.inbox import Inbox
-from reconswarm.net.keys import Keys
 from reconswarm.net.node import Invalid
-from reconswarm.net.ros2_node import Ros2Publisher, SentTimes
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.ros2 import ros2
+from reconswarm.net.ros2.ros2_node import Ros2Publisher, SentTimes
+from reconswarm.net.runtime.inbox import Inbox
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm.plant import unicycle
 from reconswarm.scenario.model import load
 from simworld.process import WorldPort, robot_io

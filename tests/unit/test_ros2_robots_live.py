@@ -13,9 +13,9 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
 from monitor.live import knowledge_update
 from monitor.scene import GROUP_RGB
-from reconswarm.net import wire
 from reconswarm.net.node import Role, Token
-from reconswarm.net.wire import ClockMode
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.wire import ClockMode
 from reconswarm.scenario.model import load
 from reconswarm_bringup.cli_launch import FOXGLOVE_PORT, optional_values
 from simworld.ros2_io import Ros2Robots, ros2_world

@@ -11,11 +11,11 @@ from dataclasses import replace
 import pytest
 import zenoh
 
-from reconswarm.net.membership import Membership, Policy
 from reconswarm.net.node import RouterLink
-from reconswarm.net.session import ZenohOptions
-from reconswarm.net.uplink import LinkChange, Uplink
-from reconswarm.net.wire import ClockMode
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.runtime.uplink import LinkChange, Uplink
+from reconswarm.net.trust.membership import Membership, Policy
+from reconswarm.net.wire.wire import ClockMode
 from tests.support import ROOT, free_port, wait_until
 from tests.unit.test_world_node import IDS, S, T, advance, commands, ended, started, ticks, tokens
 

@@ -1,4 +1,4 @@
-"""A router forwards no payload over the wire's limit (reconswarm/net/session.py PAYLOAD_CAP): real zenoh sessions
+"""A router forwards no payload over the wire's limit (net/runtime/session.py PAYLOAD_CAP): real zenoh sessions
 on 127.0.0.1, a router opened with the options every `reconswarm router` uses, two clients through it. (A peer
 takes none either: tests/system/test_zenoh_peers.py.)"""
 
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import zenoh
 
-from reconswarm.net.session import PAYLOAD_CAP, ZenohOptions, open_session
+from reconswarm.net.runtime.session import PAYLOAD_CAP, ZenohOptions, open_session
 from reconswarm.scenario.wire_limits import MAX_PAYLOAD_BYTES
 from tests.support import free_port, wait_until
 

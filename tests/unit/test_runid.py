@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from reconswarm.errors import BadInput
-from reconswarm.net.keys import Keys
+from reconswarm.net.wire.keys import Keys
 from reconswarm_bringup import runid
 
 

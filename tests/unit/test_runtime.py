@@ -1,4 +1,4 @@
-"""The one runtime (reconswarm/net/runtime.py) against its rules, with nodes and an inbox of our own (no zenoh: the
+"""The one runtime (net/runtime/runtime.py) against its rules, with nodes and an inbox of our own (no zenoh: the
 runtime's only zenoh call, the uplink's, finds no router on a session object without one and follows nothing).
 
 Rules: one wake-up per batch, waiting for the fewest messages any node still needs (less what the port holds for
@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from reconswarm.net.node import Exit, Stop
-from reconswarm.net.runtime import Runtime
+from reconswarm.net.runtime.runtime import Runtime
 
 
 class NoRouters:

@@ -1,4 +1,4 @@
-"""A session that replaces one the process closed keeps its id (reconswarm/net/session.py `open_session(zid=)`,
+"""A session that replaces one the process closed keeps its id (reconswarm/net/runtime/session.py `open_session(zid=)`,
 agent/process.py): whoever pinned an agent to the old session's id (admission.Pins) keeps hearing it through the
 new one. Real zenoh sessions on 127.0.0.1: a router, a listener and the replaced client."""
 
@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from reconswarm.net.inbox import sample_source
-from reconswarm.net.session import ZenohOptions, open_session
+from reconswarm.net.runtime.inbox import sample_source
+from reconswarm.net.runtime.session import ZenohOptions, open_session
 from tests.support import free_port, wait_subscribed, wait_until
 
 

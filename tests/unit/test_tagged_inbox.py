@@ -15,7 +15,7 @@ import time
 from typing import Any
 
 from agent.tagged_inbox import TaggedInbox
-from reconswarm.net.inbox import Inbox
+from reconswarm.net.runtime.inbox import Inbox
 
 
 class Payload:

@@ -1,4 +1,4 @@
-"""The tick's serial path: the marks a process keeps (reconswarm/net/trace.py) and the segments bench/tick_path.py
+"""The tick's serial path: the marks a process keeps (net/runtime/trace.py) and the segments bench/tick_path.py
 computes from them, on a tick whose every time is known."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from reconswarm.net import trace
-from reconswarm.net.trace import Mark
+from reconswarm.net.runtime import trace
+from reconswarm.net.runtime.trace import Mark
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 import tick_path

@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from reconswarm.net import wire
-from reconswarm.net.keys import Keys, WireError
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import Keys, WireError
 from reconswarm.paper.events import Event, EventKind
 from reconswarm.scenario.wire_limits import MAX_AGENT_ID, MAX_PAYLOAD_BYTES
 
@@ -122,8 +122,7 @@ def test_keys_parse_every_key():
     k = Keys("paper")
     assert k.parse(k.scan(3)) == ("agent", 3, "scan")
     assert k.parse(k.host(10, "cmd")) == ("host", 10, "cmd") and k.parse(k.host(3, "state")) == ("host", 3, "state")
-    assert k.beacon((-3, 4), 1) == "swarm/paper/cell/-3_4/agent/1/beacon"
-    assert k.parse(k.beacon((-3, 4), 1)) == ("agent", 1, "beacon")
+    assert k.parse(k.host_beacons((-3, 4), 1)) == ("host", 1, "beacons")
     assert k.parse(k.obstacles((0, 12), 2)) == ("agent", 2, "obstacles")
     assert k.parse(k.scan(7)) == ("agent", 7, "scan")
     assert k.parse(k.clock) == ("clock", None, "")

@@ -1,4 +1,4 @@
-"""Decoder rules that bench/mutation.py found no test for on reconswarm/net/wire.py (the 2026-12-02 run): the
+"""Decoder rules that bench/mutation.py found no test for on reconswarm/net/wire/wire.py (the 2026-12-02 run): the
 clock's optional fields and their defaults, every list and map at its bound (the bound accepted, one more
 refused), the size bound at exactly 1 MiB, msgpack's own limits wherever in the payload, the agent id of a
 scan, state or obstacle set against its key, and refusals that name the field (the receiver logs the reason).
@@ -12,8 +12,8 @@ from typing import Any
 import msgpack
 import pytest
 
-from reconswarm.net import wire
-from reconswarm.net.keys import WireError
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import WireError
 from reconswarm.scenario.wire_limits import (
     MAX_AGENT_ID,
     MAX_ARRAY_LEN,

@@ -1,4 +1,4 @@
-"""Decoder rules that mutmut found no test for (bench/mutation.py on reconswarm/net/wire.py): a command
+"""Decoder rules that mutmut found no test for (bench/mutation.py on reconswarm/net/wire/wire.py): a command
 claiming another agent's id on an agent's key, a beacon's optional revision and its range, the truth's and an
 event's agent ids at their bounds, and malformed event groups; each refused with a WireError (dropped and
 counted by the receiver), never another exception, and the valid edges accepted."""
@@ -10,8 +10,8 @@ from typing import Any
 import msgpack
 import pytest
 
-from reconswarm.net import wire
-from reconswarm.net.keys import WireError
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import WireError
 from reconswarm.scenario.wire_limits import MAX_AGENT_ID
 
 

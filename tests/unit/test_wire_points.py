@@ -15,13 +15,13 @@ import zenoh
 from agent.link import AgentLink, decode_sample
 from agent.node import AgentNode
 from agent.robot_io import take_states
-from reconswarm.net import wire
-from reconswarm.net.gate import Gate
-from reconswarm.net.hostwire import STATE_ROW, state_batch_from_wire, state_batches
-from reconswarm.net.inbox import Rejections
-from reconswarm.net.keys import Keys, WireError
 from reconswarm.net.node import Invalid
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.hostwire import STATE_ROW, state_batch_from_wire, state_batches
+from reconswarm.net.wire.keys import Keys, WireError
 from reconswarm.scenario.model import load
 from tests.support import PAPER, free_port
 

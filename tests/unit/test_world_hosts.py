@@ -6,11 +6,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from reconswarm.net import wire
-from reconswarm.net.gate import Gate
-from reconswarm.net.hostwire import cmds_to_wire, state_batch_from_wire
-from reconswarm.net.keys import Keys
 from reconswarm.net.node import Role, Token
+from reconswarm.net.trust.gate import Gate
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.hostwire import cmds_to_wire, state_batch_from_wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm.scenario.model import load
 from simworld.hosts import Hosts
 from simworld.robot_io import KeysIO

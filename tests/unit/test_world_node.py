@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from reconswarm.errors import ProcessFailure
-from reconswarm.net import wire
 from reconswarm.net.node import Exit, Invalid, Role, RouterLink, Stop, Token
 from reconswarm.net.timing import Timing
-from reconswarm.net.wire import ClockMode
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.wire import ClockMode
 from reconswarm.plant import unicycle
 from reconswarm.scenario.model import load
 from simworld.ros2_io import ros2_world

@@ -8,9 +8,9 @@ from dataclasses import replace
 
 import pytest
 
-from reconswarm.net import wire
 from reconswarm.net.node import RouterLink, Stop
-from reconswarm.net.wire import ClockMode
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.wire import ClockMode
 from reconswarm.scenario.model import Scenario
 from simworld.robots import Robots
 from simworld.world import Command, Phase, WorldNode

@@ -23,10 +23,10 @@ from typing import Any
 
 import zenoh
 
-from reconswarm.net import wire
-from reconswarm.net.hostwire import cmds_to_wire
-from reconswarm.net.keys import Keys
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.hostwire import cmds_to_wire
+from reconswarm.net.wire.keys import Keys
 from tests.support import (
     ROOT,
     end_launch,

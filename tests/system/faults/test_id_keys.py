@@ -18,10 +18,10 @@ from typing import Any
 
 import zenoh
 
-from reconswarm.net import wire
-from reconswarm.net.cells import CellGrid, cell_chunk
-from reconswarm.net.keys import Keys
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.cells import CellGrid, cell_chunk
+from reconswarm.net.wire.keys import Keys
 from reconswarm.scenario.model import load
 from tests.support import (
     ROOT,

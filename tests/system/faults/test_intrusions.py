@@ -24,12 +24,12 @@ from typing import Any
 import numpy as np
 import zenoh
 
-from reconswarm.net import wire
-from reconswarm.net.batch import batch_to_wire
-from reconswarm.net.cells import CellGrid
-from reconswarm.net.hostwire import cmds_to_wire
-from reconswarm.net.keys import Keys
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import batch_to_wire
+from reconswarm.net.wire.cells import CellGrid
+from reconswarm.net.wire.hostwire import cmds_to_wire
+from reconswarm.net.wire.keys import Keys
 from reconswarm.plant.unicycle import inputs
 from reconswarm.record.store import RunRecord
 from reconswarm.scenario.model import load

@@ -19,10 +19,11 @@ from typing import Any
 import pytest
 import zenoh
 
-from reconswarm.net import ros2, wire
-from reconswarm.net.batch import batch_from_wire
-from reconswarm.net.keys import Keys
-from reconswarm.net.session import ZenohOptions
+from reconswarm.net.ros2 import ros2
+from reconswarm.net.runtime.session import ZenohOptions
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import batch_from_wire
+from reconswarm.net.wire.keys import Keys
 from tests.support import (
     PAPER,
     ROOT,

@@ -23,8 +23,8 @@ import pytest
 import zenoh
 from zenoh import ext
 
-from reconswarm.net import wire
-from reconswarm.net.batch import batch_to_wire
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import batch_to_wire
 from reconswarm.scenario.model import load
 from reconswarm_bringup import secure
 from tests.support import (

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from reconswarm.net.keys import Keys
+from reconswarm.net.wire.keys import Keys
 from tests.support import (
     ROOT,
     assert_all_gone,

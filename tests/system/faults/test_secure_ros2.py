@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from reconswarm.net import ros2
+from reconswarm.net.ros2 import ros2
 from tests.support import (
     ROOT,
     assert_all_gone,

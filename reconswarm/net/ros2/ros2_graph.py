@@ -12,7 +12,7 @@ import re
 from dataclasses import dataclass
 from enum import Enum, IntEnum
 
-from reconswarm.net.ros2 import Ros2Error, check_domain_id, dds_type_name, type_hash
+from reconswarm.net.ros2.ros2 import Ros2Error, check_domain_id, dds_type_name, type_hash
 
 ADMIN_SPACE = "@ros2_lv"
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from reconswarm.net.admission import Intrusion
+from reconswarm.net.trust.admission import Intrusion
 
 
 @dataclass

@@ -9,7 +9,7 @@ map with the beacons as packed little-endian rows (`ROW`, 52 bytes each, one msg
 
 Decoding checks what `beacon_from_wire` checks of each row (finite numbers, radius > 0, ids and ticks in range)
 and what a batch adds: the host field equals the key's, n rows exactly, no id twice, no id below the host's (its
-lowest). A receiver admits each row by the rules of a beacon (reconswarm/net/admission.py).
+lowest). A receiver admits each row by the rules of a beacon (reconswarm/net/trust/admission.py).
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import msgpack
 
-from reconswarm.net import wire
-from reconswarm.net.keys import WireError
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import WireError
 from reconswarm.scenario.wire_limits import MAX_AGENT_ID, MAX_IDS, MAX_PAYLOAD_BYTES
 
 # One row per beacon, packed little-endian: id uint32, k int64, t, px, py, radius float64, rev int64 (52 bytes; numpy's

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from reconswarm.net.keys import WireError
-from reconswarm.net.wire import _int, _num, _pack, _str, _unpack
+from reconswarm.net.wire.keys import WireError
+from reconswarm.net.wire.wire import _int, _num, _pack, _str, _unpack
 from reconswarm.scenario.wire_limits import agent_id_from_text
 
 MAX_ROWS = 300

@@ -12,19 +12,18 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
-from reconswarm.net import wire
-from reconswarm.net.batch import BeaconBatch, batch_from_wire
-from reconswarm.net.hostwire import CmdBatch, StateBatch, cmd_batch_from_wire, state_batch_from_wire
-from reconswarm.net.keys import Keys, ParsedKey, WireError
 from reconswarm.net.node import Role, Token
-from reconswarm.net.report import Report, report_from_wire
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import BeaconBatch, batch_from_wire
+from reconswarm.net.wire.hostwire import CmdBatch, StateBatch, cmd_batch_from_wire, state_batch_from_wire
+from reconswarm.net.wire.keys import Keys, ParsedKey, WireError
+from reconswarm.net.wire.report import Report, report_from_wire
 
 Kind = tuple[str, str]  # (the key's kind, its leaf); a report key's leaf is ""
-Message = (wire.State | wire.Scan | wire.Beacon | BeaconBatch | StateBatch | CmdBatch | wire.ObstacleSet | wire.Cmd
-           | wire.Clock | wire.Truth | Report | Token)
+Message = (wire.State | wire.Scan | BeaconBatch | StateBatch | CmdBatch | wire.ObstacleSet | wire.Cmd | wire.Clock
+           | wire.Truth | Report | Token)
 
 SCAN: Kind = ("agent", "scan")
-BEACON: Kind = ("agent", "beacon")
 HOST_BEACONS: Kind = ("host", "beacons")
 HOST_STATE: Kind = ("host", "state")
 HOST_CMD: Kind = ("host", "cmd")
@@ -52,7 +51,6 @@ def _id(p: ParsedKey) -> int:
 
 TABLE: dict[Kind, Entry] = {
     SCAN: Entry(lambda b, p, _put: wire.scan_from_wire(b, _id(p)), wire.Scan),
-    BEACON: Entry(lambda b, p, _put: wire.beacon_from_wire(b, _id(p)), wire.Beacon),
     HOST_BEACONS: Entry(lambda b, p, _put: batch_from_wire(b, _id(p)), BeaconBatch),
     HOST_STATE: Entry(lambda b, p, _put: state_batch_from_wire(b, _id(p)), StateBatch),
     HOST_CMD: Entry(lambda b, p, _put: cmd_batch_from_wire(b, _id(p)), CmdBatch),
@@ -67,7 +65,7 @@ TABLE: dict[Kind, Entry] = {
 }
 
 # What each port accepts (the rest of the run's keys are not its). States and commands go in a host's batches
-# (reconswarm/net/hostwire.py).
+# (reconswarm/net/wire/hostwire.py).
 AGENT = frozenset({HOST_STATE, SCAN, HOST_BEACONS, OBSTACLES, CLOCK, ALIVE_AGENT, ALIVE_WORLD})
 WORLD = frozenset({HOST_CMD, ALIVE_AGENT, ALIVE_HOST, ALIVE_MONITOR})
 MONITOR = frozenset({CLOCK, TRUTH, REPORT, ALIVE_AGENT, ALIVE_WORLD})

@@ -10,7 +10,7 @@ from collections.abc import Callable
 from contextlib import suppress
 from typing import Any
 
-from reconswarm.net.inbox import Inbox
+from reconswarm.net.runtime.inbox import Inbox
 
 log = logging.getLogger("reconswarm")
 

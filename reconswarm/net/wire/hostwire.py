@@ -29,8 +29,8 @@ from typing import Any
 
 import msgpack
 
-from reconswarm.net import wire
-from reconswarm.net.keys import WireError
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.keys import WireError
 from reconswarm.scenario.wire_limits import MAX_AGENT_ID, MAX_ARRAY_LEN, MAX_IDS, MAX_PAYLOAD_BYTES, MAX_STR_BYTES
 
 STATE_ROW = struct.Struct("<Iddddd")  # id, x, y, theta, px, py

@@ -24,7 +24,7 @@ which the receiver drops, counts (`tally.IntrusionTally`) and logs. The rules:
 - an agent's messages (beacon, cmd): only from the session that agent speaks from (`Pins`, pinned at first
   sight; another session may take over only once the pinned one has been silent `repin_after_s`, as a
   restarted agent's new session does);
-- membership (reconswarm/net/membership.py, not here): an agent is alive while its liveliness token is there
+- membership (reconswarm/net/trust/membership.py, not here): an agent is alive while its liveliness token is there
   AND its own session's data keeps coming; a token anyone can declare decides nothing alone.
 
 Sources are the publishers' zenoh session ids as their samples carry them: the id in the sample's
@@ -46,8 +46,8 @@ from enum import Enum
 import numpy as np
 
 from reconswarm.geometry.plane import SAMPLE_SPACING_M, Edges, sample_boundary, signed_distance
-from reconswarm.net import wire
 from reconswarm.net.timing import TIMING
+from reconswarm.net.wire import wire
 from reconswarm.paper.planner import max_repulsion_speed
 from reconswarm.plant.unicycle import arc_head_speed
 from reconswarm.scenario.model import Scenario
@@ -344,7 +344,7 @@ class Admission:
         return self.hulls.ok
 
     def check_report(self, agent_id: int | None, source: str, key: str, now: float) -> Intrusion | None:
-        """A report (reconswarm/net/report.py): an agent's like its other messages (a known agent, from its
+        """A report (reconswarm/net/wire/report.py): an agent's like its other messages (a known agent, from its
         pinned session); the world's only from the world's session."""
         if agent_id is not None:
             return self._agent(agent_id, source, key, now)

@@ -89,7 +89,7 @@ def sample_source(sample: Any) -> str:
     """Who published a sample: the id in its timestamp, which the publishing session stamps (every process
     of a run enables timestamping; a router stamps samples that arrive without one with its own id).
     "unattributed" if there is none. Any client can stamp a copied id: this attributes, it does not
-    authenticate (see reconswarm/net/admission.py)."""
+    authenticate (see reconswarm/net/trust/admission.py)."""
     try:
         ts = sample.timestamp
         return str(ts.get_id()) if ts is not None else "unattributed"

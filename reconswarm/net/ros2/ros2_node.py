@@ -24,8 +24,8 @@ from typing import Any
 
 import zenoh
 
-from reconswarm.net import ros2
-from reconswarm.net import ros2_graph as graph
+from reconswarm.net.ros2 import ros2
+from reconswarm.net.ros2 import ros2_graph as graph
 
 QOS = graph.QoS(depth=10)  # ROS 2's default profile for topics: reliable, volatile, keep last 10
 _IDS: dict[str, Iterator[int]] = {}  # session id -> its next entity id (rmw_zenoh: one counter per context)

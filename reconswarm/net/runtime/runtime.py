@@ -15,12 +15,12 @@ with admission and rejection counting: what a node is given is believed), `act` 
 - after a round of steps a port that hosts nodes talking to each other (`CoHosting`: an agent host) may answer
   what the nodes asked in it, together (`answers`: its law for all its agents' plans at once): those nodes are
   stepped with the answers at once, until none is left;
-- our own session's router link going or coming back reaches every node as `RouterLink` (net/uplink.py);
+- our own session's router link going or coming back reaches every node as `RouterLink` (net/runtime/uplink.py);
 - SIGINT/SIGTERM (the `Stopper`) reach every node as `Stop`: each winds down and says what happened (its
   `Exit`); a node's `Exit` takes it out of the loop, the others go on;
 - the `usage at start` mark once the mission started (benchmarks take CPU per tick from it).
 
-Signals, the parent watch and logging are set up once by `net/session.serving`, which opens the session.
+Signals, the parent watch and logging are set up once by `net/runtime/session.serving`, which opens the session.
 """
 
 from __future__ import annotations
@@ -30,15 +30,15 @@ import time
 from collections.abc import Mapping, Sequence
 from typing import Any, Protocol
 
-from reconswarm.net.lifecycle import StartMark, Stopper
 from reconswarm.net.node import Exit, Node, RouterLink, Stop
-from reconswarm.net.uplink import LinkChange, Uplink
+from reconswarm.net.runtime.lifecycle import StartMark, Stopper
+from reconswarm.net.runtime.uplink import LinkChange, Uplink
 
 
 class Batches(Protocol):
     """An inbox: `take` every sample waiting once `want` of them (None: only urgent ones) are in, `urgent` urgent
     ones came (from as many nodes; an inbox may go on with fewer after a short while), or `timeout` seconds
-    passed (net/inbox.Inbox; agent/host.TaggedInbox, which tags each sample with the subscription it came
+    passed (net/runtime/inbox.Inbox; agent/host.TaggedInbox, which tags each sample with the subscription it came
     through)."""
 
     def take(self, want: int | None, timeout: float | None, urgent: int = 1) -> Sequence[Any]: ...

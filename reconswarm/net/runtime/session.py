@@ -2,8 +2,8 @@
 
 Every process takes the same options (`--connect EP`, `--listen EP`, `--mode peer|client|router`,
 `--zenoh-config FILE.json5`); multicast scouting is off unless a config file turns it on; clients wait
-for their router (and reconnect by themselves when it restarts). The inbox is reconswarm/net/inbox.py, a
-process's signals and usage reconswarm/net/lifecycle.py.
+for their router (and reconnect by themselves when it restarts). The inbox is reconswarm/net/runtime/inbox.py, a
+process's signals and usage reconswarm/net/runtime/lifecycle.py.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from reconswarm.errors import BadInput, ProcessFailure
-from reconswarm.net.lifecycle import Stopper, usage
+from reconswarm.net.runtime.lifecycle import Stopper, usage
 from reconswarm.net.timing import TIMING
 from reconswarm.scenario.wire_limits import MAX_PAYLOAD_BYTES
 
@@ -27,7 +27,7 @@ MODES = ("peer", "client", "router")
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 
 # A router forwards no message with a payload over the wire's limit: every decoder refuses such a payload anyway
-# (reconswarm/net/wire.py), and a router that fans it out makes each receiver take it first (a flood of 1 MiB
+# (reconswarm/net/wire/wire.py), and a router that fans it out makes each receiver take it first (a flood of 1 MiB
 # payloads held every agent host's loop up for seconds and ~1 GB of memory). Zenoh's own low-pass filter, on
 # what the router receives; a router's own config file may set its own filter instead.
 PAYLOAD_CAP = {"id": "reconswarm-payload-cap", "flows": ["ingress"], "messages": ["put", "delete", "query", "reply"],

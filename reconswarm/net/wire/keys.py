@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from reconswarm.net.cells import Cell, cell_chunk, chunk_cell
+from reconswarm.net.wire.cells import Cell, cell_chunk, chunk_cell
 from reconswarm.scenario.wire_limits import agent_id_from_text, ids_from_text, ids_to_text
 
-CELL_LEAVES = ("beacon", "obstacles")  # an agent's keys under a cell of its position (`beacon`: in-process only)
-HOST_BEACONS = "beacons"  # a host's batch of its agents' beacons in a cell (reconswarm/net/batch.py)
-HOST_LEAVES = ("state", "cmd")  # a host's batch of its agents' states (the world's), their commands (net/hostwire.py)
+CELL_LEAVES = ("obstacles",)  # an agent's keys under a cell of its position (its beacons: in its host's batch)
+HOST_BEACONS = "beacons"  # a host's batch of its agents' beacons in a cell (reconswarm/net/wire/batch.py)
+HOST_LEAVES = ("state", "cmd")  # a host's batch of its agents' states (the world's), their commands (hostwire.py)
 
 
 class WireError(ValueError):
@@ -48,13 +48,8 @@ class Keys:
         return self.agent(agent_id, "scan")
 
     def in_cell(self, cell: Cell, agent_id: int, leaf: str) -> str:
-        """A key published under the spatial cell of the sender's position (reconswarm/net/cells.py)."""
+        """A key published under the spatial cell of the sender's position (reconswarm/net/wire/cells.py)."""
         return f"{self.prefix}/cell/{cell_chunk(cell)}/agent/{agent_id}/{leaf}"
-
-    def beacon(self, cell: Cell, agent_id: int) -> str:
-        """One agent's beacon in a cell: the label of a co-hosted agent's beacon handed over in the process (the
-        wire carries beacons in host batches, `host_beacons`; nobody subscribes to this key)."""
-        return self.in_cell(cell, agent_id, "beacon")
 
     def host_beacons(self, cell: Cell | None, host: int | None) -> str:
         """A host's batch of its agents' beacons in a cell (None: every cell, every host)."""
@@ -73,7 +68,7 @@ class Keys:
         return self.in_cell(cell, agent_id, "obstacles")
 
     def cell_agents(self, cell: Cell | None, leaf: str) -> str:
-        """Every agent's `leaf` (beacon, obstacles) in one cell, or in every cell (None)."""
+        """Every agent's `leaf` (obstacles) in one cell, or in every cell (None)."""
         return f"{self.prefix}/cell/{'*' if cell is None else cell_chunk(cell)}/agent/*/{leaf}"
 
     def all_agents(self, leaf: str) -> str:

@@ -4,17 +4,17 @@ Pure (no zenoh): a process's port decodes a sample, passes it here with its sour
 and delivers it to its node only if `admit` says so. Refusals are counted per (kind, source), logged (the
 first of each kind and source at once, then at most one line a second), and summed up in a `Report` that
 the port publishes on `swarm/<run>/report/<process>` at most once a second when it changed (an
-agent's report is also its heartbeat, with its counters: reconswarm/net/report.py).
+agent's report is also its heartbeat, with its counters: reconswarm/net/wire/report.py).
 """
 
 from __future__ import annotations
 
 import logging
 
-from reconswarm.net import wire
-from reconswarm.net.admission import Admission, HullChecks, Intrusion
-from reconswarm.net.report import Report
-from reconswarm.net.tally import IntrusionTally
+from reconswarm.net.trust.admission import Admission, HullChecks, Intrusion
+from reconswarm.net.trust.tally import IntrusionTally
+from reconswarm.net.wire import wire
+from reconswarm.net.wire.report import Report
 from reconswarm.scenario.model import Scenario
 
 log = logging.getLogger("reconswarm.admission")

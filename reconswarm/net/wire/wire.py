@@ -1,4 +1,4 @@
-"""The wire protocol: msgpack schemas (docs/wire.md); the key expressions are in reconswarm.net.keys.
+"""The wire protocol: msgpack schemas (docs/wire.md); the key expressions are in reconswarm.net.wire.keys.
 
 Every message is a frozen dataclass with a paired `<name>_to_wire` / `<name>_from_wire`. Decoding
 validates everything a hostile or broken peer could get wrong (size, msgpack, schema version, types,
@@ -15,7 +15,7 @@ from typing import Any
 
 import msgpack
 
-from reconswarm.net.keys import WireError
+from reconswarm.net.wire.keys import WireError
 from reconswarm.paper.events import Event
 from reconswarm.scenario.wire_limits import (
     MAX_AGENT_ID,
