@@ -8,7 +8,7 @@ rows (one msgpack bin):
 
     state: v: 1, host: hid, k, t, n, rows: n x (id uint32, x, y, theta, px, py float64) (`STATE_ROW`, 44 bytes),
            scans: [[row, points, bodies], ...] (the rows with something in range, ascending; points and bodies as
-           a state carries them: reconswarm/net/wire.py)
+           a state carries them: reconswarm/net/wire/wire.py)
     cmd:   v: 1, host: hid, n, rows: n x (id uint32, k int64, v_mps, omega_radps float64) (`CMD_ROW`, 28 bytes)
 
 The sample's attachment is n, 4 bytes little-endian (what a host's inbox counts a state batch for; the payload's n
