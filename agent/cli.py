@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from reconswarm.cli import help_style
-from reconswarm.cli.options import Connect, Listen, Mode, Ros2, RosDomain, RunId, ZConfig, ros2_domain, run_node
+from reconswarm.cli.options import Connect, Listen, Mode, Ros2, RosDomain, RunId, ZConfig, ros2_domain, run_process
 from reconswarm.net.runtime.session import ZenohOptions
 
 help_style.install()
@@ -33,7 +33,7 @@ def agent_cmd(
                                ZenohOptions.build(connect, listen, mode, zenoh_config), run_id,
                                ros2_domain_id=ros2_domain(ros2, ros_domain_id)))
 
-    run_node(go)
+    run_process(go)
 
 
 app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)

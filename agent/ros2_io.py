@@ -2,7 +2,7 @@
 
 Instead of its state and command keys, agent i reads `/robot_<i>/odom` (nav_msgs/Odometry: the body pose
 s, θ and the simulated time) and publishes `/robot_<i>/cmd_vel` (geometry_msgs/Twist: linear.x = v,
-angular.z = ω), as node `agent_<i>` with rmw_zenoh's keys, attachments and liveliness tokens
+angular.z = ω), as ROS 2 node `agent_<i>` with rmw_zenoh's keys, attachments and liveliness tokens
 (reconswarm/net/ros2/ros2_node.py). The node (agent/node.py) does not change: an odometry becomes the state it
 knows (head point p = s + l [cos θ, sin θ], tick k = round(t / dt)), and its command u becomes the Twist a robot
 base holds: the (v, ω) whose arc over the step, from the state it was planned from, moves the head point by
@@ -58,10 +58,10 @@ class AgentRos2:
                  callback: Any, timing: Timing = TIMING) -> None:
         """callback(sample): where odometry samples go (the host's inbox)."""
         self.id, self.l, self.dt, self.timing = agent_id, head_offset_m, dt_s, timing
-        self.node = Ros2Node(session, domain_id, f"agent_{agent_id}")
+        self.ros2_node = Ros2Node(session, domain_id, f"agent_{agent_id}")
         self.odom_key = ros2.odom_key(domain_id, agent_id)
-        self.cmd_vel = self.node.publisher(ros2.cmd_vel_topic(agent_id), ros2.TWIST)
-        self.node.subscription(ros2.odom_topic(agent_id), ros2.ODOMETRY, callback)
+        self.cmd_vel = self.ros2_node.publisher(ros2.cmd_vel_topic(agent_id), ros2.TWIST)
+        self.ros2_node.subscription(ros2.odom_topic(agent_id), ros2.ODOMETRY, callback)
         self.counted = 0
         self.published_ns: dict[int, int] = {}  # tick -> when the plant published its odometry (its attachment)
         self.stale = 0  # commands not sent: planned from an odometry older than `ros2_plan_age_periods`
@@ -98,7 +98,8 @@ class AgentRos2:
         k = round(o.t_s / self.dt)
         px, py = o.x_m + self.l * math.cos(o.theta_rad), o.y_m + self.l * math.sin(o.theta_rad)
         # (its scan: on its own key)
-        return Odometry(wire.State(self.id, k, o.t_s, o.x_m, o.y_m, o.theta_rad, px, py), self.node.sent.take(payload))
+        state = wire.State(self.id, k, o.t_s, o.x_m, o.y_m, o.theta_rad, px, py)
+        return Odometry(state, self.ros2_node.sent.take(payload))
 
     def keep(self, o: Odometry) -> None:
         """An admitted odometry (the plant's): when its tick was published, what a command of that tick is judged
@@ -150,11 +151,11 @@ class AgentRos2:
 
     def dropped(self) -> list[Invalid]:
         """Samples dropped for their attachment since the last call (for the node to count)."""
-        n, self.counted = self.node.bad_attachments - self.counted, self.node.bad_attachments
+        n, self.counted = self.ros2_node.bad_attachments - self.counted, self.ros2_node.bad_attachments
         return [Invalid(self.odom_key, "odometry without a valid rmw_zenoh attachment")] * n
 
     def close(self) -> None:
-        self.node.close()
+        self.ros2_node.close()
 
 
 def ros2_robot(domain_id: int) -> Callable[..., AgentRos2]:

@@ -1,4 +1,4 @@
-"""The top floor's node commands: `reconswarm router` and `reconswarm flood` (the roles' own, `agent`, `simworld`
+"""The top floor's process commands: `reconswarm router` and `reconswarm flood` (the roles' own, `agent`, `simworld`
 and `monitor record`, live in agent/cli.py, simworld/cli.py and monitor/cli.py). All take the zenoh options
 of README.md (`--connect`, `--listen`, `--mode`, `--zenoh-config`) from reconswarm/cli/options.py.
 """
@@ -12,7 +12,7 @@ from typing import Annotated
 
 import typer
 
-from reconswarm.cli.options import Connect, Listen, Mode, ZConfig, run_node
+from reconswarm.cli.options import Connect, Listen, Mode, ZConfig, run_process
 from reconswarm.net.runtime.session import ZenohOptions, serving
 
 log = logging.getLogger("reconswarm.router")
@@ -33,7 +33,7 @@ def router_cmd(
                 time.sleep(0.1)
         return 0
 
-    run_node(go)
+    run_process(go)
 
 
 def flood_cmd(
@@ -49,7 +49,7 @@ def flood_cmd(
         run(FloodConfig(run_id, scenario, count, ZenohOptions.build(connect, listen, mode, zenoh_config)))
         return 0
 
-    run_node(go)
+    run_process(go)
 
 
 def register(app: typer.Typer) -> None:

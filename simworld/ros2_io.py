@@ -3,7 +3,7 @@
 Per robot i the plant publishes `/robot_<i>/odom` (nav_msgs/Odometry: body pose s_i, θ_i in frame `odom`,
 child frame `robot_<i>/base_link`, stamp = simulated time, twist = the (v, ω) it moved with) instead of
 its state key, and takes `/robot_<i>/cmd_vel` (geometry_msgs/Twist: linear.x = v, angular.z = ω) instead
-of the command key, as node `simworld` with rmw_zenoh's keys, attachments and liveliness tokens
+of the command key, as ROS 2 node `simworld` with rmw_zenoh's keys, attachments and liveliness tokens
 (reconswarm/net/ros2/ros2_node.py). Scans, clock and truth stay on the project's keys.
 
 In this mode the world's state machine (simworld/world.py) has the plant a robot base is (`Ros2Robots`): it
@@ -14,7 +14,7 @@ source timestamp; an agent sends none planned from an older one, agent/ros2_io.p
 as the project's own mode holds a command of that tick: from where the robot stood then, a late one too,
 while the robot stays within d_safe / 2 of that point and for `hold_sim_s` from that tick.
 ROS 2 topics carry no tick, so ROS 2 mode is realtime only. `Ros2IO` is the world's robot interface in
-this mode (simworld/robot_io.py `RobotIO`): the node `simworld`'s odometry publishers and cmd_vel subscriptions,
+this mode (simworld/robot_io.py `RobotIO`): the ROS 2 node `simworld`'s odometry publishers and cmd_vel subscriptions,
 and each robot's scan on the project's key. The world node is the same as in the project's own mode, with
 `Ros2Robots` as its plant.
 """
@@ -84,7 +84,7 @@ def planned_tick(published_ns: dict[int, int], sent_ns: int, plan_age_ns: float)
 
 
 class Ros2IO:
-    """The node `simworld`: an odom publisher and a cmd_vel subscription per robot; each robot's scan on the
+    """The ROS 2 node `simworld`: an odom publisher and a cmd_vel subscription per robot; each robot's scan on the
     project's key (the robot interface `RobotIO`, simworld/robot_io.py).
 
     period_s: the run's period (wall seconds a tick lasts at its speed)."""
@@ -94,12 +94,12 @@ class Ros2IO:
         """keys: the run's (scans go there); gate: the world's (admits each cmd_vel); callback(sample): where
         cmd_vel samples go (the process's inbox)."""
         self.base, self.keys, self.gate = base, keys, gate
-        self.node = Ros2Node(session, domain_id, "simworld")
-        self.odom = {a: self.node.publisher(ros2.odom_topic(a), ros2.ODOMETRY) for a in base.ids}
+        self.ros2_node = Ros2Node(session, domain_id, "simworld")
+        self.odom = {a: self.ros2_node.publisher(ros2.odom_topic(a), ros2.ODOMETRY) for a in base.ids}
         block = zenoh.CongestionControl.BLOCK
         self.pub_scan = {a: session.declare_publisher(keys.scan(a), congestion_control=block) for a in base.ids}
         for a in base.ids:
-            self.node.subscription(ros2.cmd_vel_topic(a), ros2.TWIST, callback)
+            self.ros2_node.subscription(ros2.cmd_vel_topic(a), ros2.TWIST, callback)
         self.agent_of = {ros2.cmd_vel_key(domain_id, a): a for a in base.ids}
         self.counted = 0
         self.plan_age_ns = timing.ros2_plan_age_periods * period_s * 1e9
@@ -125,7 +125,7 @@ class Ros2IO:
         attachment's source timestamp; None: unnoted); Ros2Error when it must be dropped. The port admits it
         (bounded, from agent i's session), then has it `dated` before the node holds it."""
         v, om = ros2.twist_from_ros(payload)
-        return wire.Cmd(self.agent_of[key], k, v, om), self.node.sent.take(payload)
+        return wire.Cmd(self.agent_of[key], k, v, om), self.ros2_node.sent.take(payload)
 
     def dated(self, c: wire.Cmd, sent_ns: int | None) -> wire.Cmd:
         """An admitted cmd_vel as the command of the tick it was planned from at the earliest (`planned_tick`;
@@ -164,10 +164,10 @@ class Ros2IO:
 
     def dropped(self) -> list[tuple[str, str]]:
         """A cmd_vel sample without a valid rmw_zenoh attachment, each: dropped by the node before `decode`."""
-        n, self.counted = self.node.bad_attachments - self.counted, self.node.bad_attachments
+        n, self.counted = self.ros2_node.bad_attachments - self.counted, self.ros2_node.bad_attachments
         return [("/robot_<i>/cmd_vel", "a sample without a valid rmw_zenoh attachment")] * n
 
     def close(self) -> None:
-        self.node.close()
+        self.ros2_node.close()
         for pub in self.pub_scan.values():
             pub.undeclare()

@@ -1,6 +1,6 @@
-"""The options and the process wrapper of the node commands (`agent`, `simworld`, `monitor record`, `router`,
+"""The options and the process wrapper of the process commands (`agent`, `simworld`, `monitor record`, `router`,
 `flood`): the zenoh options of README.md (`--connect`, `--listen`, `--mode`, `--zenoh-config`), `--run`,
-`--ros2` and `--ros-domain-id`, and `run_node`, which runs a node's main with logging, the parent watch and
+`--ros2` and `--ros-domain-id`, and `run_process`, which runs a process's main with logging, the parent watch and
 one-line errors."""
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ def profiled(module: str) -> Iterator[None]:
                                                     exc.strerror or exc)
 
 
-def run_node(fn: Callable[[], int]) -> None:
+def run_process(fn: Callable[[], int]) -> None:
     """Run a node process's main: logging set up, the process ends with its parent, a ReconswarmError is one
     line and its exit code, else the main's exit code. RECONSWARM_PROFILE=DIR: cProfile stats dumped to
     DIR/MODULE-PID.prof (MODULE: the command's, e.g. agent.cli; `profiled`)."""

@@ -200,7 +200,7 @@ def test_in_ros2_mode_an_agent_takes_its_scan_not_its_state_and_odometry_without
             out.put(ros2.odom_key, b"no attachment")
             got: list[Any] = []
             deadline = time.monotonic() + 10.0
-            while time.monotonic() < deadline and (not got or ros2.node.bad_attachments == 0):
+            while time.monotonic() < deadline and (not got or ros2.ros2_node.bad_attachments == 0):
                 got += inbox.take(1, 0.3)
             # (one session's puts arrive in order: the odometry came, so a state put before it would have too)
             got += inbox.take(0, 0.0)

@@ -127,7 +127,7 @@ def test_the_plant_dates_a_cmd_vel_by_its_attachments_source_timestamp() -> None
             with pytest.raises(ros2.Ros2Error, match="clocks apart"):
                 world.dated(wire.Cmd(a, 3, 0.0, 0.01), late)
             assert world.dated(wire.Cmd(a, 3, 0.0, 0.0), world.published_ns[2] + MS) == wire.Cmd(a, 2, 0.0, 0.0)
-            world.node.bad_attachments = 2
+            world.ros2_node.bad_attachments = 2
             assert (len(world.dropped()), world.dropped()) == (2, [])
         finally:
             world.close()
@@ -169,13 +169,13 @@ def test_the_world_admits_a_cmd_vel_before_it_dates_it_so_a_forgers_timestamp_is
         port.io.publish(wire.State(a, 0, 0.0, 0.0, 0.0, 0.0, 0.5, 0.0))
         port.gate.world_k = 0  # (tick 0 out, as its clock says)
         key, genuine, forged = ros2.cmd_vel_key(0, a), ros2.twist_to_ros(1.0, 0.0), ros2.twist_to_ros(2.0, 0.0)
-        port.io.node.sent.note(genuine, port.io.published_ns[0] + MS)
+        port.io.ros2_node.sent.note(genuine, port.io.published_ns[0] + MS)
         assert port.decode(key, genuine, "PUT", "agent-session", 0.0) == Command(wire.Cmd(a, 0, 1.0, 0.0), 0.0)
-        port.io.node.sent.note(forged, port.io.published_ns[0] + 10**12)  # "sent" 1000 s on: no odometry so old
+        port.io.ros2_node.sent.note(forged, port.io.published_ns[0] + 10**12)  # "sent" 1000 s on: no odometry so old
         assert port.decode(key, forged, "PUT", "forger", 0.0) is None
         assert port.gate.count == 1 and set(port.gate.tally.rows) == {("impersonation", "forger")}
         assert port.rej.count == 0
-        port.io.node.sent.note(forged, port.io.published_ns[0] + 10**12)  # from the agent's own session: invalid
+        port.io.ros2_node.sent.note(forged, port.io.published_ns[0] + 10**12)  # from the agent's own session: invalid
         got = port.decode(key, forged, "PUT", "agent-session", 0.0)
         assert isinstance(got, Invalid) and "clocks apart" in got.reason and port.rej.count == 1
     finally:
@@ -234,7 +234,7 @@ def agent() -> Iterator[AgentRos2]:
 def odometry(agent: AgentRos2, k: int, sent_ns: int, x: float = 3.0, y: float = -2.0, theta: float = 0.7) -> bytes:
     """Agent 1's odometry of tick k as the plant publishes it, noted as published at sent_ns."""
     payload = ros2.odom_to_ros(ros2.Odom(1, k * S.meta.dt_s, x, y, theta, 0.0, 0.0))
-    agent.node.sent.note(payload, sent_ns)
+    agent.ros2_node.sent.note(payload, sent_ns)
     return payload
 
 
@@ -259,7 +259,7 @@ def test_an_odometry_is_the_state_of_its_tick_with_the_head_point_l_ahead_of_the
     bad = agent.odometry(agent.odom_key, other)
     assert isinstance(bad, Invalid) and bad.key == agent.odom_key and "of agent 2 on the topic of agent 1" in bad.reason
     assert agent.published_ns == {7: 10**18}
-    agent.node.bad_attachments = 2
+    agent.ros2_node.bad_attachments = 2
     assert agent.dropped() == [Invalid(agent.odom_key, "odometry without a valid rmw_zenoh attachment")] * 2
     assert agent.dropped() == []
 
