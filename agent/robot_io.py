@@ -28,7 +28,7 @@ from reconswarm.net.trust.admission import Intrusion, IntrusionKind
 from reconswarm.net.trust.gate import Gate
 from reconswarm.net.wire import wire
 from reconswarm.net.wire.batch import BeaconBatch
-from reconswarm.net.wire.hostwire import StateBatch, cmds_to_wire
+from reconswarm.net.wire.hostwire import StateBatch, attachment, cmds_to_wire
 from reconswarm.net.wire.keys import Keys
 
 Decoded = Received | BeaconBatch | StateBatch | None  # what a sample decodes to (None: a key no agent reads)
@@ -94,7 +94,8 @@ class HostKeys:
         """Put the commands of this round, in one message."""
         if self.cmds and self.pub is not None:
             trace.mark(trace.Mark.HOST_CMD_PUT, self.cmds[0].k, self.hid)
-            self.pub.put(cmds_to_wire(self.hid, self.cmds))
+            # (its attachment: the rows the world's inbox counts it for)
+            self.pub.put(cmds_to_wire(self.hid, self.cmds), attachment=attachment(len(self.cmds)))
         self.cmds = []
 
     def close(self) -> None:

@@ -147,7 +147,7 @@ class RobotIOFactory(Protocol):
 
 
 def _keys_io(session: zenoh.Session, keys: Keys, node: WorldNode, gate: Gate, inbox: Inbox) -> RobotIO:
-    return KeysIO(session, keys, node.ids, gate, inbox.handler())
+    return KeysIO(session, keys, node.ids, gate, inbox.handler(rows=True))  # (a host's commands: its rows)
 
 
 def robot_io(ros2_domain_id: int | None) -> RobotIOFactory:

@@ -68,3 +68,39 @@ def test_a_deleted_sample_and_an_unreadable_one() -> None:
     box.callback(sample(8))
     assert [(key[-8:], kind) for key, _, kind, _, _ in box.take(1, 0)] == [("7/beacon", "DELETE"), ("8/beacon", "PUT")]
     assert box.take(1, 0) == []
+
+
+@dataclass
+class Batch(Sample):
+    attachment: Payload | None = None
+
+
+def host_commands(host: int, rows: int) -> Batch:
+    return Batch(f"swarm/r/host/{host}/cmd", Payload(bytes([host])), attachment=Payload(rows.to_bytes(4, "little")))
+
+
+def test_a_hosts_batch_counts_for_its_rows_so_the_world_is_woken_by_the_last_hosts_commands() -> None:
+    """The world waits for ten commands; two hosts of five answer in one message each (their attachments say 5):
+    the second wakes it, not its poll (before: each batch counted one, and every lockstep tick took the poll)."""
+    box = Inbox()
+    box.callback_rows(host_commands(1, 5))
+    threading.Timer(0.05, box.callback_rows, args=(host_commands(6, 5),)).start()
+    t0 = time.monotonic()
+    got = box.take(10, 5.0)
+    assert [key for key, *_ in got] == ["swarm/r/host/1/cmd", "swarm/r/host/6/cmd"]
+    assert time.monotonic() - t0 < 4.0
+    # Nothing is left counted once taken: the next take waits again for what it wants.
+    box.callback_rows(host_commands(1, 5))
+    t0 = time.monotonic()
+    assert len(box.take(10, 0.2)) == 1 and time.monotonic() - t0 >= 0.19
+
+
+def test_a_batch_without_a_sane_attachment_counts_one_and_never_more_than_the_cap() -> None:
+    box = Inbox()
+    box.callback_rows(Batch("swarm/r/host/1/cmd", Payload(b"x")))  # no attachment: one
+    box.callback_rows(Batch("swarm/r/host/2/cmd", Payload(b"x"), attachment=Payload(b"")))  # empty: one (max 1)
+    t0 = time.monotonic()
+    assert len(box.take(3, 0.2)) == 2 and time.monotonic() - t0 >= 0.19  # two counted: it waited
+    box.callback_rows(host_commands(3, 2**31))  # a forged count: capped, it only wakes the loop early
+    assert box._count == Inbox.MAX_ROWS
+    assert len(box.take(10, 5.0)) == 1 and box._count == 0

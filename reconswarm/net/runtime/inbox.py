@@ -30,35 +30,59 @@ class Inbox:
 
     samples_in = 0  # over every inbox of the process (for its exit line: benchmarks read them)
     wakeups = 0
+    MAX_ROWS = 4096  # the most a batch's attachment may count for
 
     def __init__(self) -> None:
-        self._samples: deque[tuple[Any, float]] = deque()  # (sample, monotonic time it arrived)
+        self._samples: deque[tuple[Any, float, int]] = deque()  # (sample, monotonic time it arrived, what it counts)
+        self._lock = threading.Lock()
+        self._count = 0  # what the samples waiting count for: one each, a host's batch its rows (`rows`)
         self._ready = threading.Event()
         self._want: float = 1
         self._urgent = False  # an urgent sample came since the last take
 
-    def handler(self, urgent: bool = False) -> Any:
-        """A zenoh handler that feeds this inbox (urgent: each sample wakes the loop at once)."""
+    def handler(self, urgent: bool = False, rows: bool = False) -> Any:
+        """A zenoh handler that feeds this inbox (urgent: each sample wakes the loop at once; rows: a host's batch
+        counts for the rows its attachment says, as the node counts the messages it waits for: a host's commands)."""
         import zenoh
 
-        return zenoh.handlers.Callback(self.urgent if urgent else self.callback)
+        if urgent:
+            return zenoh.handlers.Callback(self.urgent)
+        return zenoh.handlers.Callback(self.callback_rows if rows else self.callback)
 
-    def callback(self, sample: Any) -> None:
-        self._samples.append((sample, time.monotonic()))
-        if len(self._samples) >= self._want:
+    def callback(self, sample: Any, n: int = 1) -> None:
+        with self._lock:
+            self._samples.append((sample, time.monotonic(), n))
+            self._count += n
+            ready = self._count >= self._want
+        if ready:
             self._ready.set()
 
+    def callback_rows(self, sample: Any) -> None:
+        """A batch: counts for its attachment's n (4 bytes, little-endian), 1..MAX_ROWS; a wrong count only wakes the
+        loop early, or at its poll (the payload's own n is what is believed)."""
+        n = 1
+        try:
+            att = sample.attachment
+            if att is not None:
+                n = min(self.MAX_ROWS, max(1, int.from_bytes(att.to_bytes()[:4], "little")))
+        except Exception:  # never raise into zenoh's callback
+            n = 1
+        self.callback(sample, n)
+
     def urgent(self, sample: Any) -> None:
-        self._samples.append((sample, time.monotonic()))
+        with self._lock:
+            self._samples.append((sample, time.monotonic(), 1))
+            self._count += 1
         self._urgent = True
         self._ready.set()
 
     def take(self, want: int | None, timeout: float | None, urgent: int = 1) -> list[Item]:
-        """Every sample waiting, once an urgent one or `want` of them (None: only an urgent one) are in, or
-        once `timeout` seconds passed (at once if 0). (`urgent`: one is enough here: a process with one node.)"""
+        """Every sample waiting, once an urgent one or `want` of them (None: only an urgent one; a host's batch
+        counts for its rows) are in, or once `timeout` seconds passed (at once if 0). (`urgent`: one is enough
+        here: a process with one node.)"""
         self._want = math.inf if want is None else max(1, want)
         self._ready.clear()  # (set by samples an earlier take already had, or that were fewer than wanted then)
-        if not self._urgent and len(self._samples) < self._want and (timeout is None or timeout > 0):
+        if not self._urgent and self._count < self._want and (timeout is None or timeout > 0):
             self._ready.wait(timeout)
         self._urgent = False
         Inbox.wakeups += 1
@@ -67,8 +91,13 @@ class Inbox:
     def drain(self) -> list[Item]:
         """Every sample waiting, without waiting."""
         out = []
-        while self._samples:
-            item = to_item(*self._samples.popleft())
+        while True:
+            with self._lock:
+                if not self._samples:
+                    break
+                sample, at_s, n = self._samples.popleft()
+                self._count -= n
+            item = to_item(sample, at_s)
             if item is not None:
                 out.append(item)
         Inbox.samples_in += len(out)
