@@ -25,7 +25,7 @@ from typing import Any
 
 import zenoh
 
-from agent.link import AgentLink
+from agent.hosted import HostedAgent
 from agent.messages import Input
 from reconswarm.net.node import Invalid
 from reconswarm.net.runtime import trace
@@ -93,7 +93,7 @@ class BeaconOut:
 
 
 def take_batch(m: BeaconBatch, key: str, source: str, who: list[int], batches: dict[int, list[Input]], at_s: float,
-               active: dict[int, AgentLink], gate: Gate, n_agents: int) -> None:
+               active: dict[int, HostedAgent], gate: Gate, n_agents: int) -> None:
     """Hand a peer host's batch under `key` (from session `source`) to the hosted agents `who` listening to its
     cell, appending to their `batches`; `active`: the hosted agents' links, `gate`: the host's one admission,
     `n_agents`: the scenario's."""

@@ -40,7 +40,7 @@ from zenoh import ext
 
 from agent.beacons import BeaconOut, handover_cell, handover_label, take_batch
 from agent.brain import Plan, commands
-from agent.link import OWN, PASSED, PEER_MESSAGES, AgentLink, Decoded, decode_sample
+from agent.hosted import OWN, PASSED, PEER_MESSAGES, HostedAgent, Decoded, decode_sample
 from agent.messages import Input, Law, Reconnect
 from agent.neighbours import Cells
 from agent.robot_io import HostKeys, KeysRobot, take_states
@@ -65,7 +65,7 @@ ALONE = (Invalid, *OWN)  # what each agent's own link takes for itself (a malfor
 class AgentHost:
     """The session's subscriptions around the hosted agents' links; `run` is the process's loop."""
 
-    def __init__(self, session: zenoh.Session, keys: Keys, links: dict[int, AgentLink],
+    def __init__(self, session: zenoh.Session, keys: Keys, links: dict[int, HostedAgent],
                  inbox: TaggedInbox) -> None:
         self.z, self.keys, self.links, self.inbox = session, keys, links, inbox
         self.active = dict(links)  # the agents still running (one that exited leaves this)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 from agent.brain import Plan
 from agent.neighbours import Cells
-from reconswarm.net.node import Exit, Invalid, RouterLink, Stop, Token
+from reconswarm.net.node import Exit, Invalid, RouterReach, Stop, Token
 from reconswarm.net.wire import wire
 
 
@@ -25,7 +25,7 @@ class Law:
 # token (Token with Role.AGENT and its id, or Role.WORLD), a message dropped as invalid, our router link, a signal
 # (all that a sample or the runtime brings: Received; what the node keeps of it is agent/heard.py's `Heard`); in a
 # host of several agents, the law its host computed for our plan
-Received = wire.State | wire.Scan | wire.Clock | wire.Beacon | wire.ObstacleSet | Token | Invalid | RouterLink | Stop
+Received = wire.State | wire.Scan | wire.Clock | wire.Beacon | wire.ObstacleSet | Token | Invalid | RouterReach | Stop
 Input = Received | Law
 
 

@@ -30,7 +30,7 @@ from agent.messages import Input, Law, Output
 from agent.neighbours import Cells, Neighbourhood
 from agent.sets import PeerSets, own_set, scan_sets
 from agent.watch import watch
-from reconswarm.net.node import Exit, Invalid, Role, RouterLink, Stop, Token
+from reconswarm.net.node import Exit, Invalid, Role, RouterReach, Stop, Token
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.net.trust.membership import Policy, silent
 from reconswarm.net.wire import wire
@@ -150,7 +150,7 @@ class AgentNode:
                 self.world_gone = True
         elif isinstance(m, Invalid):
             self.rejected += 1
-        elif isinstance(m, RouterLink):  # what was in flight to us meanwhile is lost: nobody sends it again
+        elif isinstance(m, RouterReach):  # what was in flight to us meanwhile is lost: nobody sends it again
             self.link_lost |= self.started and self.mode == "lockstep" and not self.ended
             self.unlinked = not m.up  # (its tokens went with it: judged only once they had time to come back)
             self.h.hold(now + (self.timing.relink_settle_s if m.up else 0.0))

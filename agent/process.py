@@ -1,6 +1,6 @@
 """`reconswarm agent --id I` (or `--ids 1-5,9`): one agent, or several, as one process on one zenoh session.
 
-Every hosted agent keeps its own identity on the wire (agent/link.py: its keys, liveliness token, gate,
+Every hosted agent keeps its own identity on the wire (agent/hosted.py: its keys, liveliness token, gate,
 counters and report), so nobody outside can tell a hosted agent from a lone one; the process's session,
 subscriptions and loop are agent/host.py's, and each agent's logic is its AgentNode (agent/node.py).
 When a node asks for a new session, the session is replaced and every node, with everything it knows,
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agent.host import RECONNECT, AgentHost, TaggedInbox
-from agent.link import AgentLink
+from agent.hosted import HostedAgent
 from agent.node import AgentNode
 from agent.robot_io import keys_robot
 from agent.ros2_io import ros2_robot
@@ -29,7 +29,7 @@ from reconswarm.net.wire.keys import Keys
 from reconswarm.scenario.model import load
 from reconswarm.scenario.wire_limits import MAX_AGENT_ID, MAX_IDS, agent_id_from_text
 
-__all__ = ["AgentConfig", "AgentLink", "parse_ids", "run"]
+__all__ = ["AgentConfig", "HostedAgent", "parse_ids", "run"]
 log = logging.getLogger("reconswarm.agent")
 
 
@@ -95,7 +95,7 @@ def run(cfg: AgentConfig) -> int:
             zid = str(session.info.zid())
             inbox = TaggedInbox()
             own = zid if len(ids) > 1 else None  # co-hosted agents hear us through it
-            links = {a: AgentLink(nodes[a], keys, session, rejs[a], gates[a], robot, own,
+            links = {a: HostedAgent(nodes[a], keys, session, rejs[a], gates[a], robot, own,
                                   inbox.callback(("own", a), urgent=True)) for a in ids}
             host = AgentHost(session, keys, links, inbox)
             log.info("%s up (run %s)", who, keys.run)

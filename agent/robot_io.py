@@ -1,6 +1,6 @@
 """An agent's robot interface: its robot's state in, its command out, chosen once per process (agent/process.py).
 
-`RobotIO` is what an agent's link (agent/link.py) and its host (agent/host.py) need of it; two interfaces
+`RobotIO` is what an agent's link (agent/hosted.py) and its host (agent/host.py) need of it; two interfaces
 implement it:
 
 - `KeysRobot`, the project's keys, through its host's `HostKeys`: one message per host and tick each way, the

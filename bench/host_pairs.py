@@ -35,7 +35,7 @@ from _common import command_line, machine
 from grid import grid_scenario
 
 from agent.host import AgentHost, TaggedInbox
-from agent.link import AgentLink
+from agent.hosted import HostedAgent
 from agent.neighbours import Cells
 from agent.node import AgentNode
 from reconswarm.net.runtime.inbox import Rejections
@@ -62,7 +62,7 @@ def measure(z: zenoh.Session, n: int, k: int, reps: int) -> tuple[int, int, floa
     else:  # (a checkout before the host's one admission)
         gates = {a: Gate(s, f"agent-{a}") for a in ids}
     zid = str(z.info.zid())
-    links = {a: AgentLink(AgentNode(s, a, 0.0, batched=True), keys, z, Rejections(f"agent {a}"), gates[a], None, zid)
+    links = {a: HostedAgent(AgentNode(s, a, 0.0, batched=True), keys, z, Rejections(f"agent {a}"), gates[a], None, zid)
              for a in ids}
     host = AgentHost(z, keys, links, TaggedInbox())
     try:

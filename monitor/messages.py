@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from monitor.rows import Record
-from reconswarm.net.node import Exit, Invalid, RouterLink, Stop, Token
+from reconswarm.net.node import Exit, Invalid, RouterReach, Stop, Token
 from reconswarm.net.wire import wire
 from reconswarm.net.wire.report import Report
 from reconswarm.paper.events import Event
@@ -32,7 +32,7 @@ class ClockFrom:
     source: str
 
 
-Input = ClockFrom | wire.Truth | Report | Token | Invalid | RouterLink | Stop
+Input = ClockFrom | wire.Truth | Report | Token | Invalid | RouterReach | Stop
 
 
 # ----------------------------------------------------------------------------------------- outputs

@@ -8,7 +8,7 @@ tokens, and returns, in order, the events it recorded (the process records then 
 and `Exit` once the mission's end is recorded or it was told to stop.
 
 Who is alive is decided once, by the node's `Presence` (monitor/presence.py): a token AND the agent's own
-reports (its heartbeat); our own session losing its router is nobody's loss (`RouterLink`); losses, returns
+reports (its heartbeat); our own session losing its router is nobody's loss (`RouterReach`); losses, returns
 and network splits are its events. The world: its clock silent for `world_stall_s` (or its token gone) is a
 stall (a clock within `burst_s` of its token going was put before it went: not the world back); while it
 lasts, agents that come and go are not judged (they reconnect when nothing moves) until `burst_s` after the
@@ -25,7 +25,7 @@ from typing import Any
 from monitor.messages import ClockFrom, Input, Output, RefusedEnd, Scene
 from monitor.presence import Presence
 from monitor.rows import Close, Commit, Counters, Gap, Intrusions, Meta, Resume, RowSink
-from reconswarm.net.node import Exit, Invalid, Role, RouterLink, Stop, Token
+from reconswarm.net.node import Exit, Invalid, Role, RouterReach, Stop, Token
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.net.trust.admission import IntrusionKind
 from reconswarm.net.wire import wire
@@ -123,7 +123,7 @@ class MonitorNode:
                     self._sync(now_s)
             elif m.role is Role.WORLD:
                 self._world_up(m.up, now_s)
-        elif isinstance(m, RouterLink):
+        elif isinstance(m, RouterReach):
             self.presence.members.link(m.up, now_s, self.t)
         elif isinstance(m, Invalid):
             self.invalid += 1

@@ -1,6 +1,6 @@
 """`reconswarm monitor record`: the monitor process, `monitor.node.MonitorNode` on the one runtime.
 
-`MonitorPort` is the role's declarations (reconswarm/net/runtime/runtime.Port): it subscribes to the truth, the clock,
+`MonitorAdapter` is the role's declarations (reconswarm/net/runtime/runtime.Port): it subscribes to the truth, the clock,
 the reports and the liveliness tokens (not to the agents' beacons: their counters and heartbeat come in their
 reports, about twice a second, whatever N is), routes each sample through its codec and the gate's admission
 to the node (a malformed one is logged and handed over as `Invalid`, counted by the node), publishes on
@@ -66,8 +66,8 @@ def disk_full(exc: BaseException) -> bool:
     return isinstance(exc, sqlite3.Error) and "full" in str(exc).lower()
 
 
-class MonitorPort(Member):
-    """The monitor's subscriptions, publisher, gate and record around its node (the runtime's Port)."""
+class MonitorAdapter(Member):
+    """The monitor's subscriptions, publisher, gate and record around its node (the runtime's Adapter)."""
 
     def __init__(self, s: Scenario, run: str, session: Any, writer: RunWriter, resume: Resume | None) -> None:
         self.z, self.keys, self.writer = session, Keys(run), writer
@@ -207,15 +207,15 @@ def run(cfg: MonitorConfig) -> int:
         raise
     node = MonitorNode(s, resume, unix_offset_s=time.time() - time.monotonic())
     with serving(cfg.zenoh, "monitor") as (session, stop):
-        port = MonitorPort(s, cfg.run_id or s.meta.name, session, writer, resume)
+        adapter = MonitorAdapter(s, cfg.run_id or s.meta.name, session, writer, resume)
         try:
             if cfg.foxglove_port is not None:
                 view = LiveView(s, cfg.foxglove_port)
-                port.serve(view)
+                adapter.serve(view)
                 log.info("live view: ws://127.0.0.1:%d (Foxglove app: Open connection)", view.port)
-            log.info("monitor up (run %s): recording to %s", port.keys.run, cfg.db)
-            code = port.run(node, stop, cfg.live)
+            log.info("monitor up (run %s): recording to %s", adapter.keys.run, cfg.db)
+            code = adapter.run(node, stop, cfg.live)
         finally:
-            port.close()
+            adapter.close()
         log.info("monitor done: %d ticks recorded, %d messages rejected", node.written + 1, node.invalid)
         return code

@@ -1,6 +1,6 @@
 """`reconswarm simworld`: the world process, its node (simworld/world.WorldNode) on the runtime.
 
-The process is the runtime's loop (reconswarm/net/runtime/runtime.py) around one node and `WorldPort`, the world's
+The process is the runtime's loop (reconswarm/net/runtime/runtime.py) around one node and `WorldAdapter`, the world's
 declarations: the clock, the truth, its reports and token, every liveliness token, and the robot interface chosen
 once for the process (simworld/robot_io.py: the project's keys, or ROS 2 topics); `route` turns each sample into
 the node's input (a token, a command its gate admitted, or Invalid, counted); `act` puts what the node returns:
@@ -56,8 +56,8 @@ class SimworldConfig:
     ros2_domain_id: int | None = None  # ROS 2 mode: odom out, cmd_vel in (simworld/ros2_io.py) in this domain
 
 
-class WorldPort(Member):
-    """The world's subscriptions, publishers, gate and token around its node (the runtime's Port); its robots are
+class WorldAdapter(Member):
+    """The world's subscriptions, publishers, gate and token around its node (the runtime's Adapter); its robots are
     reached through `io` (simworld/robot_io.py), given by `robot_io`."""
 
     def __init__(self, node: WorldNode, run: str, session: zenoh.Session, io: RobotIOFactory | None = None) -> None:
@@ -141,7 +141,7 @@ class WorldPort(Member):
 
 
 class RobotIOFactory(Protocol):
-    """Makes the world's robot interface on its session (the port's inbox takes what it subscribes to)."""
+    """Makes the world's robot interface on its session (the adapter's inbox takes what it subscribes to)."""
 
     def __call__(self, session: zenoh.Session, keys: Keys, node: WorldNode, gate: Gate, inbox: Inbox) -> RobotIO: ...
 
@@ -175,16 +175,16 @@ def run(cfg: SimworldConfig) -> int:
         raise BadInput("--ros2: runs on the realtime clock only (ROS 2 topics carry no tick), not --clock lockstep")
     node = WorldNode(s, clock, cfg.speed, timing) if cfg.ros2_domain_id is None else ros2_world(s, cfg.speed, timing)
     with serving(cfg.zenoh, "simworld") as (session, stop):
-        port = WorldPort(node, cfg.run_id or s.meta.name, session, robot_io(cfg.ros2_domain_id))
-        log.info("simworld up (run %s, %s clock): waiting for %d agents and the monitor", port.keys.run,
+        adapter = WorldAdapter(node, cfg.run_id or s.meta.name, session, robot_io(cfg.ros2_domain_id))
+        log.info("simworld up (run %s, %s clock): waiting for %d agents and the monitor", adapter.keys.run,
                  clock, len(node.ids))
         wall0 = time.monotonic()
-        exits = Runtime(session, "simworld", stop, port.inbox, POLL_S).run({WORLD: node}, port,
+        exits = Runtime(session, "simworld", stop, adapter.inbox, POLL_S).run({WORLD: node}, adapter,
                                                                             started=lambda: node.started)
         if not node.started:
             return 0
         log.info("mission ended (%s) after %.2f s wall; stats %s", exits[WORLD].reason, time.monotonic() - wall0,
                  node.stats())
         time.sleep(TIMING.world_end_linger_s)  # let the last messages reach the monitor before the session closes
-        port.close()
+        adapter.close()
         return 0

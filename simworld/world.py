@@ -35,7 +35,7 @@ from enum import Enum, auto
 import numpy as np
 
 from reconswarm.errors import ProcessFailure
-from reconswarm.net.node import Exit, Invalid, Role, RouterLink, Stop, Token
+from reconswarm.net.node import Exit, Invalid, Role, RouterReach, Stop, Token
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.net.trust.membership import Membership, Policy
 from reconswarm.net.wire import wire
@@ -64,7 +64,7 @@ class Command:
     at_s: float
 
 
-WorldInput = Token | Command | RouterLink | Stop | Invalid
+WorldInput = Token | Command | RouterReach | Stop | Invalid
 WorldOutput = wire.Clock | wire.Truth | wire.State | Exit
 
 
@@ -152,7 +152,7 @@ class WorldNode:
                 self.monitor = m.up
             elif m.role is Role.AGENT and m.agent in self.index:
                 self.members.token(m.agent, m.up, now_s, sim)
-        elif isinstance(m, RouterLink):
+        elif isinstance(m, RouterReach):
             self.members.link(m.up, now_s, sim)
             self._link(m.up, now_s)
         elif isinstance(m, Stop):

@@ -54,7 +54,7 @@ class Invalid:
 
 
 @dataclass(frozen=True)
-class RouterLink:
+class RouterReach:
     """Our own session lost (up=False) or regained its router: nobody else's loss (net/runtime/uplink.py)."""
 
     up: bool

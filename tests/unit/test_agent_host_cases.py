@@ -16,7 +16,7 @@ import zenoh
 
 from agent.brain import Plan, commands
 from agent.host import ALL, AgentHost, TaggedInbox
-from agent.link import AgentLink
+from agent.hosted import HostedAgent
 from agent.messages import Law, Reconnect
 from agent.neighbours import Cells
 from agent.node import AgentNode
@@ -42,7 +42,7 @@ Item = tuple[str, bytes, str, str, float]
 
 def make_host(z: Any, ids: tuple[int, ...] = (1, 2)) -> AgentHost:
     inbox, zid = TaggedInbox(), str(z.info.zid())
-    links = {a: AgentLink(AgentNode(S, a, 0.0), KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"), None, zid)
+    links = {a: HostedAgent(AgentNode(S, a, 0.0), KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"), None, zid)
              for a in ids}
     return AgentHost(z, KEYS, links, inbox)
 

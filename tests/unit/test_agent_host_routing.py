@@ -14,7 +14,7 @@ import zenoh
 
 from agent.beacons import handover_label
 from agent.host import AgentHost, TaggedInbox
-from agent.link import AgentLink
+from agent.hosted import HostedAgent
 from agent.neighbours import Cells
 from agent.node import AgentNode
 from reconswarm.net.node import Exit, Invalid
@@ -39,7 +39,7 @@ def host() -> Iterator[AgentHost]:
     z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{free_port()}",), "peer").config())
     inbox = TaggedInbox()
     zid = str(z.info.zid())
-    links = {a: AgentLink(AgentNode(S, a, 0.0), KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"), None, zid)
+    links = {a: HostedAgent(AgentNode(S, a, 0.0), KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"), None, zid)
              for a in (1, 2)}
     h = AgentHost(z, KEYS, links, inbox)
     try:

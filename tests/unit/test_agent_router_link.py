@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from agent.brain import Peer
 from agent.node import AgentNode
-from reconswarm.net.node import RouterLink
+from reconswarm.net.node import RouterReach
 from tests.support import joined, left, world_token
 from tests.unit.test_agent_node import RADIUS, A, B, C, T, beacon, beacons, clock, cmds, reference, started, state
 
@@ -24,8 +24,8 @@ def two_ticks() -> AgentNode:
 
 def test_a_router_link_lost_mid_mission_makes_the_next_tick_a_guess() -> None:
     node = two_ticks()
-    node.step([RouterLink(False)], 0.1)
-    back = node.step([RouterLink(True)], 3.0)
+    node.step([RouterReach(False)], 0.1)
+    back = node.step([RouterReach(True)], 3.0)
     # Our newest beacon again: it may have been lost with the link, and peers place us by it for their next wait.
     assert [(b.id, b.k) for b in beacons(back)] == [(A, 1)]
     out = node.step([clock(2), state(2, 100.0, 0.0), beacon(B, 2, 110.0, 0.0), beacon(C, 2, 120.0, 0.0)], 3.1)
@@ -36,20 +36,20 @@ def test_a_router_link_lost_mid_mission_makes_the_next_tick_a_guess() -> None:
 
 def test_a_different_router_found_between_two_polls_is_a_link_lost_too() -> None:
     node = two_ticks()
-    node.step([RouterLink(True)], 0.1)  # (a router restarted between two polls: UP with no DOWN before it)
+    node.step([RouterReach(True)], 0.1)  # (a router restarted between two polls: UP with no DOWN before it)
     node.step([clock(2), state(2, 100.0, 0.0), beacon(B, 2, 110.0, 0.0), beacon(C, 2, 120.0, 0.0)], 0.2)
     assert node.k == 2 and node.guessed_k == 2
 
 
 def test_a_link_change_before_the_first_clock_or_in_realtime_says_nothing() -> None:
     node = started()
-    node.step([RouterLink(False)], 0.0)
-    node.step([RouterLink(True)], 0.5)
+    node.step([RouterReach(False)], 0.0)
+    node.step([RouterReach(True)], 0.5)
     node.step([clock(0), state(0, 100.0, 0.0), beacon(B, 0, 110.0, 0.0), beacon(C, 0, 120.0, 0.0)], 0.6)
     assert node.k == 0 and node.guessed_k == -1
     rt = started()
     rt.step([clock(0, (A, B, C), mode="realtime", speed=1.0), state(0, 100.0, 0.0)], 0.0)
-    rt.step([RouterLink(False)], 0.1)
+    rt.step([RouterReach(False)], 0.1)
     rt.step([state(1, 100.0, 0.0), beacon(B, 1, 110.0, 0.0), beacon(C, 1, 120.0, 0.0)], 0.2)
     assert rt.k == 1 and rt.guessed_k == -1
 
@@ -62,9 +62,9 @@ def test_tokens_that_go_with_our_router_do_not_shrink_the_wait_set() -> None:
     node = two_ticks()
     assert not cmds(node.step([clock(2), state(2, 100.0, 0.0)], 0.10))  # (waiting for B and C)
     assert not cmds(node.step([left(B), left(C), world_token(False)], 0.11))  # (the router died: its tokens go)
-    node.step([RouterLink(False)], 0.13)
+    node.step([RouterReach(False)], 0.13)
     assert not cmds(node.step([], 2.0)) and node.k == 1
-    node.step([RouterLink(True), joined(B), joined(C), world_token(True)], 3.0)
+    node.step([RouterReach(True), joined(B), joined(C), world_token(True)], 3.0)
     out = node.step([beacon(B, 2, 110.0, 0.0), beacon(C, 2, 120.0, 0.0)], 3.1)
     want = reference(2, (100.0, 0.0), [Peer(B, 110.0, 0.0, RADIUS[B]), Peer(C, 120.0, 0.0, RADIUS[C])])
     assert [(c.k, c.v_mps, c.omega_radps) for c in cmds(out)] == [(2, *want)]

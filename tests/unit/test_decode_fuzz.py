@@ -24,11 +24,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from agent.host import ALL, AgentHost, TaggedInbox
-from agent.link import AgentLink
+from agent.hosted import HostedAgent
 from agent.node import AgentNode
 from agent.robot_io import STATES
 from monitor.node import MonitorNode
-from monitor.process import MonitorPort
+from monitor.process import MonitorAdapter
 from reconswarm.net.node import Invalid, Role, Token
 from reconswarm.net.runtime.inbox import Item, Rejections
 from reconswarm.net.runtime.session import ZenohOptions
@@ -42,7 +42,7 @@ from reconswarm.net.wire.report import Report, report_to_wire
 from reconswarm.record.store import RunWriter
 from reconswarm.scenario.model import load
 from reconswarm.scenario.wire_limits import MAX_AGENT_ID
-from simworld.process import WorldPort
+from simworld.process import WorldAdapter
 from simworld.world import Command, WorldNode
 from tests.support import PAPER, free_port
 
@@ -135,11 +135,11 @@ class View:
 
 @dataclass
 class Roles:
-    world: WorldPort
+    world: WorldAdapter
     world_node: WorldNode
-    monitor: MonitorPort
+    monitor: MonitorAdapter
     monitor_node: MonitorNode
-    live: MonitorPort  # a monitor that serves the live view: its obstacle sets through the same port
+    live: MonitorAdapter  # a monitor that serves the live view: its obstacle sets through the same port
     live_node: MonitorNode
     host: AgentHost
     nodes: dict[int, AgentNode]
@@ -153,14 +153,14 @@ def roles(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Roles]:
     writer = RunWriter(db, S, "lockstep")
     t0 = time.monotonic()
     world_node = WorldNode(S)
-    world = WorldPort(world_node, RUN, z)
-    monitor = MonitorPort(S, RUN, z, writer, None)
+    world = WorldAdapter(world_node, RUN, z)
+    monitor = MonitorAdapter(S, RUN, z, writer, None)
     zid = str(z.info.zid())
     nodes = {a: AgentNode(S, a, t0, batched=True) for a in HOSTED}
-    links = {a: AgentLink(nodes[a], KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"), None, zid)
+    links = {a: HostedAgent(nodes[a], KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"), None, zid)
              for a in HOSTED}
     host = AgentHost(z, KEYS, links, TaggedInbox())
-    live = MonitorPort(S, RUN, z, writer, None)
+    live = MonitorAdapter(S, RUN, z, writer, None)
     live.serve(View())  # type: ignore[arg-type]
     try:
         yield Roles(world, world_node, monitor, MonitorNode(S), live, MonitorNode(S), host, nodes,

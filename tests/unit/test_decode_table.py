@@ -12,7 +12,7 @@ import pytest
 import zenoh
 
 from agent.beacons import handover_cell, handover_label
-from monitor.process import MonitorPort
+from monitor.process import MonitorAdapter
 from reconswarm.net.node import Invalid, Role, Token
 from reconswarm.net.runtime.session import ZenohOptions
 from reconswarm.net.wire import decode as dec
@@ -106,10 +106,10 @@ class View:
 
 
 @pytest.fixture
-def served(tmp_path: Path) -> Iterator[tuple[MonitorPort, View]]:
+def served(tmp_path: Path) -> Iterator[tuple[MonitorAdapter, View]]:
     z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{free_port()}",), "peer").config())  # alone
     writer = RunWriter(tmp_path / "run.db", S, "lockstep")
-    port, view = MonitorPort(S, "t", z, writer, None), View()
+    port, view = MonitorAdapter(S, "t", z, writer, None), View()
     port.serve(view)  # type: ignore[arg-type]
     try:
         yield port, view
@@ -120,7 +120,7 @@ def served(tmp_path: Path) -> Iterator[tuple[MonitorPort, View]]:
 
 
 def test_the_live_views_sets_are_admitted_or_refused_and_counted_by_the_monitors_gate(
-        served: tuple[MonitorPort, View]) -> None:
+        served: tuple[MonitorAdapter, View]) -> None:
     port, view = served
     good = wire.ObstacleSet(A, 1, 0)
     unknown_agent = wire.ObstacleSet(9999, 1, 0)

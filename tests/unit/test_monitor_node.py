@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from monitor.rows import Commit, Counters, Meta
-from reconswarm.net.node import Invalid, RouterLink
+from reconswarm.net.node import Invalid, RouterReach
 from reconswarm.net.wire import wire
 from reconswarm.paper.events import MEMBERSHIP, EventKind
 from reconswarm.record.summary import summarize
@@ -68,8 +68,8 @@ def test_our_own_router_link_going_is_nobodys_loss(tmp_path: Path) -> None:
     def outage(link: bool) -> list[tuple[str, int | None]]:
         run = started(tmp_path / str(link))
         run.tick(0, 0.0)
-        run.step(1.0, *([RouterLink(False)] if link else []), *tokens(False))  # every token goes at once
-        run.step(1.5, *([RouterLink(True)] if link else []))
+        run.step(1.0, *([RouterReach(False)] if link else []), *tokens(False))  # every token goes at once
+        run.step(1.5, *([RouterReach(True)] if link else []))
         run.step(1.6, *tokens(True))  # and they come back through the new router
         for k in range(1, 4):
             run.tick(k, 2.0 + k)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from monitor.messages import ClockFrom
-from reconswarm.net.node import RouterLink, Stop
+from reconswarm.net.node import RouterReach, Stop
 from reconswarm.paper.events import EventKind
 from reconswarm.record.summary import summarize
 from tests.unit.monitor_run import (
@@ -190,8 +190,8 @@ def test_an_agent_guessing_at_tick_0_loses_determinism_at_t_0(tmp_path: Path) ->
 def test_after_its_router_link_is_back_an_agent_whose_token_goes_is_lost(tmp_path: Path) -> None:
     run = started(tmp_path)
     run.tick(0, 0.0)
-    run.step(0.1, RouterLink(False))
-    run.step(0.2, RouterLink(True))
+    run.step(0.1, RouterReach(False))
+    run.step(0.2, RouterReach(True))
     now = 0.2 + T.relink_settle_s + 0.5  # (tokens that go while the sessions settle are kept)
     k = 1
     t = 0.3

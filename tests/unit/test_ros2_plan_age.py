@@ -28,7 +28,7 @@ from reconswarm.net.wire import wire
 from reconswarm.net.wire.keys import Keys
 from reconswarm.plant import unicycle
 from reconswarm.scenario.model import load
-from simworld.process import WorldPort, robot_io
+from simworld.process import WorldAdapter, robot_io
 from simworld.ros2_io import Ros2IO, Ros2Robots, planned_tick, ros2_world
 from simworld.world import Command
 from tests.support import PAPER, free_port, wait_subscribed, wait_until
@@ -162,7 +162,7 @@ def test_the_plant_publishes_each_robots_odometry_and_keeps_when_each_tick_was_o
 
 def test_the_world_admits_a_cmd_vel_before_it_dates_it_so_a_forgers_timestamp_is_an_impersonation() -> None:
     z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{free_port()}",), "peer").config())
-    port = WorldPort(ros2_world(S, speed=1.0), "plan-age", z, robot_io(0))
+    port = WorldAdapter(ros2_world(S, speed=1.0), "plan-age", z, robot_io(0))
     try:
         assert isinstance(port.io, Ros2IO)
         a = S.agents[0].id

@@ -11,7 +11,7 @@ from dataclasses import replace
 import pytest
 import zenoh
 
-from reconswarm.net.node import RouterLink
+from reconswarm.net.node import RouterReach
 from reconswarm.net.runtime.session import ZenohOptions
 from reconswarm.net.runtime.uplink import LinkChange, Uplink
 from reconswarm.net.trust.membership import Membership, Policy
@@ -158,11 +158,11 @@ def test_the_world_holds_while_its_own_link_is_gone_and_steps_nobody_uncommanded
         node.step(commands(k, (1.0, 0.0), now), now)
     node.step([], now)  # tick 3 published
     node.step([*commands(3, (1.0, 0.0), now, skip=tuple(IDS[2:])), *tokens(up=False)], now)
-    out = advance(node, now, now + 4 * T.step_timeout_s, every_s=0.1, inputs=[RouterLink(False)])  # 12 s
+    out = advance(node, now, now + 4 * T.step_timeout_s, every_s=0.1, inputs=[RouterReach(False)])  # 12 s
     now += 4 * T.step_timeout_s
     assert node.k == 3 and not ended(out) and node.strikes == {} and node.uncommanded_k == -1
     assert node.alive == set(IDS)
-    again = node.step([RouterLink(True), *tokens()], now)
+    again = node.step([RouterReach(True), *tokens()], now)
     assert [t.clock.k for t in ticks(again)] == [3]  # tick 3 again, for the agents whose state went nowhere
     node.step(commands(3, (1.0, 0.0), now, skip=tuple(IDS[:2])), now)  # (the first two were kept)
     assert node.k == 4 and node.uncommanded_k == -1
@@ -173,10 +173,10 @@ def test_a_realtime_world_resumes_its_schedule_after_the_link_and_ends_if_it_nev
     advance(node, 0.0, 1.0, every_s=0.01)
     k = node.k
     assert k > 0
-    advance(node, 1.0, 11.0, every_s=0.01, inputs=[RouterLink(False)])
+    advance(node, 1.0, 11.0, every_s=0.01, inputs=[RouterReach(False)])
     assert node.k == k  # held: no tick while nobody is reachable
-    advance(node, 11.0, 11.5, every_s=0.01, inputs=[RouterLink(True)])
+    advance(node, 11.0, 11.5, every_s=0.01, inputs=[RouterReach(True)])
     period = S.meta.dt_s / 10.0
     assert node.k - k <= round(0.5 / period) + 2  # the schedule moved on by the hold: no burst of ticks
-    end = advance(node, 11.5, 11.5 + T.no_agents_grace_s + 1.0, every_s=0.5, inputs=[RouterLink(False)])
+    end = advance(node, 11.5, 11.5 + T.no_agents_grace_s + 1.0, every_s=0.5, inputs=[RouterReach(False)])
     assert ended(end) == "no agents"

@@ -73,7 +73,7 @@ class Node:
         return self.need
 
 
-class Port:
+class Adapter:
     """Routes ("to", who, message) items to node `who`; records what it was asked to do."""
 
     def __init__(self, stop_on: Any = None) -> None:
@@ -106,7 +106,7 @@ class Port:
         return {}
 
 
-class AskingPort(Port):
+class AskingAdapter(Adapter):
     """Answers ("ask", x) outputs after the round, all at once: ("answer", x, how many were asked together)."""
 
     def __init__(self) -> None:
@@ -145,7 +145,7 @@ def test_each_node_gets_its_own_inputs_and_its_outputs_are_acted_in_order() -> N
     a, b = Node(), Node()
     inbox = Inbox([[("to", 1, ("echo", "x")), ("to", 2, ("echo", "y")), ("to", 1, ("echo", "z"))],
                    [("to", 1, ("exit", 0)), ("to", 2, ("exit", 4))]])
-    port = Port()
+    port = Adapter()
     exits = runtime(inbox).run({1: a, 2: b}, port, cohosting=port)
     assert a.steps[0] == [("echo", "x"), ("echo", "z")] and b.steps[0] == [("echo", "y")]
     assert port.acted == [(1, ("say", "x")), (1, ("say", "z")), (2, ("say", "y"))]
@@ -157,7 +157,7 @@ def test_a_node_with_nothing_new_and_no_timer_due_is_not_stepped() -> None:
     a, b = Node(), Node()
     inbox = Inbox([[("to", 1, ("echo", 1))], [("to", 1, ("echo", 2))],
                    [("to", 1, ("exit", 0)), ("to", 2, ("exit", 0))]])
-    runtime(inbox).run({1: a, 2: b}, Port())
+    runtime(inbox).run({1: a, 2: b}, Adapter())
     assert len(a.steps) == 3
     assert b.steps == [[], [("exit", 0)]]  # once at first (its poll), then only when it had input
 
@@ -165,7 +165,7 @@ def test_a_node_with_nothing_new_and_no_timer_due_is_not_stepped() -> None:
 def test_a_due_timer_steps_the_node_without_input() -> None:
     a = Node(wake=time.monotonic() - 1.0)  # overdue
     inbox = Inbox([[], [], [("to", 1, ("exit", 0))]])
-    runtime(inbox).run({1: a}, Port())
+    runtime(inbox).run({1: a}, Adapter())
     assert a.steps == [[], [], [("exit", 0)]]
     assert all(timeout == 0.0 for _want, timeout in inbox.asked)  # (an overdue timer: no waiting)
 
@@ -173,7 +173,7 @@ def test_a_due_timer_steps_the_node_without_input() -> None:
 def test_the_wait_is_for_the_fewest_messages_any_node_needs() -> None:
     a, b, c = Node(need=5), Node(need=2), Node(need=None)
     inbox = Inbox([[("to", w, ("exit", 0)) for w in (1, 2, 3)]])
-    runtime(inbox, poll_s=0.3).run({1: a, 2: b, 3: c}, Port())
+    runtime(inbox, poll_s=0.3).run({1: a, 2: b, 3: c}, Adapter())
     assert inbox.asked == [(2, 0.3)]
     assert inbox.urgent == [1]  # (node 3 needs an urgent sample of its own: its state)
 
@@ -181,12 +181,12 @@ def test_the_wait_is_for_the_fewest_messages_any_node_needs() -> None:
 def test_the_wait_is_for_the_urgent_samples_of_every_node_that_needs_one() -> None:
     nodes = {w: Node(need=None) for w in (1, 2, 3)} | {4: Node(need=2)}
     inbox = Inbox([[("to", w, ("exit", 0)) for w in (1, 2, 3, 4)]])
-    runtime(inbox, poll_s=0.3).run(nodes, Port())
+    runtime(inbox, poll_s=0.3).run(nodes, Adapter())
     assert inbox.asked == [(2, 0.3)] and inbox.urgent == [3]
 
 
 def test_what_the_port_holds_for_a_node_counts_toward_what_it_needs() -> None:
-    port = Port()
+    port = Adapter()
     port.local = {1: 2, 2: 1}  # (held for node 1: 2 of the 5 it needs; for node 2: 1 of its 4)
     inbox = Inbox([[("to", w, ("exit", 0)) for w in (1, 2)]])
     runtime(inbox, poll_s=0.3).run({1: Node(need=5), 2: Node(need=4)}, port, cohosting=port)
@@ -194,7 +194,7 @@ def test_what_the_port_holds_for_a_node_counts_toward_what_it_needs() -> None:
 
 
 def test_no_waiting_when_what_the_port_holds_is_all_a_node_needs() -> None:
-    port = Port()
+    port = Adapter()
     port.local = {2: 3}
     inbox = Inbox([[("to", w, ("exit", 0)) for w in (1, 2)]])
     runtime(inbox, poll_s=0.3).run({1: Node(need=5), 2: Node(need=3)}, port, cohosting=port)
@@ -202,7 +202,7 @@ def test_no_waiting_when_what_the_port_holds_is_all_a_node_needs() -> None:
 
 
 def test_what_the_port_holds_for_a_node_that_needs_its_own_state_first_is_no_reason_to_wake() -> None:
-    port = Port()
+    port = Adapter()
     port.local = {1: 4}
     inbox = Inbox([[("to", 1, ("exit", 0))]])
     runtime(inbox, poll_s=0.3).run({1: Node(need=None)}, port, cohosting=port)
@@ -217,7 +217,7 @@ def test_a_signal_reaches_every_node_once_as_stop() -> None:
         stop.stopped = n >= 2
 
     inbox = Inbox([[("to", 1, ("echo", 1))], []], on_take=signal_at)
-    port = Port()
+    port = Adapter()
     exits = runtime(inbox, stop).run({1: a, 2: b}, port, cohosting=port)
     assert [sum(isinstance(m, Stop) for m in s) for s in a.steps] == [0, 1]
     assert [sum(isinstance(m, Stop) for m in s) for s in b.steps] == [0, 1]
@@ -227,7 +227,7 @@ def test_a_signal_reaches_every_node_once_as_stop() -> None:
 def test_a_port_can_stop_the_whole_loop() -> None:
     a, b = Node(), Node()
     inbox = Inbox([[("to", 1, ("echo", "new session")), ("to", 2, ("echo", "later"))]])
-    port = Port(stop_on=("say", "new session"))
+    port = Adapter(stop_on=("say", "new session"))
     rt = runtime(inbox)
     exits = rt.run({1: a, 2: b}, port, cohosting=port)
     assert rt.interrupted and exits == {}
@@ -239,7 +239,7 @@ def test_what_nodes_ask_in_a_round_is_answered_together_before_the_next_take() -
     the answers before the inbox is read again; an answer that leads to another question is answered too."""
     a, b, c = AskingNode(), AskingNode(), AskingNode()
     takes: list[int] = []
-    port = AskingPort()
+    port = AskingAdapter()
     inbox = Inbox([[("to", 1, ("job", 5)), ("to", 2, ("job", -6))],
                    [("to", 1, ("exit", 0)), ("to", 2, ("exit", 0)), ("to", 3, ("exit", 0))]],
                   on_take=lambda n: takes.append(len(port.acted)))

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import zenoh
 
-from agent.link import AgentLink, decode_sample
+from agent.hosted import HostedAgent, decode_sample
 from agent.node import AgentNode
 from agent.robot_io import take_states
 from reconswarm.net.node import Invalid
@@ -72,7 +72,7 @@ def link() -> Any:
     port = free_port()
     z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{port}",), "peer").config())  # alone: nothing to connect to
     node = AgentNode(S1, A, 0.0)
-    lk = AgentLink(node, Keys("nan-test"), z, Rejections(f"agent-{A}"), Gate(S1, f"agent-{A}"))
+    lk = HostedAgent(node, Keys("nan-test"), z, Rejections(f"agent-{A}"), Gate(S1, f"agent-{A}"))
     try:
         yield lk
     finally:

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from reconswarm.errors import ProcessFailure
-from reconswarm.net.node import Exit, Invalid, Role, RouterLink, Stop, Token
+from reconswarm.net.node import Exit, Invalid, Role, RouterReach, Stop, Token
 from reconswarm.net.timing import Timing
 from reconswarm.net.wire import wire
 from reconswarm.net.wire.wire import ClockMode
@@ -333,10 +333,10 @@ def test_while_its_own_router_link_is_gone_the_world_holds_and_nobody_is_lost() 
     node = started()
     node.step([], 0.0)
     node.step(commands(0, (1.0, 0.0), 0.1, skip=tuple(IDS[2:])), 0.1)
-    out = advance(node, 0.1, 0.1 + 4 * T.step_timeout_s, inputs=[RouterLink(False), *tokens(up=False)])
+    out = advance(node, 0.1, 0.1 + 4 * T.step_timeout_s, inputs=[RouterReach(False), *tokens(up=False)])
     assert out == [] and node.k == 0 and node.phase == Phase.NO_AGENTS and node.alive == set(IDS)
     now = 0.1 + 4 * T.step_timeout_s
-    assert [t.clock.k for t in ticks(node.step([RouterLink(True), *tokens()], now))] == [0]
+    assert [t.clock.k for t in ticks(node.step([RouterReach(True), *tokens()], now))] == [0]
     node.step(commands(0, (1.0, 0.0), now + 0.1, skip=tuple(IDS[:2])), now + 0.1)  # (the first two were kept)
     assert node.k == 1 and node.uncommanded_k == -1 and node.strikes == {}
 
@@ -345,9 +345,9 @@ def test_a_realtime_world_moves_its_schedule_on_by_the_time_its_link_was_gone() 
     node = started(ClockMode.REALTIME, now=100.0)
     period = S.meta.dt_s / 10.0
     node.step([], 100.0)  # tick 0, due at 100 + period
-    assert node.step([RouterLink(False)], 100.001) == [] and node.phase == Phase.NO_AGENTS
+    assert node.step([RouterReach(False)], 100.001) == [] and node.phase == Phase.NO_AGENTS
     assert advance(node, 100.001, 101.901) == []  # (stepped as the runtime does: not a stall of its own)
-    assert [t.clock.k for t in ticks(node.step([RouterLink(True)], 102.001))] == [0]
+    assert [t.clock.k for t in ticks(node.step([RouterReach(True)], 102.001))] == [0]
     assert node.wake_at_s() == pytest.approx(102.0 + period)
 
 

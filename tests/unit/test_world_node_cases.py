@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import pytest
 
-from reconswarm.net.node import RouterLink, Stop
+from reconswarm.net.node import RouterReach, Stop
 from reconswarm.net.wire import wire
 from reconswarm.net.wire.wire import ClockMode
 from reconswarm.scenario.model import Scenario
@@ -256,8 +256,8 @@ def test_agents_back_after_a_hold_get_the_tick_as_an_ordinary_one() -> None:
 
 def test_a_router_link_lost_and_back_before_the_start_still_starts() -> None:
     node = WorldNode(S, ClockMode.LOCKSTEP, 10.0, T)
-    node.step([RouterLink(False)], 0.0)
-    node.step([RouterLink(True)], 0.5)
+    node.step([RouterReach(False)], 0.0)
+    node.step([RouterReach(True)], 0.5)
     node.step([*tokens(), MONITOR], 1.0)
     assert node.started and [t.clock.k for t in ticks(node.step([], 1.0))] == [0]
 
@@ -265,8 +265,8 @@ def test_a_router_link_lost_and_back_before_the_start_still_starts() -> None:
 def test_after_its_router_link_is_back_a_token_that_goes_is_judged_again() -> None:
     node = started()
     node.step([], 0.0)
-    node.step([RouterLink(False)], 0.1)
-    advance(node, 0.1, 0.2 + T.relink_settle_s, inputs=[RouterLink(True)])  # (the sessions settle meanwhile)
+    node.step([RouterReach(False)], 0.1)
+    advance(node, 0.1, 0.2 + T.relink_settle_s, inputs=[RouterReach(True)])  # (the sessions settle meanwhile)
     now = 0.2 + T.relink_settle_s
     advance(node, now, now + 1.0, every_s=0.1, inputs=tokens(IDS[:1], up=False))
     assert IDS[0] not in node.alive and set(IDS[1:]) <= node.alive

@@ -5,7 +5,7 @@ A client session (every process of a run but the routers) lists the routers it i
 list goes empty and every liveliness token learnt through it is deleted at once: that is this process's
 link going, not every agent dying. The client reconnects by itself when a router listens again on the
 endpoint (a restarted one has a new id), and the tokens come back. `Uplink.poll` tells the runtime
-(net/runtime/runtime.py: every node gets a `RouterLink`) when the link goes and comes back, so that each role's
+(net/runtime/runtime.py: every node gets a `RouterReach`) when the link goes and comes back, so that each role's
 membership (`Membership`) judges nobody meanwhile.
 """
 

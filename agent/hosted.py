@@ -1,6 +1,6 @@
 """One agent's identity on the wire, inside its process's session (agent/host.py holds the session).
 
-An `AgentLink` is what makes a hosted agent indistinguishable from a lone one: its own robot interface (its state
+An `HostedAgent` is what makes a hosted agent indistinguishable from a lone one: its own robot interface (its state
 in, its command out: agent/robot_io.py), its own publishers (obstacle set under its home cell, report `agent-<id>`;
 its beacons go out in its host's batches, agent/beacons.py), its own liveliness token, its own gate (admission state
 and intrusion tally) and rejection count around its AgentNode. It does not subscribe: the host's shared
@@ -21,7 +21,7 @@ from agent.messages import Output, Received
 from agent.neighbours import Cells
 from agent.node import AgentNode
 from agent.robot_io import Decoded, RobotFactory, keys_robot
-from reconswarm.net.node import Invalid, RouterLink, Stop, Token
+from reconswarm.net.node import Invalid, RouterReach, Stop, Token
 from reconswarm.net.runtime.inbox import Rejections
 from reconswarm.net.runtime.session import Member
 from reconswarm.net.trust.admission import Intrusion, IntrusionKind
@@ -35,14 +35,14 @@ from reconswarm.net.wire.keys import Keys, WireError
 from reconswarm.net.wire.report import report_to_wire
 
 log = logging.getLogger("reconswarm.agent")
-# (the kinds `AgentLink.take` sorts a sample by, as tuples: `isinstance` with `A | B` builds the union each call)
-PASSED = (Token, RouterLink, Stop)  # taken as they are
+# (the kinds `HostedAgent.take` sorts a sample by, as tuples: `isinstance` with `A | B` builds the union each call)
+PASSED = (Token, RouterReach, Stop)  # taken as they are
 OWN = (wire.State, wire.Scan)  # for one agent: the others drop it
 PEER_MESSAGES = (wire.Beacon, wire.ObstacleSet)  # a peer's: never in our own name from another session
 
 
 def decode_sample(keys: Keys, key: str, payload: bytes, kind: str) -> Decoded:
-    """A sample as a node input, for any agent (who may take it is `AgentLink.take`'s question); a malformed one
+    """A sample as a node input, for any agent (who may take it is `HostedAgent.take`'s question); a malformed one
     becomes Invalid."""
     try:
         return cast(Decoded, decode(keys, AGENT, key, payload, kind))  # (AGENT's kinds: what a node receives)
@@ -50,7 +50,7 @@ def decode_sample(keys: Keys, key: str, payload: bytes, kind: str) -> Decoded:
         return Invalid(key, str(exc))
 
 
-class AgentLink(Member):
+class HostedAgent(Member):
     """One agent's publishers, token, gate and counters in a session, around its node.
 
     own_source: the session's id when co-hosted agents share it (the host hands them each other's beacons and
