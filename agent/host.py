@@ -40,7 +40,7 @@ from zenoh import ext
 
 from agent.beacons import BeaconOut, handover_cell, handover_label, take_batch
 from agent.brain import Plan, commands
-from agent.hosted import OWN, PASSED, PEER_MESSAGES, HostedAgent, Decoded, decode_sample
+from agent.hosted import OWN, PASSED, PEER_MESSAGES, Decoded, HostedAgent, decode_sample
 from agent.messages import Input, Law, Reconnect
 from agent.neighbours import Cells
 from agent.robot_io import HostKeys, KeysRobot, take_states

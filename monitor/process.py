@@ -1,7 +1,7 @@
 """`reconswarm monitor record`: the monitor process, `monitor.node.MonitorNode` on the one runtime.
 
-`MonitorAdapter` is the role's declarations (reconswarm/net/runtime/runtime.Port): it subscribes to the truth, the clock,
-the reports and the liveliness tokens (not to the agents' beacons: their counters and heartbeat come in their
+`MonitorAdapter` is the role's declarations (reconswarm/net/runtime/runtime.Adapter): it subscribes to the truth,
+the clock, the reports and the liveliness tokens (not to the agents' beacons: their counters and heartbeat come in their
 reports, about twice a second, whatever N is), routes each sample through its codec and the gate's admission
 to the node (a malformed one is logged and handed over as `Invalid`, counted by the node), publishes on
 `swarm/<run>/event` every event the node recorded (the same objects, in order), and hands the node's rows to

@@ -185,8 +185,8 @@ def test_an_agent_that_fails_sends_its_final_report_at_once() -> None:
 def test_in_ros2_mode_an_agent_takes_its_scan_not_its_state_and_odometry_without_attachment_counts() -> None:
     with two_sessions() as (z, out):
         inbox = TaggedInbox()
-        link = HostedAgent(AgentNode(S, 1, 0.0), KEYS, z, Rejections("agent 1"), Gate(S, "agent-1"), ros2_robot(0), None,
-                         inbox.callback(("own", 1), urgent=True))
+        link = HostedAgent(AgentNode(S, 1, 0.0), KEYS, z, Rejections("agent 1"), Gate(S, "agent-1"), ros2_robot(0),
+                           None, inbox.callback(("own", 1), urgent=True))
         h = AgentHost(z, KEYS, {1: link}, inbox)
         ros2 = link.robot
         assert isinstance(ros2, AgentRos2)
@@ -268,8 +268,8 @@ def test_in_ros2_mode_agents_hosted_on_one_session_are_ros2_nodes_with_ids_of_th
     z = host_session()
     inbox = TaggedInbox()
     zid = str(z.info.zid())
-    links = {a: HostedAgent(AgentNode(S, a, 0.0), KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"), ros2_robot(0),
-                          zid, inbox.callback(("own", a), urgent=True)) for a in (1, 2)}
+    links = {a: HostedAgent(AgentNode(S, a, 0.0), KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"),
+                            ros2_robot(0), zid, inbox.callback(("own", a), urgent=True)) for a in (1, 2)}
     h = AgentHost(z, KEYS, links, inbox)
     try:
         tokens = [graph.parse_token(str(r.ok.key_expr)) for r in z.liveliness().get("@ros2_lv/0/**", timeout=2.0)
