@@ -36,15 +36,15 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from reconswarm.net.wire.keys import Keys
+from reconswarm.scenario.wire_limits import ids_runs_text
 from reconswarm_bringup.deployment import Deployment, Host
-from reconswarm_bringup.packing import ids_spec
 
 FLOWS = ("ingress", "egress")
 
 
 def process_name(agents: tuple[int, ...]) -> str:
     """An agent process's certificate name (its ACL subject): `agent-3`, or `agents-1-5` for an agent host."""
-    return f"agent-{agents[0]}" if len(agents) == 1 else f"agents-{ids_spec(agents)}"
+    return f"agent-{agents[0]}" if len(agents) == 1 else f"agents-{ids_runs_text(agents)}"
 
 
 def processes(dep: Deployment, host: Host) -> list[str]:

@@ -20,6 +20,7 @@ from typing import Any
 
 from reconswarm.errors import BadInput
 from reconswarm.scenario.model import Scenario
+from reconswarm.scenario.wire_limits import ids_runs_text
 from reconswarm_bringup.fleet import allowed_cpus
 
 log = logging.getLogger("reconswarm.launch")
@@ -67,23 +68,9 @@ def hosts(ids: Sequence[int], k: int, reach: Callable[[int], object]) -> list[tu
     return out
 
 
-def ids_spec(ids: Sequence[int]) -> str:
-    """`1-5,9`: the ids as `--ids` takes them (runs of consecutive ids as ranges)."""
-    parts: list[str] = []
-    start = prev = ids[0]
-    for a in [*ids[1:], None]:
-        if a is not None and a == prev + 1:
-            prev = a
-            continue
-        parts.append(str(start) if start == prev else f"{start}-{prev}")
-        if a is not None:
-            start = prev = a
-    return ",".join(parts)
-
-
 def agent_args(ids: Sequence[int]) -> list[str]:
     """The agent command's arguments naming its agents: `--id I` alone (as always), `--ids SPEC` for a host."""
-    return ["--id", str(ids[0])] if len(ids) == 1 else ["--ids", ids_spec(ids)]
+    return ["--id", str(ids[0])] if len(ids) == 1 else ["--ids", ids_runs_text(ids)]
 
 
 def start_agents(fleet: Any, s: Scenario, k: int | str, zopt: Callable[[str, str], tuple[list[str], list[str]]],
@@ -103,5 +90,5 @@ def start_agents(fleet: Any, s: Scenario, k: int | str, zopt: Callable[[str, str
                  ", ".join(map(str, fleet.cpus[:len(packed)])))
     for group in packed:
         prefix, zargs = zopt("agent", str(group[0]))
-        fleet.start("agent", ids_spec(group), ["agent", *agent_args(group), *args, *zargs], prefix,
+        fleet.start("agent", ids_runs_text(group), ["agent", *agent_args(group), *args, *zargs], prefix,
                     members=tuple(map(str, group)) if len(group) > 1 else ())

@@ -33,9 +33,9 @@ from reconswarm.errors import BadInput
 from reconswarm.net.runtime.session import ZenohOptions
 from reconswarm.net.timing import TIMING
 from reconswarm.scenario.model import Scenario
+from reconswarm.scenario.wire_limits import ids_runs_text
 from reconswarm_bringup import acl, creddir
 from reconswarm_bringup.deployment import Deployment, Host, tls_endpoint
-from reconswarm_bringup.packing import ids_spec
 
 ROLES = ("monitor", "simworld", "agent")
 VALID_DAYS = 30
@@ -94,7 +94,7 @@ class Secrets:
     def config_for(self, role: str, ident: str = "-") -> Path:
         """The client configuration of a role: `monitor`, `simworld` or `agent` (ident = the agent id, or an agent
         host's ids, e.g. `1-5`)."""
-        if role == "agent" and ident in {ids_spec(h) for h in self.hosts}:
+        if role == "agent" and ident in {ids_runs_text(h) for h in self.hosts}:
             return self._dir_of(f"agents-{ident}") / f"agents-{ident}.json5"
         if role == "agent":
             try:

@@ -13,6 +13,7 @@ from typing import Any
 from reconswarm.errors import BadInput
 from reconswarm.net.runtime.session import ZenohOptions
 from reconswarm.scenario.model import Scenario
+from reconswarm.scenario.wire_limits import ids_runs_text
 from reconswarm_bringup import netns, packing, secure
 from reconswarm_bringup.config import LaunchConfig
 from reconswarm_bringup.deployment import Deployment, Host, tls_endpoint
@@ -73,7 +74,7 @@ def plan(cfg: LaunchConfig, s: Scenario, run: str, endpoint: str, port_free: Cal
     }
     for h in dep.hosts:
         for g in h.agent_processes:  # an agent host is reached by its first agent's id, as it starts
-            ident = str(g[0]) if len(g) == 1 else packing.ids_spec(g)
+            ident = str(g[0]) if len(g) == 1 else ids_runs_text(g)
             for a in g:  # (every member: the launcher packs agents by where they run)
                 reach[("agent", str(a))] = (prefix[h.name], zargs(sec.config_for("agent", ident)))
     routers = [(h.name if hosts is not None else "-", ["router", "--zenoh-config", str(sec.router_config_for(h.name))],

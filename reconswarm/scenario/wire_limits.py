@@ -13,6 +13,7 @@ key than agent 3's, which would speak for it), `-0`, and more digits than the ra
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 
 MAX_PAYLOAD_BYTES = 1 << 20  # 1 MiB: larger payloads are rejected before decoding
 MAX_POINTS = 50_000  # contour points in a scan
@@ -48,10 +49,14 @@ def agent_id_from_text(text: str) -> int | None:
 def ids_to_text(ids: tuple[int, ...] | list[int]) -> str:
     """A set of agent ids in its one canonical text, `1-5,9`: ascending runs of consecutive ids as ranges (what a
     host's liveliness token names, `alive/host/<hid>/<members>`)."""
+    return ids_runs_text(sorted(set(ids)))
+
+
+def ids_runs_text(ids: Sequence[int]) -> str:
+    """The ids in the order given, runs of consecutive ids as ranges: `1-3,5,9,7-8` (what `--ids` takes)."""
     parts: list[str] = []
-    order = sorted(set(ids))
-    start = prev = order[0]
-    for a in [*order[1:], None]:
+    start = prev = ids[0]
+    for a in [*ids[1:], None]:
         if a is not None and a == prev + 1:
             prev = a
             continue

@@ -16,7 +16,7 @@ from reconswarm.net.trust.admission import Admission, IntrusionKind
 from reconswarm.net.wire import wire
 from reconswarm.net.wire.keys import Keys
 from reconswarm.scenario.model import load
-from reconswarm.scenario.wire_limits import MAX_AGENT_ID, MAX_IDS
+from reconswarm.scenario.wire_limits import MAX_AGENT_ID, MAX_IDS, ids_runs_text
 from reconswarm_bringup import packing, secure
 from tests.support import PAPER
 
@@ -62,10 +62,10 @@ def test_no_agent_at_all_is_refused() -> None:
         parse_ids(None, None)
 
 
-def test_ids_spec_round_trips() -> None:
+def test_ids_runs_text_round_trips() -> None:
     for ids in [(1,), (1, 2, 3, 5, 7, 8), (9, 3, 4), tuple(range(1, 101))]:
-        assert parse_ids(None, packing.ids_spec(ids)) == ids
-    assert packing.ids_spec((1, 2, 3, 5, 7, 8)) == "1-3,5,7-8"
+        assert parse_ids(None, ids_runs_text(ids)) == ids
+    assert ids_runs_text((1, 2, 3, 5, 7, 8)) == "1-3,5,7-8"
     assert packing.agent_args((4,)) == ["--id", "4"] and packing.agent_args((4, 5)) == ["--ids", "4-5"]
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
+from typing import Any
 
 import msgpack
 
@@ -45,26 +46,7 @@ def batch_to_wire(host: int, beacons: list[wire.Beacon] | tuple[wire.Beacon, ...
 
 def batch_from_wire(payload: bytes, key_host: int | None = None) -> BeaconBatch:
     """The batch a payload carries; raises WireError for anything a batch may not be."""
-    if len(payload) > MAX_PAYLOAD_BYTES:
-        raise WireError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD_BYTES}")
-    try:
-        o = msgpack.unpackb(payload, raw=False, strict_map_key=True, max_array_len=0, max_map_len=8,
-                            max_str_len=16, max_bin_len=ROW.size * MAX_IDS, max_ext_len=0)
-    except Exception as exc:  # msgpack raises several unrelated exception types
-        raise WireError(f"undecodable payload: {type(exc).__name__}") from None
-    if not isinstance(o, dict):
-        raise WireError("payload is not a map")
-    if o.get("v") != wire.VERSION:
-        raise WireError(f"schema version {o.get('v')!r}, expected {wire.VERSION}")
-    host, n, raw = o.get("host"), o.get("n"), o.get("rows")
-    if type(host) is not int or not 0 <= host <= MAX_AGENT_ID:
-        raise WireError("field 'host': expected an agent id")
-    if key_host is not None and host != key_host:
-        raise WireError(f"field 'host': {host} under the key of host {key_host}")
-    if type(n) is not int or not 0 < n <= MAX_IDS:
-        raise WireError(f"field 'n': expected 1..{MAX_IDS} rows")
-    if type(raw) is not bytes or len(raw) != n * ROW.size:
-        raise WireError(f"field 'rows': expected {n} packed rows of {ROW.size} bytes")
+    _o, host, _n, raw = unpack_batch(payload, key_host, ROW)
     out: list[wire.Beacon] = []
     seen: set[int] = set()
     for aid, k, t, px, py, radius, rev in ROW.iter_unpack(raw):
@@ -81,3 +63,30 @@ def batch_from_wire(payload: bytes, key_host: int | None = None) -> BeaconBatch:
         seen.add(aid)
         out.append(wire.Beacon(aid, k, t, px, py, radius, rev))
     return BeaconBatch(host, tuple(out))
+
+
+def unpack_batch(payload: bytes, key_host: int | None, row: struct.Struct, max_array_len: int = 0,
+                 max_str_len: int = 16) -> tuple[dict[str, Any], int, int, bytes]:
+    """A host's batch (beacons, states, commands): its map, host, n and packed rows of `row`, checked as every batch
+    is (size, version, the host its key names, 1..MAX_IDS rows); raises WireError."""
+    if len(payload) > MAX_PAYLOAD_BYTES:
+        raise WireError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD_BYTES}")
+    try:
+        o = msgpack.unpackb(payload, raw=False, strict_map_key=True, max_array_len=max_array_len, max_map_len=8,
+                            max_str_len=max_str_len, max_bin_len=row.size * MAX_IDS, max_ext_len=0)
+    except Exception as exc:  # msgpack raises several unrelated exception types
+        raise WireError(f"undecodable payload: {type(exc).__name__}") from None
+    if not isinstance(o, dict):
+        raise WireError("payload is not a map")
+    if o.get("v") != wire.VERSION:
+        raise WireError(f"schema version {o.get('v')!r}, expected {wire.VERSION}")
+    host, n, raw = o.get("host"), o.get("n"), o.get("rows")
+    if type(host) is not int or not 0 <= host <= MAX_AGENT_ID:
+        raise WireError("field 'host': expected an agent id")
+    if key_host is not None and host != key_host:
+        raise WireError(f"field 'host': {host} under the key of host {key_host}")
+    if type(n) is not int or not 0 < n <= MAX_IDS:
+        raise WireError(f"field 'n': expected 1..{MAX_IDS} rows")
+    if type(raw) is not bytes or len(raw) != n * row.size:
+        raise WireError(f"field 'rows': expected {n} packed rows of {row.size} bytes")
+    return o, host, n, raw

@@ -30,8 +30,9 @@ from typing import Any
 import msgpack
 
 from reconswarm.net.wire import wire
+from reconswarm.net.wire.batch import unpack_batch
 from reconswarm.net.wire.keys import WireError
-from reconswarm.scenario.wire_limits import MAX_AGENT_ID, MAX_ARRAY_LEN, MAX_IDS, MAX_PAYLOAD_BYTES, MAX_STR_BYTES
+from reconswarm.scenario.wire_limits import MAX_AGENT_ID, MAX_ARRAY_LEN, MAX_STR_BYTES
 
 STATE_ROW = struct.Struct("<Iddddd")  # id, x, y, theta, px, py
 CMD_ROW = struct.Struct("<Iqdd")  # id, k, v_mps, omega_radps
@@ -95,31 +96,6 @@ def cmds_to_wire(host: int, cmds: list[wire.Cmd]) -> bytes:
 # ------------------------------------------------------------------------------------------- decode
 
 
-def _unpack(payload: bytes, key_host: int | None, row: struct.Struct) -> tuple[dict[str, Any], int, int, bytes]:
-    """The map, its host, n and packed rows, checked as every batch is."""
-    if len(payload) > MAX_PAYLOAD_BYTES:
-        raise WireError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD_BYTES}")
-    try:
-        o = msgpack.unpackb(payload, raw=False, strict_map_key=True, max_array_len=MAX_ARRAY_LEN, max_map_len=8,
-                            max_str_len=MAX_STR_BYTES, max_bin_len=row.size * MAX_IDS, max_ext_len=0)
-    except Exception as exc:  # msgpack raises several unrelated exception types
-        raise WireError(f"undecodable payload: {type(exc).__name__}") from None
-    if not isinstance(o, dict):
-        raise WireError("payload is not a map")
-    if o.get("v") != wire.VERSION:
-        raise WireError(f"schema version {o.get('v')!r}, expected {wire.VERSION}")
-    host, n, raw = o.get("host"), o.get("n"), o.get("rows")
-    if type(host) is not int or not 0 <= host <= MAX_AGENT_ID:
-        raise WireError("field 'host': expected an agent id")
-    if key_host is not None and host != key_host:
-        raise WireError(f"field 'host': {host} under the key of host {key_host}")
-    if type(n) is not int or not 0 < n <= MAX_IDS:
-        raise WireError(f"field 'n': expected 1..{MAX_IDS} rows")
-    if type(raw) is not bytes or len(raw) != n * row.size:
-        raise WireError(f"field 'rows': expected {n} packed rows of {row.size} bytes")
-    return o, host, n, raw
-
-
 def _check_id(aid: int, host: int, seen: set[Any], once: Any) -> None:
     """aid in range for its host, and `once` (a state's id, a command's id and tick) not seen before in the batch."""
     if once in seen:
@@ -131,7 +107,7 @@ def _check_id(aid: int, host: int, seen: set[Any], once: Any) -> None:
 
 def state_batch_from_wire(payload: bytes, key_host: int | None = None) -> StateBatch:
     """The states a payload carries; raises WireError for anything a state batch may not be."""
-    o, host, n, raw = _unpack(payload, key_host, STATE_ROW)
+    o, host, n, raw = unpack_batch(payload, key_host, STATE_ROW, MAX_ARRAY_LEN, MAX_STR_BYTES)
     k, t = o.get("k"), o.get("t")
     if type(k) is not int or not 0 <= k <= MAX_TICK:
         raise WireError("field 'k': expected a tick")
@@ -160,7 +136,7 @@ def state_batch_from_wire(payload: bytes, key_host: int | None = None) -> StateB
 
 def cmd_batch_from_wire(payload: bytes, key_host: int | None = None) -> CmdBatch:
     """The commands a payload carries; raises WireError for anything a command batch may not be."""
-    _o, host, _n, raw = _unpack(payload, key_host, CMD_ROW)
+    _o, host, _n, raw = unpack_batch(payload, key_host, CMD_ROW, MAX_ARRAY_LEN, MAX_STR_BYTES)
     out: list[wire.Cmd] = []
     seen: set[Any] = set()
     for aid, k, v, w in CMD_ROW.iter_unpack(raw):
