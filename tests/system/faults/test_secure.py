@@ -25,6 +25,7 @@ from zenoh import ext
 
 from reconswarm.net.wire import wire
 from reconswarm.net.wire.batch import batch_to_wire
+from reconswarm.net.wire.hostwire import cmds_to_wire
 from reconswarm.scenario.model import load
 from reconswarm_bringup import secure
 from tests.support import (
@@ -122,8 +123,8 @@ def test_create_writes_private_credentials_and_configs(tmp_path: Path) -> None:
     (pol3,) = [p for p in acl["policies"] if p["subjects"] == ["agent-3"]]
     sent = {k for rid in pol3["rules"] for k in rules[rid]["key_exprs"]
             if "ingress" in rules[rid]["flows"] and set(rules[rid]["messages"]) & {"put", "reply", "liveliness_token"}}
-    assert sent == {f"{run}/agent/3/cmd", f"{run}/cell/*/host/3/beacons", f"{run}/cell/*/agent/3/obstacles",
-                    f"{run}/report/agent-3", f"{run}/alive/agent/3"}
+    assert sent == {f"{run}/host/3/cmd", f"{run}/cell/*/host/3/beacons", f"{run}/cell/*/agent/3/obstacles",
+                    f"{run}/report/agent-3", f"{run}/alive/agent/3", f"{run}/alive/host/3/3"}
     assert "intruder" not in {c for sub in acl["subjects"] for c in sub["cert_common_names"]}
     with pytest.raises(Exception, match="no credentials for agent 42"):
         sec.config_for("agent", "42")
@@ -259,9 +260,9 @@ def test_agent_credentials_cannot_impersonate_another_agent(live: Live) -> None:
         a2.declare_subscriber(f"{run}/cell/*/host/*/beacons", beacons)  # (the monitor no longer hears beacons)
         mon.declare_subscriber(f"{run}/clock", clock)
         mon.liveliness().declare_subscriber(f"{run}/alive/**", alive, history=True)
-        sim.declare_subscriber(f"{run}/agent/*/cmd", cmds)
-        a3.declare_subscriber(f"{run}/agent/5/state", reads)  # not agent 3's to read
-        a3.declare_subscriber(f"{run}/agent/3/state", reads)  # its own: allowed
+        sim.declare_subscriber(f"{run}/host/*/cmd", cmds)
+        a3.declare_subscriber(f"{run}/host/5/state", reads)  # not agent 3's to read
+        a3.declare_subscriber(f"{run}/host/3/state", reads)  # its own (a lone agent is a host of one): allowed
         # Agent 3's credentials, agent 5's keys: beacons (its host's batch key), command, obstacle set (an advanced
         # publisher whose cache answers late joiners), liveliness token; and a token for an agent that does not exist.
         one = ext.CacheConfig(max_samples=1)
@@ -270,11 +271,11 @@ def test_agent_credentials_cannot_impersonate_another_agent(live: Live) -> None:
         tokens = [a3.liveliness().declare_token(f"{run}/alive/agent/5"),
                   a3.liveliness().declare_token(f"{run}/alive/agent/11")]
         # The declarations are in place once the run is heard and probes on agent 3's own keys come through.
-        wait_until(lambda: len(clock) and f"{run}/agent/3/state" in reads.key_set(), 30,
+        wait_until(lambda: len(clock) and f"{run}/host/3/state" in reads.key_set(), 30,
                    "the clock and agent 3's state heard")
         probes = {f"{run}/cell/0_0/host/3/beacons": (batch_to_wire(3, [wire.Beacon(3, 0, 0.0, -78.0, 0.0, 2.6)]),
                                                      beacons),
-                  f"{run}/agent/3/cmd": (wire.cmd_to_wire(wire.Cmd(3, 1, 0.0, 0.0)), cmds)}  # (not the controls)
+                  f"{run}/host/3/cmd": (cmds_to_wire(3, [wire.Cmd(3, 1, 0.0, 0.0)]), cmds)}  # (not the controls)
         for key, (probe, catch) in probes.items():
             def heard(key: str = key, probe: bytes = probe, catch: Catch = catch) -> bool:
                 a3.put(key, probe)
@@ -293,13 +294,13 @@ def test_agent_credentials_cannot_impersonate_another_agent(live: Live) -> None:
 
         for n in range(20):  # valid-looking messages for the ticks to come
             send(f"{run}/cell/0_0/host/5/beacons", batch_to_wire(5, [wire.Beacon(5, k + n, 0.0, 123.0, 45.0, 2.6)]))
-            send(f"{run}/agent/5/cmd", wire.cmd_to_wire(wire.Cmd(5, k + n, 100.0, 0.0)))
+            send(f"{run}/host/5/cmd", cmds_to_wire(5, [wire.Cmd(5, k + n, 100.0, 0.0)]))
             hull: dict[str, tuple[tuple[float, float], ...]] = {"fake": ((0.0, 0.0), (10.0, 0.0), (0.0, 10.0))}
             fake = wire.obstacles_to_wire(wire.ObstacleSet(5, k + n, 99, hull))
             send(f"{run}/cell/0_0/agent/5/obstacles", fake, fake_set)
             # the control: the same session on agent 3's own keys
             send(f"{run}/cell/0_0/host/3/beacons", batch_to_wire(3, [wire.Beacon(3, 0, 0.0, -77.0, 0.0, 2.6)]))
-            send(f"{run}/agent/3/cmd", wire.cmd_to_wire(wire.Cmd(3, 0, 0.0, 0.0)))
+            send(f"{run}/host/3/cmd", cmds_to_wire(3, [wire.Cmd(3, 0, 0.0, 0.0)]))
             time.sleep(0.1)
         own_payload = wire.obstacles_to_wire(wire.ObstacleSet(3, 0, 99, {"own": ((5.0, 5.0), (6.0, 5.0), (5.0, 6.0))}))
         send(f"{run}/cell/0_0/agent/3/obstacles", own_payload, own_set)
@@ -319,15 +320,15 @@ def test_agent_credentials_cannot_impersonate_another_agent(live: Live) -> None:
     arrived = {key: sum(1 for x in seen[key.rsplit("/", 1)[1]].payloads(key) if x in payloads)
                for key, payloads in sent.items()}
     print("messages from agent 3's credentials that arrived, per key:", arrived)
-    for key in (f"{run}/cell/0_0/host/5/beacons", f"{run}/agent/5/cmd", f"{run}/cell/0_0/agent/5/obstacles"):
+    for key in (f"{run}/cell/0_0/host/5/beacons", f"{run}/host/5/cmd", f"{run}/cell/0_0/agent/5/obstacles"):
         assert arrived[key] == 0, f"a message from agent 3's credentials arrived on {key}"
     assert f"{run}/alive/agent/11" not in alive.key_set()
     assert [kind for key, _, kind in alive.items if key == f"{run}/alive/agent/5"] == ["SampleKind.PUT"]
-    assert f"{run}/agent/5/state" not in reads.key_set()
+    assert f"{run}/host/5/state" not in reads.key_set()
     # The same credentials do work on agent 3's own keys: nothing above passes because all is blocked.
-    assert arrived[f"{run}/cell/0_0/host/3/beacons"] > 0 and arrived[f"{run}/agent/3/cmd"] > 0
+    assert arrived[f"{run}/cell/0_0/host/3/beacons"] > 0 and arrived[f"{run}/host/3/cmd"] > 0
     assert arrived[f"{run}/cell/0_0/agent/3/obstacles"] >= 1  # through the publisher's cache, to a late joiner
-    assert f"{run}/agent/3/state" in reads.key_set()
+    assert f"{run}/host/3/state" in reads.key_set()
     assert len(clock) > 10
 
 
