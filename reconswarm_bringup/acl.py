@@ -82,7 +82,7 @@ class _Rules:
     def publish(self, rid: str, keys: list[str], subscribed_as: list[str] | None = None) -> list[str]:
         """Put on keys (ingress), and learn of the subscribers there (egress): a client sends a sample only when
         the router has declared a matching subscriber to it. Declarations keep the subscriber's own key expression
-        (`R/agent/*/cmd`), hence subscribed_as."""
+        (`R/host/*/cmd`), hence subscribed_as."""
         return [self.rule(f"{rid}-put", ["put"], ("ingress",), keys),
                 self.rule(f"{rid}-matching", ["declare_subscriber"], ("egress",), [*keys, *(subscribed_as or [])])]
 
