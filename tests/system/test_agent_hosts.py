@@ -34,6 +34,7 @@ from tests.support import (
     reconswarm,
     run_launcher,
     scenario_with,
+    short_paper,
     trajectories,
     wait_until,
 )
@@ -182,8 +183,9 @@ def test_an_outside_client_sees_each_hosted_agent_as_its_own(tmp_path: Path, out
     assert len({pids[a] for a in IDS[:5]}) == 1 and pids[1] != pids[6]
 
 
-def test_killing_a_hosted_agent_kills_its_host_and_the_survivors_avoid_them_all(out: Path) -> None:
-    p = run_launcher(out, "--agents-per-process", "5", "--fault", "kill:agent:3@60", "--json")
+def test_killing_a_hosted_agent_kills_its_host_and_the_survivors_avoid_them_all(tmp_path: Path, out: Path) -> None:
+    p = run_launcher(out, "-s", str(short_paper(tmp_path)), "--agents-per-process", "5", "--fault", "kill:agent:3@60",
+                     "--json")
     assert p.returncode == 0, p.stderr[-3000:]
     s = json.loads(p.stdout)
     assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == [1, 2, 3, 4, 5], s
@@ -193,12 +195,13 @@ def test_killing_a_hosted_agent_kills_its_host_and_the_survivors_avoid_them_all(
 
 
 @pytest.mark.realtime  # (ROS 2 mode runs on the realtime clock, at 3x)
-def test_ros2_mode_runs_agent_hosts_and_the_robots_of_a_killed_host_are_avoided(out: Path) -> None:
+def test_ros2_mode_runs_agent_hosts_and_the_robots_of_a_killed_host_are_avoided(tmp_path: Path, out: Path) -> None:
     """`--ros2` with hosts of 5: each hosted agent its own ROS 2 node (agent_i) on its host's session, odometry in
     and cmd_vel out; agent 3 killed at t = 60 s takes its host, and with it robots 1-5, which the survivors go round
-    (the robots' motion interface is ROS 2's: the plant holds, then stops each robot whose cmd_vel went quiet)."""
-    p = run_launcher(out, "--ros2", "--speed", "3", "--agents-per-process", "5", "--fault", "kill:agent:3@60",
-                     "--json", timeout=900)
+    (the robots' motion interface is ROS 2's: the plant holds, then stops each robot whose cmd_vel went quiet).
+    The paper's first leg (tests.support.short_paper)."""
+    p = run_launcher(out, "-s", str(short_paper(tmp_path)), "--ros2", "--speed", "3", "--agents-per-process", "5",
+                     "--fault", "kill:agent:3@60", "--json", timeout=900)
     assert p.returncode == 0, p.stderr[-3000:]
     s = json.loads(p.stdout)
     assert s["mode"] == "realtime" and s["converged"] and s["collisions"] == 0 and s["safety_violations"] == 0, s
@@ -233,8 +236,9 @@ def test_bad_packing_or_zenoh_mode_is_one_line_exit_2(out: Path, args: list[str]
     assert line in last, last
 
 
-def test_restarting_a_hosted_agent_restarts_its_host_and_all_its_agents_rejoin(out: Path) -> None:
-    p = run_launcher(out, "--agents-per-process", "5", "--fault", "restart:agent:4@70+1", "--json")
+def test_restarting_a_hosted_agent_restarts_its_host_and_all_its_agents_rejoin(tmp_path: Path, out: Path) -> None:
+    p = run_launcher(out, "-s", str(short_paper(tmp_path)), "--agents-per-process", "5", "--fault",
+                     "restart:agent:4@70+1", "--json")
     assert p.returncode == 0, p.stderr[-3000:]
     s = json.loads(p.stdout)
     assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == [], s

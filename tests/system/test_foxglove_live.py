@@ -24,7 +24,7 @@ import websockets
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from websockets.typing import Subprotocol
 
-from tests.support import PAPER, ROOT, free_port, launcher_cmd, summary
+from tests.support import PAPER, ROOT, free_port, launcher_cmd, short_paper, summary
 
 SUBPROTOCOL = "foxglove.sdk.v1"
 MESSAGE_DATA = 1
@@ -112,7 +112,8 @@ async def watch(port: int, seconds: float, connect_timeout_s: float = 60.0, unti
 @pytest.mark.realtime  # (the scene streams at 1-21 messages per wall second)
 def test_live_view_serves_the_paper_mission(tmp_path: Path, out: Path) -> None:
     port = free_port()
-    cmd = launcher_cmd(out, "-s", str(PAPER), "--foxglove", str(port), "--json")
+    # The paper's first leg (tests.support.short_paper): the scene's channels and pace, not the paper's figures.
+    cmd = launcher_cmd(out, "-s", str(short_paper(tmp_path)), "--foxglove", str(port), "--json")
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         w = asyncio.run(watch(port, seconds=20.0))

@@ -27,7 +27,7 @@ import pytest
 import zenoh
 from rosbags.typesys import Stores, get_typestore
 
-from tests.support import PAPER, ROOT, attempt, free_port, launcher_cmd, paper_with, summary, trajectories, wait_until
+from tests.support import PAPER, ROOT, attempt, free_port, launcher_cmd, short_paper, summary, trajectories, wait_until
 from tests.unit.test_ros2 import PUBLISHED_ODOMETRY_HASH, PUBLISHED_TWIST_HASH
 
 pytestmark = pytest.mark.realtime  # (holds only if the machine keeps the clock's pace: run alone, last)
@@ -62,7 +62,8 @@ def test_ros2_paper_mission_seen_from_outside(tmp_path: Path, out: Path) -> None
     # the survivors were caught between it and the diamond, 590 m from their slots, or collided).
     # Twice real time, and more simulated time than the paper's 300 s: a loaded machine misses deadlines (a third of
     # them at load average 10 on 2 CPUs: converged at 270.35 s), which slows the swarm, not what is checked here.
-    scen = paper_with(tmp_path, **{"duration_s = 300.0": "duration_s = 450.0"})
+    # The paper's first leg (tests.support.short_paper: the diamond is where the harm is).
+    scen = short_paper(tmp_path, **{"duration_s = 300.0": "duration_s = 450.0"})
     cmd = launcher_cmd(out, "-s", str(scen), "--ros2", "--ros-domain-id", str(DOMAIN), "--speed", str(SPEED),
                        "--fault", "kill:agent:3@40", "--json", port=port)
     wall0 = time.time()

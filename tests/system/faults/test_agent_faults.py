@@ -7,15 +7,16 @@ from pathlib import Path
 
 import pytest
 
-from tests.support import assert_all_gone, events, faults_log, positions, restart_and_rejoin, run_launcher
+from tests.support import assert_all_gone, events, faults_log, positions, restart_and_rejoin, run_launcher, short_paper
 from tests.system.faults.test_router_loss import three_agents
 
 
 @pytest.mark.realtime  # (the monitor notices the death within 1 s of wall time)
-def test_agent_killed(out: Path) -> None:
-    """Killed at t = 40 s, robot 3 stops by the diamond's lower vertex, in the swarm's path: agents 6, 7 and 10
-    stood still in the pocket between it and the diamond, 590 m from their slots (reconswarm/paper/blocked.py)."""
-    p = run_launcher(out, "--fault", "kill:agent:3@40", "--json")
+def test_agent_killed(tmp_path: Path, out: Path) -> None:
+    """Killed at t = 40 s, robot 3 stops by the diamond's lower vertex, in the swarm's path: the others go round
+    it (reconswarm/paper/blocked.py). The paper's first leg (tests.support.short_paper): the harm is by the
+    diamond."""
+    p = run_launcher(out, "-s", str(short_paper(tmp_path)), "--fault", "kill:agent:3@40", "--json")
     assert p.returncode == 0, p.stderr[-3000:]
     s = json.loads(p.stdout)
     assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == [3]  # converged: the survivors
@@ -46,13 +47,14 @@ def test_agent_frozen_then_rejoins(tmp_path: Path, out: Path) -> None:
 
 @pytest.fixture(scope="module")
 def restarted(tmp_path_factory: pytest.TempPathFactory) -> dict[int, list[str]]:
-    """One paper mission, two agents restarted: 8 killed at t = 60 s (the diamond is known by then) and started
-    again half a second later, 4 at t = 70 s and a second later. Each agent's "joining at tick" log lines."""
-    out = tmp_path_factory.mktemp("restarted") / "run"
+    """One mission (the paper's first leg, tests.support.short_paper), two agents restarted: 8 killed at t = 60 s
+    (the diamond is known by then) and started again half a second later, 4 at t = 70 s and a second later. Each
+    agent's "joining at tick" log lines."""
+    tmp = tmp_path_factory.mktemp("restarted")
     try:
-        return restart_and_rejoin(out, {8: (60, 0.5), 4: (70, 1)})
+        return restart_and_rejoin(tmp / "run", {8: (60, 0.5), 4: (70, 1)}, "-s", str(short_paper(tmp)))
     finally:
-        assert_all_gone(out)
+        assert_all_gone(tmp / "run")
 
 
 def test_agent_restarted_rejoins_with_shared_obstacles(restarted: dict[int, list[str]]) -> None:
@@ -66,12 +68,13 @@ def test_late_agent_catches_up_on_obstacles(restarted: dict[int, list[str]]) -> 
     assert "'diamond'" in joined[-1]  # learned from its peers' cached sets, before sensing anything itself
 
 
-def test_dead_robot_is_still_avoided_after_a_world_stall(out: Path) -> None:
+def test_dead_robot_is_still_avoided_after_a_world_stall(tmp_path: Path, out: Path) -> None:
     """Issue 11, collisions with no attacker 1: agent 3 killed, then the world stalled for 18 s, so the agents
     go without commanding for longer than the session safety net while the world's token is gone (15 s) and
     open new sessions. Robot 3 still stands where it stopped: everyone must still avoid it (before: agent 10
-    hit it at t = 81.55 s)."""
-    p = run_launcher(out, "--fault", "kill:agent:3@60", "--fault", "freeze:simworld@78+18", "--json")
+    hit it at t = 81.55 s). The paper's first leg (tests.support.short_paper): robot 3 stops by the diamond."""
+    p = run_launcher(out, "-s", str(short_paper(tmp_path)), "--fault", "kill:agent:3@60", "--fault",
+                     "freeze:simworld@78+18", "--json")
     assert p.returncode == 0, p.stderr[-3000:]
     s = json.loads(p.stdout)
     assert s["collisions"] == 0 and 3 in s["agents_lost"] and s["converged"], s

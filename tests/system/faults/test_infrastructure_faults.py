@@ -2,14 +2,15 @@
 
 The monitor and router faults concern the infrastructure, not the paper's geometry: they run the paper's first
 three agents without obstacles (tests/system/faults/test_router_loss.py `three_agents`: converged at 172.05 s,
-in a fraction of the paper's wall time). The flood's fan-out counts are the paper's ten agents."""
+in a fraction of the paper's wall time). The flood's fan-out counts are the paper's ten agents, on the paper's
+first leg (tests.support.short_paper)."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
-from tests.support import faults_log, run_launcher, summary
+from tests.support import faults_log, reconswarm, run_launcher, short_paper, summary
 from tests.system.faults.test_router_loss import three_agents
 
 
@@ -39,8 +40,9 @@ def test_router_restarted(tmp_path: Path, out: Path) -> None:
     assert s["deterministic"] is False and restart_t <= s["determinism_lost_at_s"] <= restart_t + 10.0, s
 
 
-def test_flood_of_malformed_messages(out: Path) -> None:
-    p = run_launcher(out, "--fault", "flood@30", "--json")
+def test_flood_of_malformed_messages(tmp_path: Path, out: Path) -> None:
+    scen = short_paper(tmp_path)
+    p = run_launcher(out, "-s", str(scen), "--fault", "flood@30", "--json")
     assert p.returncode == 0, p.stderr[-3000:]
     s = json.loads(p.stdout)
     assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
@@ -50,7 +52,8 @@ def test_flood_of_malformed_messages(out: Path) -> None:
     firsts = [next(line for line in f.read_text().splitlines() if "no longer deterministic" in line)
               for f in sorted((out / "logs").glob("agent-*.log")) if "no longer deterministic" in f.read_text()]
     assert s["deterministic"] is True and not firsts, (s["determinism_lost_at_s"], firsts)
-    assert s["convergence_time_s"] == 222.25
+    ref = json.loads(reconswarm("sim", str(scen), "-o", str(tmp_path / "sim"), "--json").stdout)
+    assert s["convergence_time_s"] == ref["convergence_time_s"] == 156.3, ref
     sent = json.loads((out / "logs" / "flood.log").read_text().strip().splitlines()[-1])
     assert sent["total"] == 10_000
     # One payload in 8 is over the wire's limit: the run's router forwards none of them (PAYLOAD_CAP), so
