@@ -32,6 +32,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
+from collections import deque
 from collections.abc import Sequence
 from typing import Any
 
@@ -60,6 +61,7 @@ from reconswarm.net.wire.keys import Keys, WireError
 log = logging.getLogger("reconswarm.agent")
 RECONNECT = -1  # AgentHost.run's answer when the session must be opened again
 ALONE = (Invalid, *OWN)  # what each agent's own link takes for itself (a malformed sample, a state or scan)
+ECHOES = 4  # a hosted agent's own sets recognised when they come back from its cache: its newest puts
 
 
 class AgentHost:
@@ -80,9 +82,10 @@ class AgentHost:
         self.cell_subs: dict[Cell | None, tuple[Any, Any]] = {}  # the host's subscriptions (None: every cell)
         self.plans: list[tuple[int, Plan]] = []  # the hosted agents' plans of this round, for `answers`
         self.sets: dict[int, tuple[Tag, Item]] = {}  # agent -> its newest obstacle set heard (its cell in its key)
-        # Each hosted agent's newest obstacle set put (key, payload), in its publisher's cache: what our own
-        # subscribers' history queries get back (zenoh does not filter a query's replies by the allowed origin).
-        self.cached: dict[int, tuple[str, bytes]] = {}
+        # Each hosted agent's newest obstacle sets put (key, payload), the newest in its publisher's cache: what our
+        # own subscribers' history queries get back (zenoh does not filter a query's replies by the allowed origin);
+        # the few before it too, for a reply that left the cache before the agent's next put.
+        self.cached: dict[int, deque[tuple[str, bytes]]] = {}
         self.replay: list[tuple[int, Tag, Item]] = []  # (agent, tag, obstacle set) for that agent alone (replayed)
         self._alive: tuple[int, ...] = ()  # the newest clock's live agents (one tuple while they stay the same)
         first = next(iter(links.values()))
@@ -287,10 +290,11 @@ class AgentHost:
             self.active[aid].gate.refuse(bad, now)
 
     def _echo(self, key: str, payload: bytes) -> bool:
-        """The newest set a hosted agent put, as its publisher's cache holds it: a cell subscription declared after the
-        put (an agent that starts listening to the publisher's cell) queries that cache, ours included. Anything else
-        with our session's id as its source (anyone can stamp it) goes through admission as before."""
-        return any(k == key and p == payload for k, p in self.cached.values())
+        """A set a hosted agent put (one of its ECHOES newest), as its publisher's cache held it: a cell subscription
+        declared after the put (an agent that starts listening to the publisher's cell) queries that cache, ours
+        included, and the reply may leave before the agent's next put and arrive after it. Anything else with our
+        session's id as its source (anyone can stamp it) goes through admission as before."""
+        return any(k == key and p == payload for puts in self.cached.values() for k, p in puts)
 
     # ------------------------------------------------------------------------------ the runtime's port
 
@@ -368,7 +372,7 @@ class AgentHost:
                 self._flush()
             put = self.links[aid].publish(out)
         if put is not None and isinstance(out, wire.ObstacleSet):
-            self.cached[aid] = put
+            self.cached.setdefault(aid, deque(maxlen=ECHOES)).append(put)
         if put is not None and len(self.links) > 1:
             item = (put[0], put[1], "PUT", self.source, now_s)
             self.local.append((("local", aid), item, out if isinstance(out, wire.Beacon) else None))

@@ -252,8 +252,14 @@ def test_a_hosted_agents_own_set_back_from_its_cache_is_no_forgery() -> None:
         assert echo and all(it[3] == h.source for _tag, it in echo)  # (zenoh's reply: our own session's id)
         assert route(h, echo) == {1: [], 2: [], 3: []}  # (agents 2 and 3 listen to every cell: C's too)
         assert all(h.links[a].gate.count == 0 and h.links[a].rej.count == 0 for a in (1, 2, 3))
+        # The reply left the cache before agent 1's next put and arrives after it (a restarted host's agents merge
+        # their peers' cached sets at once, a put a tick): still its own (before: one impersonation per other agent).
+        h.act(1, wire.ObstacleSet(1, 1, 2, {"square": ((1.0, 1.0), (-1.0, 1.0), (-1.0, -1.0), (1.0, -1.0))}), 0.0)
+        route(h, [])  # (the newer set handed over)
+        assert route(h, echo) == {1: [], 2: [], 3: []}
+        assert all(h.links[a].gate.count == 0 and h.links[a].rej.count == 0 for a in (1, 2, 3))
         # Another set in agent 1's name stamped with our id, or its very bytes from another session: refused.
-        forged = wire.obstacles_to_wire(wire.ObstacleSet(1, 0, 2, {}))
+        forged = wire.obstacles_to_wire(wire.ObstacleSet(1, 0, 3, {}))
         route(h, [(("cell", C), (KEYS.obstacles(C, 1), forged, "PUT", h.source, 0.0)),
                   (("cell", C), (KEYS.obstacles(C, 1), echo[0][1][1], "PUT", PEER, 0.0))])
         assert h.links[2].gate.count == 2
