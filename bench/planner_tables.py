@@ -18,7 +18,7 @@ import csv
 from pathlib import Path
 
 from reconswarm_bringup.sweep import percentile
-from reconswarm_bringup.sweep_plot import suite_of
+from reconswarm_bringup.sweep_plot import Row, by_suite, converged
 
 HEAD = ("| planner | runs | converged | converged, no collision | conv. time median (s) | p90 (s) | collision episodes "
         "| runs with a collision | min agent gap (m) | min obstacle gap (m) | path length, mean (m) "
@@ -30,19 +30,16 @@ def _s(v: float | None) -> str:
 
 
 def tables(paths: list[Path]) -> str:
-    rows: list[dict[str, str]] = []
+    rows: list[Row] = []
     for p in paths:
         with p.open(newline="") as fh:
             rows += list(csv.DictReader(fh))
-    suites: dict[str, dict[str, list[dict[str, str]]]] = {}
-    for r in rows:
-        suites.setdefault(suite_of(r["scenario"]), {}).setdefault(r["planner"], []).append(r)
     out = []
-    for suite, by in suites.items():
+    for suite, by in by_suite(rows).items():
         files = {r["scenario"] for rs in by.values() for r in rs}
         out += [f"### {suite} ({len(files)} files)", "", HEAD, "|---" * 12 + "|"]
         for planner, rs in by.items():
-            ok = [r for r in rs if r["converged"] == "True"]
+            ok = converged(rs)
             times = [float(r["convergence_time_s"]) for r in ok]
             hit = [r for r in rs if int(r["collisions"]) > 0]
             n = len(rs)

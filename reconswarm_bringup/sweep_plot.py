@@ -19,6 +19,21 @@ def suite_of(label: str) -> str:
     return p.parent.name or p.stem
 
 
+Row = dict[str, str]  # one line of results.csv, as csv.DictReader gives it
+
+
+def by_suite(rows: list[Row]) -> dict[str, dict[str, list[Row]]]:
+    """results.csv's rows by suite, then by planner, each in order of first appearance."""
+    out: dict[str, dict[str, list[Row]]] = {}
+    for r in rows:
+        out.setdefault(suite_of(r["scenario"]), {}).setdefault(r["planner"], []).append(r)
+    return out
+
+
+def converged(rows: list[Row]) -> list[Row]:
+    return [r for r in rows if r["converged"] == "True"]
+
+
 def plot(results_csv: Path, png: Path) -> int:
     """Draw the figure of results.csv into png; returns the number of panels' columns (suites)."""
     import matplotlib
@@ -30,19 +45,13 @@ def plot(results_csv: Path, png: Path) -> int:
         rows = list(csv.DictReader(f))
     if not rows:
         raise BadInput(f"--plot: {results_csv} holds no run to plot")
-    suites: dict[str, dict[str, tuple[int, int, int, list[float]]]] = {}
-    planners: list[str] = []
-    files: dict[str, set[str]] = {}
-    for r in rows:
-        suite, kind = suite_of(r["scenario"]), r["planner"]
-        if kind not in planners:
-            planners.append(kind)
-        files.setdefault(suite, set()).add(r["scenario"])
-        runs, ok, clean, times = suites.setdefault(suite, {}).get(kind, (0, 0, 0, []))
-        good = r["converged"] == "True"
-        if good:
-            times.append(float(r["convergence_time_s"]))
-        suites[suite][kind] = (runs + 1, ok + good, clean + (good and int(r["collisions"]) == 0), times)
+    planners = list(dict.fromkeys(r["planner"] for r in rows))
+    grouped = by_suite(rows)
+    files = {suite: {r["scenario"] for rs in by.values() for r in rs} for suite, by in grouped.items()}
+    suites: dict[str, dict[str, tuple[int, int, int, list[float]]]] = {
+        suite: {kind: (len(rs), len(ok := converged(rs)), sum(int(r["collisions"]) == 0 for r in ok),
+                       [float(r["convergence_time_s"]) for r in ok]) for kind, rs in by.items()}
+        for suite, by in grouped.items()}
     fig, axes = plt.subplots(2, len(suites), figsize=(1.4 + 0.9 * len(planners) * len(suites), 6.5), squeeze=False,
                              sharex="col")
     for c, (suite, by) in enumerate(suites.items()):
