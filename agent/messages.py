@@ -23,8 +23,8 @@ class Law:
 
 # inputs: the wire messages an agent reads, plus the runtime's (reconswarm/net/node.py): a peer's or the world's
 # token (Token with Role.AGENT and its id, or Role.WORLD), a message dropped as invalid, our router link, a signal
-# (all that a sample or the runtime brings: Received; what the node keeps of it is agent/heard.py's `Heard`); in a
-# host of several agents, the law its host computed for our plan
+# (all that a sample or the runtime brings: Received; what the node keeps of it is agent/heard.py's `Heard`); and
+# the law our host computed for our plan
 Received = wire.State | wire.Scan | wire.Clock | wire.Beacon | wire.ObstacleSet | Token | Invalid | RouterReach | Stop
 Input = Received | Law
 
@@ -35,5 +35,5 @@ class Reconnect:
     """No command for `resubscribe_s` though the mission goes on: open a new session (keep this node)."""
 
 
-# Plan: a hosted agent's tick ready for the law, which its host computes for all its agents at once (then `Law`)
+# Plan: our tick ready for the law, which our host computes for all its agents at once (then `Law`)
 Output = Cells | wire.Beacon | wire.ObstacleSet | wire.Cmd | Reconnect | Exit | Plan

@@ -11,8 +11,8 @@ peer stays where last seen or where the world's scan reports it held; a live one
 A new session of its process (`reconnected`) keeps the node: peers, lost peers, knowledge, revisions, escape state.
 Its router link lost (or changed) mid-mission in lockstep, what was in flight to it is lost and nobody sends it
 again: the next tick it acts on is a guess (`guessed_k`).
-What it heard is agent/heard.py's. Hosted with others (`batched`), it returns its tick's `Plan` and takes its
-command back as `Law`: its host computes the law of every plan of a round at once (agent/host.py).
+What it heard is agent/heard.py's. The law is its host's, for a lone agent as for many: the node returns its
+tick's `Plan` and takes its command back as `Law` (agent/host.py computes the law of every plan of a round at once).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from collections.abc import Set as AbstractSet
 
 import numpy as np
 
-from agent.brain import AgentBrain, Body, commands
+from agent.brain import AgentBrain, Body
 from agent.heard import Heard
 from agent.messages import Input, Law, Output
 from agent.neighbours import Cells, Neighbourhood
@@ -40,10 +40,9 @@ log = logging.getLogger("reconswarm.agent")
 
 
 class AgentNode:
-    def __init__(self, s: Scenario, agent_id: int, now_s: float, timing: Timing = TIMING,
-                 batched: bool = False) -> None:
+    def __init__(self, s: Scenario, agent_id: int, now_s: float, timing: Timing = TIMING) -> None:
         self.s, self.id, self.timing, self.policy = s, agent_id, timing, Policy.agent(timing)
-        self.batched, self.planning = batched, -1  # batched: our plan out, its `Law` from our host (planning: its tick)
+        self.planning = -1  # the tick of our plan out, whose `Law` our host computes (-1: none)
         self.brain = AgentBrain(s, agent_id)
         self.nb = Neighbourhood(s, agent_id)  # our cells and whom a tick waits for (agent/neighbours.py)
         self.radius = float(self.brain.r[0])
@@ -335,11 +334,8 @@ class AgentNode:
         plan = self.brain.plan(k, p, scan, peers, shared, swarm, lost, st.theta)
         if plan.grew:
             self._out.append(self._obstacle_set(k))
-        if self.batched:  # our host computes the law with its other agents' plans, then hands it to us
-            self.planning = k
-            self._out.append(plan)
-        else:
-            self._command(k, *commands([plan])[0], now)
+        self.planning = k  # our host computes the law with its other agents' plans, then hands it to us
+        self._out.append(plan)
 
     def _command(self, k: int, v_mps: float, omega_radps: float, now: float) -> None:
         self.last_cmd = wire.Cmd(self.id, k, v_mps, omega_radps)  # (v, ω) at our heading θ_k

@@ -79,7 +79,7 @@ def run(cfg: AgentConfig) -> int:
     if missing:
         raise BadInput(f"--id: agent {missing[0]} is not in {cfg.scenario}")
     # Kept across new sessions: each agent's node, gate and rejection count.
-    nodes = {a: AgentNode(s, a, time.monotonic(), cfg.timing, batched=len(ids) > 1) for a in ids}
+    nodes = {a: AgentNode(s, a, time.monotonic(), cfg.timing) for a in ids}
     # One admission for the process's agents (who speaks for whom, where each peer was, whether a hull lies on its
     # obstacle): the host judges each sample once for all it is for; each agent's gate counts its refusals.
     adm = Admission(s)

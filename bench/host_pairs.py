@@ -62,7 +62,7 @@ def measure(z: zenoh.Session, n: int, k: int, reps: int) -> tuple[int, int, floa
     else:  # (a checkout before the host's one admission)
         gates = {a: Gate(s, f"agent-{a}") for a in ids}
     zid = str(z.info.zid())
-    links = {a: HostedAgent(AgentNode(s, a, 0.0, batched=True), keys, z, Rejections(f"agent {a}"), gates[a], None, zid)
+    links = {a: HostedAgent(AgentNode(s, a, 0.0), keys, z, Rejections(f"agent {a}"), gates[a], None, zid)
              for a in ids}
     host = AgentHost(z, keys, links, TaggedInbox())
     try:

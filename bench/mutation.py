@@ -63,7 +63,7 @@ CORE: dict[str, tuple[str, ...]] = {
                        "test_agent_node_waits.py", "test_agent_node_outputs.py"),
     "agent/neighbours.py": ("test_neighbours.py", "test_neighbours_cases.py", "test_agent_node.py",
                             "test_agent_node_cases.py", "test_agent_node_outputs.py", "test_agent_host_routing.py"),
-    "agent/brain.py": ("test_agent_brain_vs_engine.py", "test_agent_node.py", "test_agent_node_batched.py",
+    "agent/brain.py": ("test_agent_brain_vs_engine.py", "test_agent_node.py", "test_agent_node_law.py",
                        "test_agent_node_cases.py", "test_agent_node_outputs.py", "test_blocked.py",
                        "test_law_batched.py", "test_agent_brain_cases.py"),
     "reconswarm/paper/knowledge.py": ("test_sensing_knowledge.py", "test_planner.py", "test_agent_brain_vs_engine.py",

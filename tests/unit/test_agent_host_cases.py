@@ -33,7 +33,7 @@ from tests.unit.test_agent_host_routing import KEYS, PEER, S, beacon, obstacle_s
 from tests.unit.test_agent_node import A as NODE_AGENT
 from tests.unit.test_agent_node import S as NODE_S
 from tests.unit.test_agent_node import T as NODE_T
-from tests.unit.test_agent_node_batched import script
+from tests.unit.test_agent_node_law import script
 
 OTHER = "other-session"
 A, B = (0, 0), (5, 5)  # cells
@@ -230,7 +230,7 @@ def test_each_agent_that_starts_listening_to_a_cell_gets_that_cells_sets_and_no_
 
 def test_the_plans_of_a_round_are_answered_together_by_tick_then_forgotten(host: AgentHost) -> None:
     def plans_of(ticks: int) -> list[Plan]:
-        node, out = AgentNode(NODE_S, NODE_AGENT, 0.0, NODE_T, batched=True), []  # (any brain's plans)
+        node, out = AgentNode(NODE_S, NODE_AGENT, 0.0, NODE_T), []  # (any brain's plans)
         for batch in script()[:ticks]:
             out = node.step(batch, 0.0)
         return [o for o in out if isinstance(o, Plan)]
@@ -244,7 +244,7 @@ def test_the_plans_of_a_round_are_answered_together_by_tick_then_forgotten(host:
 
 def test_each_agent_gets_the_law_of_its_own_plan_when_the_plans_differ() -> None:
     """Three hosted agents with three different plans of one tick: each law goes to the agent whose plan it is."""
-    node, out = AgentNode(NODE_S, NODE_AGENT, 0.0, NODE_T, batched=True), []
+    node, out = AgentNode(NODE_S, NODE_AGENT, 0.0, NODE_T), []
     for batch in script()[:2]:
         out = node.step(batch, 0.0)
     (p,) = (o for o in out if isinstance(o, Plan))

@@ -16,12 +16,12 @@ import pytest
 from agent.brain import AgentBrain, Peer
 from agent.messages import Output, Reconnect
 from agent.neighbours import Cells
-from agent.node import AgentNode
 from reconswarm.net.node import Exit, Invalid, Stop
 from reconswarm.net.timing import Timing
 from reconswarm.net.wire import wire
 from reconswarm.scenario.model import PlannerKind, Scenario, load
 from tests.support import PAPER, joined, left, world_token
+from tests.unit.solo import SoloNode
 
 A, B, C = 1, 2, 3  # the node under test and two peers
 HEAD = {A: (100.0, 0.0), B: (110.0, 0.0), C: (120.0, 0.0)}  # where their head points start (tick 0)
@@ -69,8 +69,8 @@ def reference(k: int, p: tuple[float, float], peers: list[Peer], brain: AgentBra
     return brain.inputs(u, 0.0)
 
 
-def started(node_s: Scenario = S, peers: tuple[int, ...] = (B, C), timing: Timing = T) -> AgentNode:
-    node = AgentNode(node_s, A, 0.0, timing)
+def started(node_s: Scenario = S, peers: tuple[int, ...] = (B, C), timing: Timing = T) -> SoloNode:
+    node = SoloNode(node_s, A, 0.0, timing)
     node.step([joined(A), *(joined(p) for p in peers)], 0.0)
     return node
 

@@ -12,9 +12,9 @@ import numpy as np
 
 from agent.brain import AgentBrain, Peer
 from agent.messages import Output
-from agent.node import AgentNode
 from reconswarm.net.wire import wire
 from tests.support import joined, left
+from tests.unit.solo import SoloNode
 from tests.unit.test_agent_node import DT, RADIUS, A, B, C, S, T, beacon, beacons, clock, cmds, started, state
 
 D, E = 4, 5  # two more peers of the scenario, far away at their starts
@@ -81,7 +81,7 @@ def test_awaiting_counts_peers_the_clock_names_before_their_tokens_and_a_missing
     node.step([clock(0, (A, B, C)), state(0, 100.0, 0.0)], 0.0)
     assert node.awaiting(0.0) == 2  # B and C are counted by the world's clock; their tokens are on their way
     t0 = 100.0  # well into the run's wall time: a peer's silence is counted from its token
-    node = AgentNode(S, A, t0, T)
+    node = SoloNode(S, A, t0, T)
     node.step([joined(A), joined(B)], t0)
     node.step([state(0, 100.0, 0.0)], t0)
     assert node.awaiting(t0 + 0.5) == 2  # B's beacon and the clock
@@ -102,7 +102,7 @@ def test_awaiting_counts_the_linked_peers_sets_not_yet_in() -> None:
     pos = {A: 100.0, B: 110.0, C: 120.0, D: 105.0, E: 115.0}  # all within link range
     s = dataclasses.replace(S, agents=tuple(
         dataclasses.replace(a, start_m=(pos[a.id] - 0.5, 0.0)) if a.id in pos else a for a in S.agents))
-    node = AgentNode(s, A, 0.0, T)
+    node = SoloNode(s, A, 0.0, T)
     node.step([joined(a) for a in (A, B, C, D, E)], 0.0)
     far: Hulls = {"hexagon": ((600.0, 0.0), (601.0, 1.0), (601.0, -1.0))}
     out = node.step([wire.ObstacleSet(D, 0, 3, far), clock(0, (A, B, C, D, E)), state(0, 100.0, 0.0),

@@ -8,14 +8,14 @@ could give) leaves the peer out, and its beacon of k within reach is said: locks
 
 from __future__ import annotations
 
-from agent.node import AgentNode
 from reconswarm.net.wire import wire
+from tests.unit.solo import SoloNode
 from tests.unit.test_agent_node import DT, RADIUS, A, clock, cmds, started, state
 
 D = 4  # a peer closing in on us along +x (far at its start in the scenario)
 
 
-def closing(node: AgentNode) -> tuple[float, list[wire.Beacon]]:
+def closing(node: SoloNode) -> tuple[float, list[wire.Beacon]]:
     """D's beacons of ticks 0..3: one step (V dt) closer each tick, from just beyond where tick 1 could wait for it
     to within reach of us at tick 3 (we step once towards it, from tick 2 to 3). Also: our head x at tick 3."""
     reach, step = node.nb.grid.reach_m, node.nb.grid.step_m
@@ -24,7 +24,7 @@ def closing(node: AgentNode) -> tuple[float, list[wire.Beacon]]:
     return 100.0 + step, [wire.Beacon(D, k, k * DT, x, 0.0, RADIUS[D], 0) for k, x in enumerate(xs)]
 
 
-def first_ticks(node: AgentNode, d: list[wire.Beacon]) -> None:
+def first_ticks(node: SoloNode, d: list[wire.Beacon]) -> None:
     """Ticks 0 and 1 with D's beacons of 0 and 1 in, our head at x = 100: D is not waited for (too far)."""
     for k in range(2):
         node.step([d[k], clock(k, (A, D)), state(k, 100.0, 0.0)], 0.05 * k)

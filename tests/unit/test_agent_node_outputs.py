@@ -14,10 +14,10 @@ import pytest
 
 from agent.brain import AgentBrain
 from agent.neighbours import Cells
-from agent.node import AgentNode
 from reconswarm.net.wire import wire
 from reconswarm.scenario.model import PlannerKind
 from tests.support import joined, world_token
+from tests.unit.solo import SoloNode
 from tests.unit.test_agent_node import DT, A, B, C, S, T, beacon, beacons, clock, cmds, started, state
 from tests.unit.test_agent_node_cases import HULL, RT, Hulls, Ref, peer, sets, vw
 
@@ -113,7 +113,7 @@ def test_realtime_merges_the_newest_set_of_a_linked_peer_even_when_it_comes_late
 # ------------------------------------------------------------------------------------------- outputs
 
 def test_nothing_goes_out_before_the_mission_and_no_timer_is_set() -> None:
-    node = AgentNode(S, A, 0.0, T)
+    node = SoloNode(S, A, 0.0, T)
     assert node.wake_at_s() is None
     assert node.step([joined(A)], 0.0) == []  # (no obstacle set of revision 0)
     node.step([world_token(False)], 0.5)
@@ -201,7 +201,7 @@ def test_realtime_after_the_first_command_plans_with_the_scans_of_skipped_ticks(
 @pytest.mark.parametrize("mode", ["lockstep", "realtime"])
 def test_the_virtual_leader_merges_every_peers_set_into_the_union(mode: str) -> None:
     s = dataclasses.replace(S, planner=dataclasses.replace(S.planner, kind=PlannerKind.VIRTUAL_LEADER))
-    node = AgentNode(s, A, 0.0, T)
+    node = SoloNode(s, A, 0.0, T)
     node.step([joined(A), joined(B)], 0.0)
     kw = RT if mode == "realtime" else {}
     far = wire.ObstacleSet(B, 0, 1, {"hexagon": ((600.0, 0.0), (601.0, 1.0), (601.0, -1.0))})

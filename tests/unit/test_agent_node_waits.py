@@ -9,15 +9,15 @@ from __future__ import annotations
 
 import dataclasses
 
-from agent.node import AgentNode
 from reconswarm.net.timing import Timing
 from tests.support import left, world_token
+from tests.unit.solo import SoloNode
 from tests.unit.test_agent_node import A, B, C, S, T, beacon, beacons, clock, cmds, joined, started, state
 
 
 def test_the_wait_for_a_lost_clock_counts_from_the_states_arrival() -> None:
     t0 = 50.0  # well into the run's wall time
-    node = AgentNode(S, A, t0, T)
+    node = SoloNode(S, A, t0, T)
     node.step([joined(A)], t0)
     node.step([clock(0, (A,)), state(0, 100.0, 0.0)], t0)
     assert node.k == 0
@@ -27,7 +27,7 @@ def test_the_wait_for_a_lost_clock_counts_from_the_states_arrival() -> None:
 
 
 def test_the_wait_for_a_talking_peer_gives_up_after_the_wait_timeout() -> None:
-    node = AgentNode(S, A, 0.0, T)
+    node = SoloNode(S, A, 0.0, T)
     node.step([joined(A), joined(B)], 0.0)
     node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 110.0, 0.0)], 0.0)
     assert node.k == 0
@@ -42,7 +42,7 @@ def test_the_wait_for_a_talking_peer_gives_up_after_the_wait_timeout() -> None:
 
 def test_a_stuck_ticks_beacon_backs_off_doubling() -> None:
     patient = dataclasses.replace(T, agent_wait_timeout_s=1e3, peer_silent_s=1e3)  # stuck for good
-    node = AgentNode(S, A, 0.0, patient)
+    node = SoloNode(S, A, 0.0, patient)
     node.step([joined(A), joined(B)], 0.0)
     node.step([clock(0, (A, B)), state(0, 100.0, 0.0)], 1.0)  # our beacon for tick 0 goes out at 1.0
     again = T.beacon_again_s
@@ -64,10 +64,10 @@ def test_a_stuck_ticks_beacon_backs_off_doubling() -> None:
 W = Timing()  # (T takes the world to speak throughout: these tests are about its silence)
 
 
-def frozen_mid_tick() -> AgentNode:
+def frozen_mid_tick() -> SoloNode:
     """A and B acted on tick 0; the world published tick 1's clock and A's state, then froze (SIGSTOP) before
     B's state: B has nothing to announce until the world is back."""
-    node = AgentNode(S, A, 0.0, W)
+    node = SoloNode(S, A, 0.0, W)
     node.step([joined(A), joined(B)], 0.0)
     node.step([clock(0, (A, B)), state(0, 100.0, 0.0), beacon(B, 0, 110.0, 0.0)], 0.0)
     assert node.k == 0
@@ -105,7 +105,7 @@ def test_a_world_silent_for_world_quiet_s_is_a_stall_though_its_token_stays() ->
 
 
 def test_a_lost_clock_is_not_given_up_while_the_world_is_silent() -> None:
-    node = AgentNode(S, A, 0.0, W)
+    node = SoloNode(S, A, 0.0, W)
     node.step([joined(A)], 0.0)
     node.step([clock(0, (A,)), state(0, 100.0, 0.0)], 0.0)
     node.step([state(1, 100.1, 0.0)], 0.1)  # clock 1 lost, then the world froze
@@ -145,7 +145,7 @@ def test_awaiting_is_kept_until_the_next_step_or_for_agent_poll_s() -> None:
     (B's beacon in: one fewer), and without one it is asked anew after agent_poll_s (C silent by then: not
     counted). In between, the count stays what it was."""
     t0 = 100.0
-    node = AgentNode(S, A, t0, T)
+    node = SoloNode(S, A, t0, T)
     node.step([joined(A), joined(B), joined(C)], t0)
     node.step([state(0, 100.0, 0.0)], t0)
     assert node.awaiting(t0) == 3  # B's beacon, C's beacon and the clock

@@ -6,13 +6,13 @@ re-sent by nobody): the next tick we act on is a guess, said in our reports (`gu
 from __future__ import annotations
 
 from agent.brain import Peer
-from agent.node import AgentNode
 from reconswarm.net.node import RouterReach
 from tests.support import joined, left, world_token
+from tests.unit.solo import SoloNode
 from tests.unit.test_agent_node import RADIUS, A, B, C, T, beacon, beacons, clock, cmds, reference, started, state
 
 
-def two_ticks() -> AgentNode:
+def two_ticks() -> SoloNode:
     node = started()
     for k in range(2):
         out = node.step([clock(k), state(k, 100.0, 0.0), beacon(B, k, 110.0, 0.0), beacon(C, k, 120.0, 0.0)],

@@ -156,7 +156,7 @@ def roles(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Roles]:
     world = WorldAdapter(world_node, RUN, z)
     monitor = MonitorAdapter(S, RUN, z, writer, None)
     zid = str(z.info.zid())
-    nodes = {a: AgentNode(S, a, t0, batched=True) for a in HOSTED}
+    nodes = {a: AgentNode(S, a, t0) for a in HOSTED}
     links = {a: HostedAgent(nodes[a], KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"), None, zid)
              for a in HOSTED}
     host = AgentHost(z, KEYS, links, TaggedInbox())

@@ -17,12 +17,12 @@ from hypothesis import strategies as st
 from agent.brain import AgentBrain, Peer
 from agent.messages import Output
 from agent.neighbours import Cells, Neighbourhood
-from agent.node import AgentNode
 from reconswarm.net.timing import TIMING
 from reconswarm.net.wire import wire
 from reconswarm.net.wire.cells import CellGrid
 from reconswarm.scenario.model import PlannerKind, load
 from tests.support import PAPER, joined, left
+from tests.unit.solo import SoloNode
 
 A, B, C = 1, 2, 3
 HEAD = {A: (0.0, 0.0), B: (30.0, 0.0), C: (200.0, 0.0)}  # head points at tick 0 (heading 0, l = 0.5)
@@ -48,8 +48,8 @@ def clock(k: int, alive: tuple[int, ...] = ALIVE) -> wire.Clock:
     return wire.Clock(k, k * DT, alive)
 
 
-def node_with(*peers: int) -> AgentNode:
-    node = AgentNode(S, A, 0.0)
+def node_with(*peers: int) -> SoloNode:
+    node = SoloNode(S, A, 0.0)
     node.step([joined(A), *(joined(p) for p in peers)], 0.0)
     return node
 
@@ -130,8 +130,8 @@ def test_the_virtual_leader_waits_for_everyone_and_hears_every_cell() -> None:
 def test_a_node_says_the_cells_a_new_session_declares() -> None:
     """Its link and host ask the node (`AgentNode.cells`), not its neighbourhood: every cell until its first
     command, from its start's cell, the cells around its start warm (none under the virtual leader's law)."""
-    assert AgentNode(S, A, 0.0).cells() == Cells(G.cell_of(*HEAD[A]), None, G.listen_cells(*HEAD[A]))
-    assert AgentNode(S.with_planner(PlannerKind.VIRTUAL_LEADER), A, 0.0).cells().warm == frozenset()
+    assert SoloNode(S, A, 0.0).cells() == Cells(G.cell_of(*HEAD[A]), None, G.listen_cells(*HEAD[A]))
+    assert SoloNode(S.with_planner(PlannerKind.VIRTUAL_LEADER), A, 0.0).cells().warm == frozenset()
 
 
 def test_cells_follow_the_agent_new_before_the_command_old_after_it() -> None:

@@ -13,7 +13,6 @@ import pytest
 import zenoh
 
 from agent.hosted import HostedAgent, decode_sample
-from agent.node import AgentNode
 from agent.robot_io import take_states
 from reconswarm.net.node import Invalid
 from reconswarm.net.runtime.inbox import Rejections
@@ -24,6 +23,7 @@ from reconswarm.net.wire.hostwire import STATE_ROW, state_batch_from_wire, state
 from reconswarm.net.wire.keys import Keys, WireError
 from reconswarm.scenario.model import load
 from tests.support import PAPER, free_port
+from tests.unit.solo import SoloNode
 
 BAD = [math.nan, math.inf, -math.inf]
 
@@ -71,7 +71,7 @@ WORLD = "world-session"
 def link() -> Any:
     port = free_port()
     z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{port}",), "peer").config())  # alone: nothing to connect to
-    node = AgentNode(S1, A, 0.0)
+    node = SoloNode(S1, A, 0.0)
     lk = HostedAgent(node, Keys("nan-test"), z, Rejections(f"agent-{A}"), Gate(S1, f"agent-{A}"))
     try:
         yield lk

@@ -1,5 +1,6 @@
-"""A hosted agent's node (`batched`): a tick's last step, the law, is its host's. The node returns its Plan and
-takes the command back as Law; everything it does is what the same node alone does, in the same order."""
+"""A tick's last step, the law, is the agent's host's (a lone agent's as well): the node returns its Plan and takes
+the command back as Law and sends it as it is (the law's rows: test_law_batched; a lone agent's commands against
+the brain's: test_agent_node.py `reference`); the node acts on nothing else while its plan is out."""
 
 from __future__ import annotations
 
@@ -26,28 +27,27 @@ def script() -> list[list[Any]]:
             [clock(3, (A, B)), state(3, 100.15, 0.02), beacon(B, 3, 104.3, 0.1, rev=1)]]
 
 
-def test_a_batched_node_returns_its_plan_and_on_its_law_does_what_it_does_alone() -> None:
-    alone, hosted = AgentNode(S, A, 0.0, T), AgentNode(S, A, 0.0, T, batched=True)
+def test_the_node_returns_its_plan_and_on_its_law_sends_that_command() -> None:
+    hosted, sent = AgentNode(S, A, 0.0, T), []
     for i, batch in enumerate(script()):
-        now = 0.01 * i
-        want = alone.step(batch, now)
-        got = hosted.step(batch, now)
+        got = hosted.step(batch, 0.01 * i)
         plans = [o for o in got if isinstance(o, Plan)]
-        if not cmds(want):
-            assert got == want and not plans
+        assert not cmds(got)  # never a command before its law
+        if not plans:
             continue
-        assert len(plans) == 1 and got[-1] is plans[0] and not cmds(got)  # the plan last, no command yet
+        assert len(plans) == 1 and got[-1] is plans[0]  # the plan last
         assert hosted.planning == plans[0].k and hosted.k == plans[0].k - 1
         # (its host: the law of this plan, alone or with others' rows: the same bits, test_law_batched)
-        rest = hosted.step([Law(plans[0].k, *commands(plans)[0])], now)
-        assert [*got[:-1], *rest] == want  # the same outputs, in the same order: set, command, cells
-        assert hosted.planning == -1 and hosted.k == alone.k
-    assert alone.k == 3 and alone.brain.rev == hosted.brain.rev == 2
-    assert hosted.brain.stall.hist_p.tolist() == alone.brain.stall.hist_p.tolist()
+        v, w = commands(plans)[0] if i % 2 else (0.125 * i, -0.5)  # (whatever its host says: it is sent)
+        rest = hosted.step([Law(plans[0].k, v, w)], 0.01 * i)
+        assert hosted.planning == -1 and hosted.k == plans[0].k
+        assert cmds(rest) == [wire.Cmd(A, plans[0].k, v, w)] and hosted.last_cmd == cmds(rest)[0]
+        sent += cmds(rest)
+    assert [c.k for c in sent] == [0, 1, 2, 3] and hosted.brain.rev == 2
 
 
 def test_while_its_plan_waits_for_the_law_the_node_acts_on_nothing_else() -> None:
-    hosted = AgentNode(S, A, 0.0, T, batched=True)
+    hosted = AgentNode(S, A, 0.0, T)
     for batch in script()[:2]:
         out = hosted.step(batch, 0.0)
     assert isinstance(out[-1], Plan) and hosted.planning == 0
