@@ -15,7 +15,7 @@ class SoloNode(AgentNode):
 
     def step(self, batch: Iterable[Input], now_s: float) -> list[Output]:
         out = super().step(batch, now_s)
-        while out and isinstance(out[-1], Plan):
-            plan = out.pop()
+        while out and isinstance(plan := out[-1], Plan):
+            out.pop()
             out += super().step([Law(plan.k, *commands([plan])[0])], now_s)
         return out
