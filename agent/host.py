@@ -5,9 +5,8 @@ process one session). The host holds the session's subscriptions and hands each 
 is for, through one inbox and one loop that steps every hosted node (agent/node.py) with the wall time:
 
 - shared by all hosted agents: the clock, liveliness (every token, with history), and each cell's beacon
-  batches and obstacle sets (advanced subscriber: publishers' cached sets), declared while at least one hosted
-  agent listens to that cell (agent/neighbours.py) and handed to those that do; an agent that starts
-  listening to a cell the host already hears gets the newest set of each publisher there, from the host's copy;
+  batches and obstacle sets, declared while at least one hosted agent listens to that cell (agent/listening.py)
+  and handed to those that do;
 - the hosted agents' states: one message per tick for all of them (urgent: it starts a tick), taken apart once
   (agent/robot_io.py `HostKeys`, `take_states`); in ROS 2 mode each agent's odometry and its scan;
 - a sample is decoded and admitted once, whatever number of hosted agents it is for: each beacon of a peer
@@ -21,10 +20,8 @@ is for, through one inbox and one loop that steps every hosted node (agent/node.
 - the host's own liveliness token `alive/host/<hid>/<members>` (declared before its agents' own tokens) tells the
   world which agents it speaks for (simworld/hosts.py).
 
-Co-hosted agents hear each other in the process: a beacon or set one of them publishes is handed to the others
-that listen to its cell, at once (a beacon as the message itself; a set as its bytes with the session as
-source); the subscriptions take remote samples only. A node is stepped when it has input, a deadline, or every
-`agent_poll_s` (its timers).
+Co-hosted agents hear each other in the process (agent/loopback.py); the subscriptions take remote samples only.
+A node is stepped when it has input, a deadline, or every `agent_poll_s` (its timers).
 """
 
 from __future__ import annotations
@@ -32,16 +29,16 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from collections import deque
 from collections.abc import Sequence
 from typing import Any
 
 import zenoh
-from zenoh import ext
 
 from agent.beacons import BeaconOut, handover_cell, handover_label, take_batch
 from agent.brain import Plan, commands
 from agent.hosted import OWN, PASSED, PEER_MESSAGES, Decoded, HostedAgent, decode_sample
+from agent.listening import CellListening
+from agent.loopback import Loopback
 from agent.messages import Input, Law, Reconnect
 from agent.neighbours import Cells
 from agent.robot_io import HostKeys, KeysRobot, take_states
@@ -56,12 +53,11 @@ from reconswarm.net.wire import wire
 from reconswarm.net.wire.batch import BeaconBatch
 from reconswarm.net.wire.cells import Cell
 from reconswarm.net.wire.hostwire import StateBatch
-from reconswarm.net.wire.keys import Keys, WireError
+from reconswarm.net.wire.keys import Keys
 
 log = logging.getLogger("reconswarm.agent")
 RECONNECT = -1  # AgentHost.run's answer when the session must be opened again
 ALONE = (Invalid, *OWN)  # what each agent's own link takes for itself (a malformed sample, a state or scan)
-ECHOES = 4  # a hosted agent's own sets recognised when they come back from its cache: its newest puts
 
 
 class AgentHost:
@@ -71,22 +67,9 @@ class AgentHost:
                  inbox: TaggedInbox) -> None:
         self.z, self.keys, self.links, self.inbox = session, keys, links, inbox
         self.active = dict(links)  # the agents still running (one that exited leaves this)
-        self.locality = zenoh.Locality.REMOTE  # (co-hosted agents' samples are handed over in the process)
         self.source = str(session.info.zid())  # the source of what co-hosted agents hand each other
-        # What co-hosted agents published since the last round: a beacon with the message it was put from (the bytes
-        # decode to it: nothing to decode again, 200 a tick in a host of 200), a set as its bytes (decoded once).
-        self.local: list[tuple[Tag, Item, wire.Beacon | None]] = []
-        self.listening: dict[int, frozenset[Cell] | None] = {}  # agent -> the cells it listens to (None: all)
-        self.by_cell: dict[Cell | None, set[int]] = {}  # cell -> the agents listening to it (None: to all)
-        self._heard_by: dict[Cell | None, list[int]] = {}  # cell -> `_listeners` (until listening or `active` change)
-        self.cell_subs: dict[Cell | None, tuple[Any, Any]] = {}  # the host's subscriptions (None: every cell)
+        self.loop = Loopback(self.source, len(links) > 1)  # what they publish, handed over (agent/loopback.py)
         self.plans: list[tuple[int, Plan]] = []  # the hosted agents' plans of this round, for `answers`
-        self.sets: dict[int, tuple[Tag, Item]] = {}  # agent -> its newest obstacle set heard (its cell in its key)
-        # Each hosted agent's newest obstacle sets put (key, payload), the newest in its publisher's cache: what our
-        # own subscribers' history queries get back (zenoh does not filter a query's replies by the allowed origin);
-        # the few before it too, for a reply that left the cache before the agent's next put.
-        self.cached: dict[int, deque[tuple[str, bytes]]] = {}
-        self.replay: list[tuple[int, Tag, Item]] = []  # (agent, tag, obstacle set) for that agent alone (replayed)
         self._alive: tuple[int, ...] = ()  # the newest clock's live agents (one tuple while they stay the same)
         first = next(iter(links.values()))
         self.known = {a.id for a in first.node.s.agents}
@@ -97,7 +80,8 @@ class AgentHost:
         # to every cell until its first command then finds its own cells declared (not declared all at once, on
         # the mission's first tick, when every hosted agent commands for the first time).
         start = {aid: link.node.cells() for aid, link in links.items()}  # (what each node says it needs now)
-        self.warm: frozenset[Cell] = frozenset().union(*(c.warm for c in start.values()))
+        warm: frozenset[Cell] = frozenset().union(*(c.warm for c in start.values()))
+        self.cells = CellListening(session, keys, inbox, warm, self.active)  # (agent/listening.py)
         z, k = session, keys
         self.subs: list[Any] = []
         for aid, link in links.items():
@@ -123,60 +107,19 @@ class AgentHost:
     # ------------------------------------------------------------------------------------ listening
 
     def listen(self, aid: int, c: Cells) -> None:
-        """Agent aid listens to c.listen from now on: cells new to the host are declared before the ones nobody
-        listens to any more go; the newest set of each agent publishing in the cells it did not hear yet is
-        replayed to it (what its own advanced subscriber's history would have brought)."""
-        old = self.listening.get(aid, frozenset())
-        if aid in self.listening and old == c.listen:
-            return
-        self.listening[aid] = c.listen
-        self._heard_by.clear()
-        for cell in {None} if old is None else old:  # (the index: who listens to a cell; None: to every cell)
-            self.by_cell.get(cell, set()).discard(aid)
-        for cell in {None} if c.listen is None else c.listen:
-            self.by_cell.setdefault(cell, set()).add(aid)
-        self.replay += [(aid, tag, item) for tag, item in self.sets.values()
-                         if self._hears(c.listen, self._cell(item[0])) and not self._hears(old, self._cell(item[0]))]
-        want: set[Cell | None] = {cell for cell, heard_by in self.by_cell.items() if heard_by}  # (every listened cell)
-        if None in want:
-            want |= self.warm
-        for cell in want - self.cell_subs.keys():
-            tag, k = ("cell", cell), self.keys
-            self.cell_subs[cell] = (
-                self.z.declare_subscriber(k.host_beacons(cell, None), self.inbox.handler(tag, rows=True),
-                                          allowed_origin=self.locality),
-                ext.declare_advanced_subscriber(self.z, k.cell_agents(cell, "obstacles"), self.inbox.handler(tag),
-                                                allowed_origin=self.locality,
-                                                history=ext.HistoryConfig(detect_late_publishers=True)))
-        for cell in self.cell_subs.keys() - want:
-            for sub in self.cell_subs.pop(cell):
-                sub.undeclare()
-
-    def _listeners(self, cell: Cell | None) -> list[int]:
-        """The running agents that listen to `cell` (a valid one; None: nobody but those listening to every cell),
-        in id order."""
-        heard_by = self._heard_by.get(cell)
-        if heard_by is None:
-            got = self.by_cell.get(cell, set()) if cell is not None else set()
-            heard_by = self._heard_by[cell] = sorted(a for a in got | self.by_cell.get(None, set()) if a in self.active)
-        return heard_by
+        """Agent aid listens to c.listen from now on (agent/listening.py); the newest set of each agent publishing in
+        the cells it did not hear yet is replayed to it (what its own advanced subscriber's history would bring)."""
+        changed, old = self.cells.listen(aid, c.listen)
+        if changed:
+            hears = self.cells.hears
+            self.loop.newly_heard(aid, lambda cell: hears(old, cell), lambda cell: hears(c.listen, cell),
+                                  self.cells.cell_of)
 
     def _others(self, sender: int, key: str) -> list[int]:
         """Whom a co-hosted agent's beacon (under its handover label) or set (under its key) is for: the running
         agents that listen to its cell, but not its sender."""
         cell = handover_cell(key)
-        return [a for a in self._listeners(self._cell(key) if cell is None else cell) if a != sender]
-
-    @staticmethod
-    def _hears(listen: frozenset[Cell] | None, cell: Cell | None) -> bool:
-        return listen is None or cell in listen
-
-    def _cell(self, key: str) -> Cell | None:
-        """The cell a beacon or obstacle set was published in (None: a key without a valid one)."""
-        try:
-            return self.keys.parsed(key).cell
-        except WireError:
-            return None
+        return [a for a in self.cells.listeners(self.cells.cell_of(key) if cell is None else cell) if a != sender]
 
     # ---------------------------------------------------------------------------------------- input
 
@@ -185,10 +128,9 @@ class AgentHost:
         for the agents that listen to the cell it was published in, whichever of the host's subscriptions it
         came through (one just replaced, or every cell's), once."""
         batches: dict[int, list[Input]] = {aid: [] for aid in self.active}
-        pending, self.replay = self.replay, []
-        for aid, tag, item in pending:
+        replay, local = self.loop.take()
+        for aid, tag, item in replay:
             self._deliver(tag, item, batches, aid)
-        local, self.local = self.local, []
         for tag, item, sent in local:
             self._deliver(tag, item, batches, None, sent)
         seen: set[tuple[str, bytes, str]] = set()
@@ -225,8 +167,8 @@ class AgentHost:
         elif tag[0] == "local":  # a co-hosted agent's: for the others that hear its cell
             who = self._others(tag[1], key)
         else:  # (a key with no valid cell: those the subscription it came through was for, to count it)
-            cell = self._cell(key)
-            who = self._listeners(tag[1] if cell is None else cell)
+            cell = self.cells.cell_of(key)
+            who = self.cells.listeners(tag[1] if cell is None else cell)
         if only is not None:
             who = [a for a in who if a == only]
         if not who:
@@ -234,7 +176,7 @@ class AgentHost:
         # A co-hosted agent's own beacon or set, handed over in the process: ours, believed without admission
         # (the tag is the host's own: no sample from zenoh carries it, whatever source it is stamped with).
         cohosted = tag[0] == "local"
-        if source == self.source and not cohosted and self._echo(key, payload):
+        if source == self.source and not cohosted and self.loop.echo(key, payload):
             return  # our own set from our publisher's cache: the others had it at its put (or have it replayed)
         if key.endswith("/obstacles") and not cohosted:  # (its size, before decoding: once for all)
             too_big = self.gate.adm.check_set_size(len(payload), source, key)
@@ -280,21 +222,15 @@ class AgentHost:
                 self.active[aid].gate.clocked(m)
         # Kept for an agent that starts listening to its cell later: a set admitted (a co-hosted agent's own is kept
         # by `act`), never one that was refused (it would stand in for the genuine one).
-        elif isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known and self._cell(key) is not None:
-            self.sets[m.id] = (tag, item)
+        elif isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known:
+            if self.cells.cell_of(key) is not None:
+                self.loop.admitted(m.id, tag, item)
 
     def _refuse(self, who: list[int], bad: Intrusion) -> None:
         """A sample admission refused: counted (and logged) by each agent it was for."""
         now = time.monotonic()
         for aid in who:
             self.active[aid].gate.refuse(bad, now)
-
-    def _echo(self, key: str, payload: bytes) -> bool:
-        """A set a hosted agent put (one of its ECHOES newest), as its publisher's cache held it: a cell subscription
-        declared after the put (an agent that starts listening to the publisher's cell) queries that cache, ours
-        included, and the reply may leave before the agent's next put and arrive after it. Anything else with our
-        session's id as its source (anyone can stamp it) goes through admission as before."""
-        return any(k == key and p == payload for puts in self.cached.values() for k, p in puts)
 
     # ------------------------------------------------------------------------------ the runtime's port
 
@@ -317,13 +253,7 @@ class AgentHost:
     def pending(self) -> dict[int, int]:
         """How many inputs each hosted agent's next batch holds already: what co-hosted agents published for it
         (their beacons and sets in its cells), the sets replayed to it."""
-        held: dict[int, int] = {}
-        for aid, _tag, _item in self.replay:
-            held[aid] = held.get(aid, 0) + 1
-        for tag, item, _sent in self.local:
-            for aid in self._others(tag[1], item[0]):
-                held[aid] = held.get(aid, 0) + 1
-        return held
+        return self.loop.pending(self._others)
 
     def answers(self, now_s: float) -> dict[int, list[Input]]:
         """The law of every plan the hosted agents returned in this round, computed at once for those of one tick
@@ -348,10 +278,9 @@ class AgentHost:
         link = self.links[aid]
         link.report(final=True)
         del self.active[aid]
-        self._heard_by.clear()
+        self.cells.changed()
         if code.code != 0 and self.active:  # it stops; its co-hosted agents go on
-            self.listen(aid, Cells(link.home or (0, 0), frozenset()))
-            self.listening.pop(aid)
+            self.cells.forget(aid)
             link.close()
 
     def act(self, aid: int, out: Any, now_s: float) -> bool:
@@ -371,13 +300,8 @@ class AgentHost:
             if isinstance(out, wire.Cmd):
                 self._flush()
             put = self.links[aid].publish(out)
-        if put is not None and isinstance(out, wire.ObstacleSet):
-            self.cached.setdefault(aid, deque(maxlen=ECHOES)).append(put)
-        if put is not None and len(self.links) > 1:
-            item = (put[0], put[1], "PUT", self.source, now_s)
-            self.local.append((("local", aid), item, out if isinstance(out, wire.Beacon) else None))
-            if isinstance(out, wire.ObstacleSet):
-                self.sets[aid] = (("local", aid), item)  # (for an agent that starts listening to its cell later)
+        if put is not None and isinstance(out, wire.Beacon | wire.ObstacleSet):
+            self.loop.published(aid, put, out, now_s)
         return False
 
     def _flush(self) -> None:
@@ -391,8 +315,6 @@ class AgentHost:
         for link in self.links.values():
             link.close()
         self.token.undeclare()
-        for subs in self.cell_subs.values():
-            for sub in subs:
-                sub.undeclare()
+        self.cells.close()
         for sub in self.subs:
             sub.undeclare()

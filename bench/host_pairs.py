@@ -70,7 +70,7 @@ def measure(z: zenoh.Session, n: int, k: int, reps: int) -> tuple[int, int, floa
         for a, link in links.items():
             start = link.node.nb.start[a]
             host.listen(a, Cells(grid.cell_of(*start), grid.listen_cells(*start)))
-        heard = set().union(*(c for c in host.listening.values() if c is not None))
+        heard = set().union(*(c for c in host.cells.listening.values() if c is not None))
         best_route = best_all = math.inf
         pairs = beacons = 0
         starts = s.starts

@@ -158,14 +158,14 @@ def test_only_sets_of_the_scenarios_agents_in_a_cell_are_kept_for_replay(host: A
     stranger = obstacle_set(99, A)
     bad_key = (f"{KEYS.prefix}/cell/x_y/agent/3/obstacles", obstacle_set(3, A)[1], "PUT", PEER, 0.0)
     route(host, [(("cell", A), stranger), (("cell", A), bad_key)])
-    assert host.sets == {}
+    assert host.loop.sets == {}
     assert host.links[1].gate.count == 1  # (agent 99 is no agent of the scenario: refused)
 
 
 def test_what_the_host_does_with_its_nodes_outputs(host: AgentHost) -> None:
     assert host.act(1, Reconnect(), 0.0) is True  # a new session for the process
-    assert host.act(1, Cells(A, frozenset({A, B})), 0.0) is False and host.listening[1] == frozenset({A, B})
-    assert host.act(1, Cells(A, frozenset({A})), 0.0) is False and host.listening[1] == frozenset({A})
+    assert host.act(1, Cells(A, frozenset({A, B})), 0.0) is False and host.cells.listening[1] == frozenset({A, B})
+    assert host.act(1, Cells(A, frozenset({A})), 0.0) is False and host.cells.listening[1] == frozenset({A})
     host.listen(2, Cells(B, frozenset({A})))
     assert host.act(1, wire.Beacon(1, 0, 0.0, 1.0, 1.0, 2.0), 0.0) is False
     got = route(host, [])

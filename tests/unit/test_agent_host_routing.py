@@ -72,13 +72,14 @@ def ids(batch: list[Any]) -> list[tuple[str, int]]:
 
 
 def test_a_beacon_goes_to_those_listening_to_its_cell_once_whichever_subscription(host: AgentHost) -> None:
-    assert host.listening == {1: None, 2: None}  # before their first command: every cell
+    assert host.cells.listening == {1: None, 2: None}  # before their first command: every cell
     # (and the cells around their starts, declared now rather than on the mission's first tick)
-    assert host.warm and set(host.cell_subs) == {None} | host.warm and host.locality == zenoh.Locality.REMOTE
+    cells = host.cells
+    assert cells.warm and set(cells.subs) == {None} | cells.warm and cells.locality == zenoh.Locality.REMOTE
     host.listen(1, Cells(A, frozenset({A})))
-    assert set(host.cell_subs) == {None, A} | host.warm  # (agent 2 still listens to every cell)
+    assert set(host.cells.subs) == {None, A} | host.cells.warm  # (agent 2 still listens to every cell)
     host.listen(2, Cells(B, frozenset({B})))
-    assert set(host.cell_subs) == {A, B}  # the every-cell subscription went once nobody needed it, and the warm
+    assert set(host.cells.subs) == {A, B}  # the every-cell subscription went once nobody needed it, and the warm
     got = host.route([(("cell", A), beacon(3, A)), (("cell", B), beacon(4, B)), (("cell", B), beacon(5, C))])
     assert ids(got[1]) == [("Beacon", 3)] and ids(got[2]) == [("Beacon", 4)]  # 5's cell: nobody's
     # The same sample through a subscription just replaced (every cell's) and through its cell's: once, to 1.
@@ -133,11 +134,11 @@ def test_a_co_hosted_agents_beacon_reaches_the_others_as_the_message_it_put(host
     host.listen(2, Cells(A, frozenset({A})))
     sent = at_start(1)
     host.act(1, sent, 0.0)
-    [(tag, (key, _payload, *_rest), message)] = host.local
+    [(tag, (key, _payload, *_rest), message)] = host.loop.local
     assert tag == ("local", 1) and key == handover_label(A, 1) and message is sent
     assert host.out.pending == {A: {1: sent}}  # (on the wire in the round's batch of cell A)
     got = host.route([])
-    assert got[1] == [] and len(got[2]) == 1 and got[2][0] is sent and host.local == []
+    assert got[1] == [] and len(got[2]) == 1 and got[2][0] is sent and host.loop.local == []
 
 
 def test_a_co_hosted_agents_set_is_replayed_as_its_own_not_refused(host: AgentHost) -> None:
@@ -170,7 +171,7 @@ def test_a_set_forged_in_a_co_hosted_agents_name_never_stands_in_for_its_genuine
     made_up = wire.ObstacleSet(3, 0, 9, {"no-such-obstacle": ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))})
     host.route([(("cell", A), (KEYS.obstacles(A, 3), wire.obstacles_to_wire(made_up), "PUT", PEER, 0.0))])
     assert host.links[1].gate.count == 1
-    assert wire.obstacles_from_wire(host.sets[3][1][1], 3).rev == 1
+    assert wire.obstacles_from_wire(host.loop.sets[3][1][1], 3).rev == 1
 
 
 def test_a_remote_sample_is_judged_once_for_every_hosted_agent_it_is_for(host: AgentHost,

@@ -142,10 +142,10 @@ def test_an_agent_that_fails_stops_listening_and_its_token_goes_one_that_ends_st
                  if r.ok is not None]
         assert hosts == [KEYS.alive_host((1, 2, 3))]  # whom the host speaks for, in its one token
         host.exited(1, Exit(1, "failed"), 0.0)  # it stops; agents 2 and 3 go on
-        assert 1 not in host.listening and 1 not in host.by_cell.get(A, set()) and A not in host.cell_subs
+        assert 1 not in host.cells.listening and 1 not in host.cells.by_cell.get(A, set()) and A not in host.cells.subs
         assert alive_tokens(host) == {2, 3}
         host.exited(2, Exit(0, "mission over"), 0.0)  # ended: its token stays until the process closes the host
-        assert host.listening[2] == frozenset({B}) and B in host.cell_subs and alive_tokens(host) == {2, 3}
+        assert host.cells.listening[2] == frozenset({B}) and B in host.cells.subs and alive_tokens(host) == {2, 3}
         assert route(host, [(("cell", B), beacon(4, B))]).keys() == {3}
     finally:
         host.close()
