@@ -222,9 +222,9 @@ class AgentHost:
                 self.active[aid].gate.clocked(m)
         # Kept for an agent that starts listening to its cell later: a set admitted (a co-hosted agent's own is kept
         # by `act`), never one that was refused (it would stand in for the genuine one).
-        elif isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known:
-            if self.cells.cell_of(key) is not None:
-                self.loop.admitted(m.id, tag, item)
+        elif (isinstance(m, wire.ObstacleSet) and only is None and m.id in self.known
+              and self.cells.cell_of(key) is not None):
+            self.loop.admitted(m.id, tag, item)
 
     def _refuse(self, who: list[int], bad: Intrusion) -> None:
         """A sample admission refused: counted (and logged) by each agent it was for."""

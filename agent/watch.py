@@ -29,7 +29,7 @@ class Watched(Protocol):
     last_clock: float
     told_waiting: float
     clock_in: wire.Clock | None
-    _out: list[Output]
+    out: list[Output]
 
     def waiting_for(self) -> str: ...
 
@@ -41,11 +41,11 @@ def watch(node: Watched, now: float) -> None:
         node.started, node.last_act, node.acted = True, now, now
     if node.started and now - node.last_clock > t.world_silence_s:
         log.error("agent %d: no clock from the world for %.0f s", node.id, t.world_silence_s)
-        node._out.append(Exit(3))
+        node.out.append(Exit(3))
         return
     if node.started and (now - node.last_act > (t.resubscribe_world_gone_s if node.world_gone else t.resubscribe_s)
                          or now - node.acted > t.resubscribe_world_gone_s):
-        node._out.append(Reconnect())
+        node.out.append(Reconnect())
         return
     if node.started and now - node.last_act > t.waiting_log_s and now > node.told_waiting + t.waiting_log_s:
         node.told_waiting = now
@@ -53,4 +53,4 @@ def watch(node: Watched, now: float) -> None:
     last = node.clock_in  # an end stands once the world's token went after it, or no clock came for a while (a
     node.ended |= last is not None and last.end and (node.world_gone or now - node.last_clock > t.end_confirm_s)
     if node.ended:  # later clock from the world, whatever tick the end claimed, says it was not the world's)
-        node._out.append(Exit(0))
+        node.out.append(Exit(0))
