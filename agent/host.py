@@ -42,10 +42,9 @@ from agent.loopback import Loopback
 from agent.messages import Input, Law, Reconnect
 from agent.neighbours import Cells
 from agent.robot_io import HostKeys, KeysRobot, take_states
-from agent.tagged_inbox import ALL, Tag, TaggedInbox
 from reconswarm.net.node import Exit, Invalid
 from reconswarm.net.runtime import trace
-from reconswarm.net.runtime.inbox import Item
+from reconswarm.net.runtime.inbox import Inbox, Item, Tag
 from reconswarm.net.runtime.lifecycle import Stopper
 from reconswarm.net.runtime.runtime import Runtime
 from reconswarm.net.trust.admission import Intrusion
@@ -57,6 +56,9 @@ from reconswarm.net.wire.keys import Keys
 
 log = logging.getLogger("reconswarm.agent")
 RECONNECT = -1  # AgentHost.run's answer when the session must be opened again
+# The subscription a sample came through (its tag in the inbox): ALL, ("own", agent id), ("cell", cell or None),
+# robot_io.STATES; and ("local", agent id) for what a co-hosted agent published (agent/loopback.py)
+ALL: Tag = ("all", None)  # for every hosted agent: the clock, liveliness
 ALONE = (Invalid, *OWN)  # what each agent's own link takes for itself (a malformed sample, a state or scan)
 
 
@@ -64,7 +66,7 @@ class AgentHost:
     """The session's subscriptions around the hosted agents' links; `run` is the process's loop."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, links: dict[int, HostedAgent],
-                 inbox: TaggedInbox) -> None:
+                 inbox: Inbox) -> None:
         self.z, self.keys, self.links, self.inbox = session, keys, links, inbox
         self.active = dict(links)  # the agents still running (one that exited leaves this)
         self.source = str(session.info.zid())  # the source of what co-hosted agents hand each other

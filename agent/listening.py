@@ -17,7 +17,7 @@ from typing import Any
 import zenoh
 from zenoh import ext
 
-from agent.tagged_inbox import TaggedInbox
+from reconswarm.net.runtime.inbox import Inbox
 from reconswarm.net.wire.cells import Cell
 from reconswarm.net.wire.keys import Keys, WireError
 
@@ -27,7 +27,7 @@ Listen = frozenset[Cell] | None  # the cells an agent listens to (None: every ce
 class CellListening:
     """Who of the hosted agents listens to which cell, and the host's subscriptions that follow from it."""
 
-    def __init__(self, session: zenoh.Session, keys: Keys, inbox: TaggedInbox, warm: frozenset[Cell],
+    def __init__(self, session: zenoh.Session, keys: Keys, inbox: Inbox, warm: frozenset[Cell],
                  active: Mapping[int, Any]) -> None:
         self.z, self.keys, self.inbox, self.warm = session, keys, inbox, warm
         self.active = active  # the hosted agents still running (the host's: one that exits leaves it)

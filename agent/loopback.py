@@ -19,8 +19,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable
 
-from agent.tagged_inbox import Tag
-from reconswarm.net.runtime.inbox import Item
+from reconswarm.net.runtime.inbox import Item, Tag
 from reconswarm.net.wire import wire
 from reconswarm.net.wire.cells import Cell
 

@@ -19,7 +19,7 @@ that meets the disk of radius reach + 3 V dt around its head point, V the scenar
   The beacons of k-1 in when the state of k comes are all the agent may ever hear: a peer puts its beacon of
   k-1 before its command of k-1, which the world waits for before it publishes any state of k, so through a
   client's one link to its router the beacon comes first, and the host hands samples over in the link's order
-  (agent/tagged_inbox.py). A beacon of k-1 not in by then was put in a cell the agent does not hear.
+  (net/runtime/inbox.py `ordered`). A beacon of k-1 not in by then was put in a cell the agent does not hear.
 - a beacon of tick k from a peer outside the wait set but within reach of p_i(k) means the speed bound
   was violated (or a beacon of k-1 came after the state of k: samples from peers that reach the agent over
   links of their own, zenoh's peer mode, keep no order with the world's): whether it was in when the agent

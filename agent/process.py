@@ -14,13 +14,13 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from agent.host import RECONNECT, AgentHost, TaggedInbox
+from agent.host import RECONNECT, AgentHost
 from agent.hosted import HostedAgent
 from agent.node import AgentNode
 from agent.robot_io import keys_robot
 from agent.ros2_io import ros2_robot
 from reconswarm.errors import BadInput
-from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.inbox import Inbox, Rejections
 from reconswarm.net.runtime.session import ZenohOptions, serving
 from reconswarm.net.timing import TIMING, Timing
 from reconswarm.net.trust.admission import Admission
@@ -93,7 +93,7 @@ def run(cfg: AgentConfig) -> int:
     while True:
         with serving(cfg.zenoh, who, cfg.timing.session_open_timeout_s, zid) as (session, stop):
             zid = str(session.info.zid())
-            inbox = TaggedInbox()
+            inbox = Inbox(ordered=True)  # (the link's order: see agent/neighbours.py)
             own = zid if len(ids) > 1 else None  # co-hosted agents hear us through it
             links = {a: HostedAgent(nodes[a], keys, session, rejs[a], gates[a], robot, own,
                                   inbox.callback(("own", a), urgent=True)) for a in ids}

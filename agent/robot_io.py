@@ -19,10 +19,9 @@ from typing import Any, Protocol
 import zenoh
 
 from agent.messages import Input, Received
-from agent.tagged_inbox import Tag
 from reconswarm.net.node import Invalid
 from reconswarm.net.runtime import trace
-from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.inbox import Rejections, Tag
 from reconswarm.net.timing import Timing
 from reconswarm.net.trust.admission import Intrusion, IntrusionKind
 from reconswarm.net.trust.gate import Gate
@@ -66,7 +65,7 @@ class RobotIO(Protocol):
 RobotFactory = Callable[[zenoh.Session, Keys, int, float, float, Timing, Callable[[Any], None]], RobotIO]
 
 
-STATES: Tag = ("states", None)  # the tag of the host's state batches in its inbox (agent/tagged_inbox.py)
+STATES: Tag = ("states", None)  # the tag of the host's state batches in its inbox (net/runtime/inbox.py)
 
 
 class HostKeys:

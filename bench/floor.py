@@ -92,7 +92,6 @@ def agent_main(port: int, run: str, s: Scenario, ids: list[int], pattern: str, s
     what a co-hosted agent publishes is counted by the others in the process, not sent back through zenoh."""
     import zenoh
 
-    from agent.tagged_inbox import TaggedInbox  # the agent processes' own inbox: the same wake-ups
 
     keys, pts, dt = Keys(run), head_points(s), s.meta.dt_s
     radius = {a: float(s.radii[s.agent_index(a)]) for a in ids}
@@ -100,7 +99,7 @@ def agent_main(port: int, run: str, s: Scenario, ids: list[int], pattern: str, s
     n_src = {a: fp.sources(s, a, per_process) for a in ids}  # (batch: the samples a tick brings each agent)
     z = session(port)
     block, remote = zenoh.CongestionControl.BLOCK, zenoh.Locality.REMOTE
-    inbox = TaggedInbox()
+    inbox = Inbox(ordered=True)
     grid = CellGrid.for_scenario(s)
     home, hid = {a: grid.cell_of(*pts[a]) for a in ids}, fp.host_of(ids[0], per_process)
     if pattern == "batch":
@@ -220,7 +219,7 @@ def world_main(port: int, run: str, s: Scenario, start: int, end: int) -> int:
         while len(up) < n:  # the readiness barrier: every agent's token (declared after its subscribers)
             if time.monotonic() > deadline:
                 raise RuntimeError(f"world: only {len(up)} of {n} agents came up")
-            for key, _p, kind, _src, _at in inbox.take(n - len(up), 0.5):
+            for _tag, (key, _p, kind, _src, _at) in inbox.take(n - len(up), 0.5):
                 what, aid, _leaf = keys.parse(key)
                 if what == "alive" and aid is not None and kind == "PUT":
                     up.add(aid)
@@ -245,7 +244,7 @@ def world_main(port: int, run: str, s: Scenario, start: int, end: int) -> int:
             while len(got) < n:
                 if time.monotonic() - last > STALL_S:
                     raise RuntimeError(f"world: tick {k}: commands from {len(got)} of {n} agents")
-                for key, payload, _kind, _src, _at in inbox.take(n - len(got), 1.0):
+                for _tag, (key, payload, _kind, _src, _at) in inbox.take(n - len(got), 1.0):
                     if key.endswith("/cmd"):
                         m = msgpack.unpackb(payload, raw=False)
                         if m["k"] == k:

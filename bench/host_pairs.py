@@ -34,11 +34,11 @@ import zenoh
 from _common import command_line, machine
 from grid import grid_scenario
 
-from agent.host import AgentHost, TaggedInbox
+from agent.host import AgentHost
 from agent.hosted import HostedAgent
 from agent.neighbours import Cells
 from agent.node import AgentNode
-from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.inbox import Inbox, Rejections
 from reconswarm.net.runtime.session import ZenohOptions
 from reconswarm.net.trust.admission import Admission
 from reconswarm.net.trust.gate import Gate
@@ -64,7 +64,7 @@ def measure(z: zenoh.Session, n: int, k: int, reps: int) -> tuple[int, int, floa
     zid = str(z.info.zid())
     links = {a: HostedAgent(AgentNode(s, a, 0.0), keys, z, Rejections(f"agent {a}"), gates[a], None, zid)
              for a in ids}
-    host = AgentHost(z, keys, links, TaggedInbox())
+    host = AgentHost(z, keys, links, Inbox(ordered=True))
     try:
         grid = CellGrid.for_scenario(s)
         for a, link in links.items():

@@ -71,7 +71,7 @@ CORE: dict[str, tuple[str, ...]] = {
     "reconswarm/net/wire/cells.py": ("test_cells.py", "test_cells_cases.py", "test_neighbours.py",
                                      "test_robots_cases.py"),
     "agent/host.py": ("test_agent_host_routing.py", "test_agent_host_cases.py", "test_agent_host_sessions.py",
-                      "test_tagged_inbox.py", "test_runtime.py", "test_law_batched.py"),
+                      "test_inbox_urgent.py", "test_runtime.py", "test_law_batched.py"),
     "agent/ros2_io.py": ("test_ros2_plan_age.py", "test_agent_host_sessions.py", "test_ros2_admission.py"),
     "simworld/ros2_io.py": ("test_ros2_plan_age.py", "test_ros2_robots_live.py", "test_ros2.py", "test_robots_reach.py",
                             "test_ros2_admission.py"),

@@ -30,7 +30,7 @@ from monitor.node import MonitorNode
 from monitor.rows import Close, Commit, Resume, write
 from reconswarm.errors import ProcessFailure
 from reconswarm.net.node import Exit, Invalid, Token
-from reconswarm.net.runtime.inbox import Inbox, Item, Rejections
+from reconswarm.net.runtime.inbox import Inbox, Item, Rejections, Tag
 from reconswarm.net.runtime.lifecycle import Stopper
 from reconswarm.net.runtime.runtime import Runtime
 from reconswarm.net.runtime.session import Member, ZenohOptions, serving
@@ -96,8 +96,8 @@ class MonitorAdapter(Member):
 
     # ------------------------------------------------------------------------------------ route
 
-    def route(self, items: Sequence[Item], now_s: float) -> dict[int, list[Input]]:
-        return {0: [m for m in (self.decode(*item) for item in items) if m is not None]}
+    def route(self, items: Sequence[tuple[Tag, Item]], now_s: float) -> dict[int, list[Input]]:
+        return {0: [m for m in (self.decode(*item) for _tag, item in items) if m is not None]}
 
     def decode(self, key: str, payload: bytes, kind: str, source: str, at_s: float) -> Input | None:
         """A sample as the node's input: admitted by the gate (else None, counted there), or Invalid."""

@@ -24,7 +24,7 @@ from reconswarm.errors import BadInput
 from reconswarm.net.node import Exit, Invalid
 from reconswarm.net.ros2 import ros2
 from reconswarm.net.runtime import trace
-from reconswarm.net.runtime.inbox import Inbox, Item, Rejections
+from reconswarm.net.runtime.inbox import Inbox, Item, Rejections, Tag
 from reconswarm.net.runtime.runtime import Runtime
 from reconswarm.net.runtime.session import Member, ZenohOptions, serving
 from reconswarm.net.timing import TIMING
@@ -86,10 +86,10 @@ class WorldAdapter(Member):
 
     # ------------------------------------------------------------------------------------------ in
 
-    def route(self, items: Sequence[Item], now_s: float) -> dict[int, list[WorldInput]]:
+    def route(self, items: Sequence[tuple[Tag, Item]], now_s: float) -> dict[int, list[WorldInput]]:
         """The node's inputs from a batch of samples, in order of arrival."""
         got: list[WorldInput] = [self._invalid(key, reason) for key, reason in self.io.dropped()]
-        for item in items:
+        for _tag, item in items:
             m = self.decode(*item)
             if isinstance(m, list):
                 got += m
@@ -159,7 +159,7 @@ def robot_io(ros2_domain_id: int | None) -> RobotIOFactory:
     def make(session: zenoh.Session, keys: Keys, node: WorldNode, gate: Gate, inbox: Inbox) -> RobotIO:
         if not isinstance(node.robots, Ros2Robots):
             raise TypeError("ROS 2 mode: the world's plant is a robot base (Ros2Robots)")
-        return Ros2IO(session, keys, gate, ros2_domain_id, node.robots, inbox.callback,
+        return Ros2IO(session, keys, gate, ros2_domain_id, node.robots, inbox.callback(),
                       node.s.meta.dt_s / node.speed, node.timing)
 
     return make

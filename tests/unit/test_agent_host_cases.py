@@ -15,14 +15,14 @@ import pytest
 import zenoh
 
 from agent.brain import Plan, commands
-from agent.host import ALL, AgentHost, TaggedInbox
+from agent.host import ALL, AgentHost
 from agent.hosted import HostedAgent
 from agent.messages import Law, Reconnect
 from agent.neighbours import Cells
 from agent.node import AgentNode
 from agent.robot_io import STATES
 from reconswarm.net.node import Exit, Role, Token
-from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.inbox import Inbox, Rejections
 from reconswarm.net.runtime.session import ZenohOptions
 from reconswarm.net.trust.gate import Gate
 from reconswarm.net.wire import wire
@@ -41,7 +41,7 @@ Item = tuple[str, bytes, str, str, float]
 
 
 def make_host(z: Any, ids: tuple[int, ...] = (1, 2)) -> AgentHost:
-    inbox, zid = TaggedInbox(), str(z.info.zid())
+    inbox, zid = Inbox(ordered=True), str(z.info.zid())
     links = {a: HostedAgent(AgentNode(S, a, 0.0), KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"), None, zid)
              for a in ids}
     return AgentHost(z, KEYS, links, inbox)

@@ -1,4 +1,5 @@
-"""An agent host hands its nodes what zenoh brought in the order it came (agent/host.py, agent/tagged_inbox.py).
+"""An agent host hands its nodes what zenoh brought in the order it came (agent/host.py, its inbox:
+reconswarm/net/runtime/inbox.py `ordered`).
 
 Lockstep's wait set for tick k is built from the peers' beacons of tick k-1 that are in when the agent's state of
 k comes (agent/neighbours.py). Each of those beacons is put before its agent's command of k-1, which the world

@@ -13,12 +13,12 @@ import pytest
 import zenoh
 
 from agent.beacons import handover_label
-from agent.host import AgentHost, TaggedInbox
+from agent.host import AgentHost
 from agent.hosted import HostedAgent
 from agent.neighbours import Cells
 from agent.node import AgentNode
 from reconswarm.net.node import Exit, Invalid
-from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.inbox import Inbox, Rejections
 from reconswarm.net.runtime.session import ZenohOptions
 from reconswarm.net.trust.gate import Gate
 from reconswarm.net.wire import wire
@@ -37,7 +37,7 @@ A, B, C = (0, 0), (5, 5), (9, 9)  # cells
 @pytest.fixture
 def host() -> Iterator[AgentHost]:
     z = zenoh.open(ZenohOptions((), (f"tcp/127.0.0.1:{free_port()}",), "peer").config())
-    inbox = TaggedInbox()
+    inbox = Inbox(ordered=True)
     zid = str(z.info.zid())
     links = {a: HostedAgent(AgentNode(S, a, 0.0), KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"), None, zid)
              for a in (1, 2)}

@@ -14,7 +14,7 @@ from typing import Any
 import zenoh
 from zenoh import ext
 
-from agent.host import ALL, AgentHost, TaggedInbox
+from agent.host import ALL, AgentHost
 from agent.hosted import HostedAgent
 from agent.neighbours import Cells
 from agent.node import AgentNode
@@ -22,7 +22,7 @@ from agent.robot_io import STATES
 from agent.ros2_io import AgentRos2, ros2_robot
 from reconswarm.net.node import Exit
 from reconswarm.net.ros2 import ros2_graph as graph
-from reconswarm.net.runtime.inbox import Rejections
+from reconswarm.net.runtime.inbox import Inbox, Rejections
 from reconswarm.net.runtime.session import ZenohOptions
 from reconswarm.net.trust.gate import Gate
 from reconswarm.net.wire import wire
@@ -51,7 +51,7 @@ def two_sessions() -> Iterator[tuple[Any, Any]]:
         z.close()
 
 
-def take_own_tokens(inbox: TaggedInbox, ids: tuple[int, ...]) -> None:
+def take_own_tokens(inbox: Inbox, ids: tuple[int, ...]) -> None:
     """Take everything waiting until the hosted agents' own tokens were among it (the host's liveliness subscription
     hears them first), so that what the test puts next is all the inbox holds."""
     early: set[str] = set()
@@ -184,7 +184,7 @@ def test_an_agent_that_fails_sends_its_final_report_at_once() -> None:
 
 def test_in_ros2_mode_an_agent_takes_its_scan_not_its_state_and_odometry_without_attachment_counts() -> None:
     with two_sessions() as (z, out):
-        inbox = TaggedInbox()
+        inbox = Inbox(ordered=True)
         link = HostedAgent(AgentNode(S, 1, 0.0), KEYS, z, Rejections("agent 1"), Gate(S, "agent-1"), ros2_robot(0),
                            None, inbox.callback(("own", 1), urgent=True))
         h = AgentHost(z, KEYS, {1: link}, inbox)
@@ -272,7 +272,7 @@ def test_in_ros2_mode_agents_hosted_on_one_session_are_ros2_nodes_with_ids_of_th
     """rmw_zenoh counts ids within a context (one session), nodes and their entities alike: a ROS 2 tool's graph
     tells two nodes of one session apart by their node ids, and each entity by its id."""
     z = host_session()
-    inbox = TaggedInbox()
+    inbox = Inbox(ordered=True)
     zid = str(z.info.zid())
     links = {a: HostedAgent(AgentNode(S, a, 0.0), KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"),
                             ros2_robot(0), zid, inbox.callback(("own", a), urgent=True)) for a in (1, 2)}

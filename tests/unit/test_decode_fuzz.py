@@ -23,14 +23,14 @@ import zenoh
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from agent.host import ALL, AgentHost, TaggedInbox
+from agent.host import ALL, AgentHost
 from agent.hosted import HostedAgent
 from agent.node import AgentNode
 from agent.robot_io import STATES
 from monitor.node import MonitorNode
 from monitor.process import MonitorAdapter
 from reconswarm.net.node import Invalid, Role, Token
-from reconswarm.net.runtime.inbox import Item, Rejections
+from reconswarm.net.runtime.inbox import Inbox, Item, Rejections
 from reconswarm.net.runtime.session import ZenohOptions
 from reconswarm.net.trust.gate import Gate
 from reconswarm.net.wire import wire
@@ -159,7 +159,7 @@ def roles(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Roles]:
     nodes = {a: AgentNode(S, a, t0) for a in HOSTED}
     links = {a: HostedAgent(nodes[a], KEYS, z, Rejections(f"agent {a}"), Gate(S, f"agent-{a}"), None, zid)
              for a in HOSTED}
-    host = AgentHost(z, KEYS, links, TaggedInbox())
+    host = AgentHost(z, KEYS, links, Inbox(ordered=True))
     live = MonitorAdapter(S, RUN, z, writer, None)
     live.serve(View())  # type: ignore[arg-type]
     try:
@@ -214,7 +214,7 @@ def test_any_key_and_payload_is_dropped_and_counted_or_taken_by_every_role(roles
     items: list[Item] = [(key, payload, kind, source, now) for key, payload, kind, source in samples]
     # the world
     before = roles.world.rej.count
-    got_w = roles.world.route(items, now)[0]
+    got_w = roles.world.route([(None, it) for it in items], now)[0]
     _counted(before, roles.world.rej.count, got_w)
     _own_keys(got_w, items)
     roles.world_node.step(got_w, now)
@@ -225,7 +225,7 @@ def test_any_key_and_payload_is_dropped_and_counted_or_taken_by_every_role(roles
     _own_keys(got_m, items)
     roles.monitor_node.step(got_m, now)
     before = roles.live.rej.count
-    got_v = roles.live.route(items, now)[0]
+    got_v = roles.live.route([(None, it) for it in items], now)[0]
     _counted(before, roles.live.rej.count, got_v)
     _own_keys(got_v, items)
     roles.live_node.step(got_v, now)

@@ -128,7 +128,7 @@ def test_the_live_views_sets_are_admitted_or_refused_and_counted_by_the_monitors
     items = [(K.obstacles((0, 0), m.id), wire.obstacles_to_wire(m), "PUT", "s1", 0.0)
              for m in (good, unknown_agent, unknown_obstacle)]
     items.append((K.obstacles((0, 0), A), b"\x00garbage", "PUT", "s1", 0.0))
-    got = port.route(items, 0.0)[0]
+    got = port.route([(None, it) for it in items], 0.0)[0]
     assert view.sets == [good]  # (the view's, never the node's)
     assert port.gate.count == 2  # the unknown agent and the unknown obstacle: the monitor's intrusions
     assert len(got) == 1 and isinstance(got[0], Invalid) and port.rej.count == 1  # the malformed one

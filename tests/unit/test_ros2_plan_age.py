@@ -94,7 +94,7 @@ def _wait(what: Any, n: int) -> list[Any]:
 def test_the_plant_dates_a_cmd_vel_by_its_attachments_source_timestamp() -> None:
     with two_sessions() as (z, out):
         inbox = Inbox()
-        world = Ros2IO(z, Keys("plan-age"), Gate(S, "simworld"), 0, Ros2Robots(S, 0.2), inbox.callback, PERIOD_S)
+        world = Ros2IO(z, Keys("plan-age"), Gate(S, "simworld"), 0, Ros2Robots(S, 0.2), inbox.callback(), PERIOD_S)
         try:
             a = S.agents[0].id
             for k in range(4):  # ticks 0-3, a period apart
@@ -109,7 +109,7 @@ def test_the_plant_dates_a_cmd_vel_by_its_attachments_source_timestamp() -> None
             agent.put(ros2.twist_to_ros(3.0, 0.0), world.published_ns[3] + 200 * MS)  # after what it can plan from
             got = _wait(lambda: inbox.take(1, 0.2), 4)
             dated: list[wire.Cmd | str] = []
-            for key, payload, *_rest in got:
+            for _tag, (key, payload, *_rest) in got:
                 try:
                     dated.append(world.dated(*world.twist(key, payload, 3)))
                 except ros2.Ros2Error as exc:

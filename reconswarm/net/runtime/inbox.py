@@ -1,4 +1,4 @@
-"""Samples from zenoh handed to a process's own loop: the inbox, who sent a sample, rejections.
+"""Samples from zenoh handed to a process's own loop: the inbox (one for every role), who sent a sample, rejections.
 
 Samples are handed from zenoh's callbacks to the process's loop through an `Inbox`: nothing blocks or calls
 zenoh inside a callback; the loop takes them all at once (one wake-up per batch) and decodes them itself.
@@ -11,97 +11,112 @@ import math
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 log = logging.getLogger("reconswarm")
 
 
 Item = tuple[str, bytes, str, str, float]  # key, payload, kind (PUT | DELETE), source (`sample_source`), arrival
+Tag = Any  # the subscription a sample came through, as its process names it (None: a process that needs none)
 
 
 class Inbox:
-    """Samples from zenoh, held raw until the main loop takes them all at once: one wake-up per batch.
+    """Samples from zenoh with the subscription each came through (its tag), held raw until the process's loop takes
+    them all at once: one wake-up per batch. Nothing blocks or calls zenoh in a callback; the loop converts and
+    decodes the batch itself.
 
-    `handler()` gives zenoh a callback (run by zenoh-python in a Python thread of the subscriber's, so zenoh's
-    own threads never wait for the GIL: measured 2-4 % cheaper per agent than running it on zenoh's receiving
-    thread, `indirect=False`, at N = 36); it only appends the sample with its arrival time and, for an urgent
-    subscriber (the tick's trigger) or once `want` samples wait, wakes the loop. The loop converts and
-    decodes the batch itself. Nothing blocks or calls zenoh in the callback."""
+    A take returns once `want` samples are in (a host's batch counts for the rows its attachment says, as the nodes
+    count the messages they wait for), once the urgent samples of `urgent` nodes are in (an agent's state, which
+    starts its tick; the world's states of a tick come in one burst: in keys mode one message per host, counted for
+    the states it carries, in ROS 2 mode one odometry per robot), or `LINGER_S` after the first urgent one (so that
+    one round, not several, takes the burst), or at its timeout.
+
+    ordered: every subscription's callback runs on the thread that received the sample (`indirect=False`), so the
+    samples of all subscriptions come in the order of the session's link (an agent host needs it: a peer's beacon
+    of tick k-1 before the world's state of k, agent/neighbours.py). Otherwise zenoh-python runs each subscription's
+    callbacks on a Python thread of its own, and zenoh's own threads never wait for the GIL (the world, the monitor:
+    measured 2-4 % cheaper per agent at N = 36)."""
 
     samples_in = 0  # over every inbox of the process (for its exit line: benchmarks read them)
     wakeups = 0
     MAX_ROWS = 4096  # the most a batch's attachment may count for
+    LINGER_S = 0.002  # how long the rest of a burst of urgent samples may take after its first
 
-    def __init__(self) -> None:
-        self._samples: deque[tuple[Any, float, int]] = deque()  # (sample, monotonic time it arrived, what it counts)
-        self._lock = threading.Lock()
-        self._count = 0  # what the samples waiting count for: one each, a host's batch its rows (`rows`)
+    def __init__(self, ordered: bool = False) -> None:
+        self.ordered = ordered
+        self._samples: deque[tuple[Tag, Any, float, int, int]] = deque()  # (tag, sample, at, urgent n, counted n)
         self._ready = threading.Event()
         self._want: float = 1
-        self._urgent = False  # an urgent sample came since the last take
+        self._lock = threading.Lock()
+        self._count = 0  # what the samples waiting count for: one each, a batch its rows (`rows`)
 
-    def handler(self, urgent: bool = False, rows: bool = False) -> Any:
-        """A zenoh handler that feeds this inbox (urgent: each sample wakes the loop at once; rows: a host's batch
-        counts for the rows its attachment says, as the node counts the messages it waits for: a host's commands)."""
+    def callback(self, tag: Tag = None, urgent: bool = False, rows: bool = False) -> Callable[[Any], None]:
+        """The function zenoh (or a ROS 2 subscription) calls with each sample of one subscription. urgent: its
+        samples wake the loop (counted for the node of its tag); rows: a host's batch counts for the rows its
+        attachment says (4 bytes, little-endian, 1..MAX_ROWS; a wrong count only wakes the loop early, or at its
+        poll: the payload's own count is what is believed)."""
+        def cb(sample: Any) -> None:
+            n = _rows(sample) if rows else 1
+            with self._lock:
+                self._samples.append((tag, sample, time.monotonic(), n if urgent else 0, n))
+                self._count += n
+                ready = urgent or self._count >= self._want
+            if ready:
+                self._ready.set()
+
+        return cb
+
+    def handler(self, tag: Tag = None, urgent: bool = False, rows: bool = False) -> Any:
+        """A zenoh handler feeding this inbox (see `callback`; on zenoh's receiving thread if `ordered`)."""
         import zenoh
 
-        if urgent:
-            return zenoh.handlers.Callback(self.urgent)
-        return zenoh.handlers.Callback(self.callback_rows if rows else self.callback)
+        return zenoh.handlers.Callback(self.callback(tag, urgent, rows), indirect=not self.ordered)
 
-    def callback(self, sample: Any, n: int = 1) -> None:
-        with self._lock:
-            self._samples.append((sample, time.monotonic(), n))
-            self._count += n
-            ready = self._count >= self._want
-        if ready:
-            self._ready.set()
+    def _urgent(self) -> tuple[int, float]:
+        """How many nodes' urgent samples wait (one per tag of a sample for one agent, `("own", id)`; a batch its
+        rows; an untagged one each), and when the first came (inf: none)."""
+        got = [(at, tag, n) for tag, _s, at, n, _c in list(self._samples) if n]  # (list(): one atomic copy)
+        alone = {tag for _at, tag, _n in got if isinstance(tag, tuple) and tag[0] == "own"}
+        return len(alone) + sum(n for _at, tag, n in got if not (isinstance(tag, tuple) and tag[0] == "own")), min(
+            (at for at, _t, _n in got), default=math.inf)
 
-    def callback_rows(self, sample: Any) -> None:
-        """A batch: counts for its attachment's n (4 bytes, little-endian), 1..MAX_ROWS; a wrong count only wakes the
-        loop early, or at its poll (the payload's own n is what is believed)."""
-        n = 1
-        try:
-            att = sample.attachment
-            if att is not None:
-                n = min(self.MAX_ROWS, max(1, int.from_bytes(att.to_bytes()[:4], "little")))
-        except Exception:  # never raise into zenoh's callback
-            n = 1
-        self.callback(sample, n)
-
-    def urgent(self, sample: Any) -> None:
-        with self._lock:
-            self._samples.append((sample, time.monotonic(), 1))
-            self._count += 1
-        self._urgent = True
-        self._ready.set()
-
-    def take(self, want: int | None, timeout: float | None, urgent: int = 1) -> list[Item]:
-        """Every sample waiting, once an urgent one or `want` of them (None: only an urgent one; a host's batch
-        counts for its rows) are in, or once `timeout` seconds passed (at once if 0). (`urgent`: one is enough
-        here: a process with one node.)"""
+    def take(self, want: int | None, timeout: float | None, urgent: int = 1) -> list[tuple[Tag, Item]]:
+        """Every sample waiting with its tag, once `want` of them (None: only urgent ones) are in, or the urgent
+        samples of `urgent` nodes (or some, `LINGER_S` ago), or once `timeout` seconds passed (at once if 0)."""
         self._want = math.inf if want is None else max(1, want)
-        self._ready.clear()  # (set by samples an earlier take already had, or that were fewer than wanted then)
-        if not self._urgent and self._count < self._want and (timeout is None or timeout > 0):
-            self._ready.wait(timeout)
-        self._urgent = False
-        Inbox.wakeups += 1
-        return self.drain()
-
-    def drain(self) -> list[Item]:
-        """Every sample waiting, without waiting."""
+        end = math.inf if timeout is None else time.monotonic() + timeout
+        while timeout != 0:
+            self._ready.clear()  # (before looking: a sample that comes after the look sets it again)
+            if self._count >= self._want:
+                break
+            states, first = self._urgent()
+            until = min(end, first + self.LINGER_S)
+            now = time.monotonic()
+            if states >= max(1, urgent) or now >= until:
+                break
+            self._ready.wait(None if until == math.inf else until - now)
+        if timeout != 0:  # (a round that only hands over what co-hosted agents published does not count)
+            Inbox.wakeups += 1
+        with self._lock:
+            got, self._count = list(self._samples), 0
+            self._samples.clear()
         out = []
-        while True:
-            with self._lock:
-                if not self._samples:
-                    break
-                sample, at_s, n = self._samples.popleft()
-                self._count -= n
-            item = to_item(sample, at_s)
+        for tag, sample, at, _u, _n in got:
+            item = to_item(sample, at)
             if item is not None:
-                out.append(item)
+                out.append((tag, item))
         Inbox.samples_in += len(out)
         return out
+
+
+def _rows(sample: Any) -> int:
+    """What a batch counts for: its attachment's row count, 1..MAX_ROWS (1 without a sane one)."""
+    try:
+        att = sample.attachment
+        return 1 if att is None else min(Inbox.MAX_ROWS, max(1, int.from_bytes(att.to_bytes()[:4], "little")))
+    except Exception:  # never raise into zenoh's callback
+        return 1
 
 
 def to_item(sample: Any, at_s: float) -> Item | None:

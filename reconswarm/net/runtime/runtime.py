@@ -38,8 +38,7 @@ from reconswarm.net.runtime.uplink import LinkChange, Uplink
 class Batches(Protocol):
     """An inbox: `take` every sample waiting once `want` of them (None: only urgent ones) are in, `urgent` urgent
     ones came (from as many nodes; an inbox may go on with fewer after a short while), or `timeout` seconds
-    passed (net/runtime/inbox.Inbox; agent/host.TaggedInbox, which tags each sample with the subscription it came
-    through)."""
+    passed (net/runtime/inbox.Inbox: each sample with the subscription it came through)."""
 
     def take(self, want: int | None, timeout: float | None, urgent: int = 1) -> Sequence[Any]: ...
 

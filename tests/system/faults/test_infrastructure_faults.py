@@ -48,7 +48,7 @@ def test_flood_of_malformed_messages(tmp_path: Path, out: Path) -> None:
     assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == []
     # Malformed input changes nothing: lockstep stays on the engine's path. The flood swamps the agents' cell
     # subscriptions, yet each agent's host hands it a peer's beacon of the tick before no later than its own state
-    # (agent/tagged_inbox.py: the link's order), so no wait set misses a peer closing in.
+    # (reconswarm/net/runtime/inbox.py `ordered`: the link's order), so no wait set misses a peer closing in.
     firsts = [next(line for line in f.read_text().splitlines() if "no longer deterministic" in line)
               for f in sorted((out / "logs").glob("agent-*.log")) if "no longer deterministic" in f.read_text()]
     assert s["deterministic"] is True and not firsts, (s["determinism_lost_at_s"], firsts)
