@@ -4,7 +4,8 @@ Layout: starts on a jittered hexagonal lattice around the origin with spacing 2 
 (Assumption 4.1 holds for every pair), the target formation the same lattice scaled up around
 p* = (D, 0) (SLOT_SPACING_M between neighbouring slots, each agent keeping its place), and M random
 convex polygons in the corridor between, apart from each other by more than the largest robot plus its
-safety band and out of reach of the target slots (Assumption 4.2). The planner's gains are the
+safety band and out of reach of the target slots (Assumption 4.2). The corridor is 2.5 times the swarm's width;
+when it cannot hold M obstacles it grows by a quarter (up to GROWTHS times) and the target moves with it. The planner's gains are the
 paper's; R_c grows with the formation so every slot lies well inside the target disk.
 
 Why the formation is wider than the start: a filled lattice has interior slots, and an agent held up
@@ -39,6 +40,7 @@ D_SAFE_M, D_MAX_M = 2.0, 10.0
 CRUISE_MPS = 0.08 * 80.0  # the paper's R_c k_att
 START_SPACING_M = 2 * R_MAX_M + D_MAX_M + 2.0
 SLOT_SPACING_M = 2 * (2 * R_MAX_M + D_MAX_M) + 2.0  # a free lane between two settled neighbours
+GROWTHS = 8  # how often the corridor may grow by a quarter when it cannot hold the obstacles asked for
 
 
 def _hex_lattice(n: int, spacing: float) -> NDArray[np.float64]:
@@ -91,15 +93,16 @@ def generate(n_agents: int, n_obstacles: int = 3, seed: int = 0, slot_spacing_m:
     width = max(100.0, swarm_r + 40.0)
     corridor = max(300.0, 2.5 * width)
     x0 = start_r + 60.0  # obstacles begin here
-    target_x = x0 + corridor + r_c + 60.0
     obstacles: list[ObstacleSpec] = []
     placed: list[tuple[NDArray[np.float64], float]] = []
     clearance = 2 * R_MAX_M + D_MAX_M + 4.0  # wider than any robot plus both repulsion bands
-    tries = 0
+    tries, longer = 0, 0
     while len(obstacles) < n_obstacles:
         tries += 1
-        if tries > 20000:
-            raise RuntimeError(f"could not place {n_obstacles} obstacles (placed {len(obstacles)})")
+        if tries > 20000:  # the corridor is full: it grows by a quarter, what it holds stays (a layout that fitted
+            tries, longer, corridor = 0, longer + 1, corridor * 1.25  # is the same as it always was)
+            if longer > GROWTHS:
+                raise RuntimeError(f"could not place {n_obstacles} obstacles (placed {len(obstacles)})")
         size = rng.uniform(0.12, 0.3) * width
         centre = np.array([rng.uniform(x0 + size, x0 + corridor - size), rng.uniform(-width, width)])
         if any(float(np.hypot(*(centre - c))) < size + r + clearance for c, r in placed):
@@ -109,6 +112,7 @@ def generate(n_agents: int, n_obstacles: int = 3, seed: int = 0, slot_spacing_m:
         placed.append((centre, size))
     # The paper's cruise speed R_c k_att = 6.4 m/s whatever the size: a larger target disk lowers k_att rather
     # than speeding the swarm up (the pressure a crowd puts on an obstacle grows with the attraction).
+    target_x = x0 + corridor + r_c + 60.0
     k_att = round(CRUISE_MPS / r_c, 6)
     travel = target_x / CRUISE_MPS
     settle = math.log(max(r_c, 1.0) / 0.5) / k_att

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -171,7 +172,7 @@ def assumption_4_1_holds(s) -> bool:
 
 
 @pytest.mark.parametrize(("n", "m", "seed"), [(1, 0, 0), (1, 3, 5), (10, 3, 0), (10, 0, 1), (10, 6, 2), (200, 3, 1),
-                                              (200, 12, 7), (2000, 3, 3)])
+                                              (200, 12, 7), (2000, 3, 3), (200, 22, 0), (10, 12, 4)])
 def test_generated_scenarios_are_valid(n, m, seed):
     s = generate(n, m, seed)
     assert len(s.agents) == n and len(s.obstacles) == m
@@ -205,6 +206,23 @@ def test_generated_scenarios_are_valid(n, m, seed):
     assert generate(n, m, seed) == s
     if n > 1:
         assert generate(n, m, seed + 1) != s
+
+
+def _digest(s) -> str:
+    return hashlib.sha256(repr((s.target_m, s.meta, [o.vertices_m for o in s.obstacles],
+                                [(a.start_m, a.offset_m, a.radius_m) for a in s.agents])).encode()).hexdigest()[:16]
+
+
+def test_a_layout_the_corridor_holds_is_the_one_it_always_was_and_a_fuller_one_lengthens_the_corridor():
+    """The corridor grows only when it cannot hold the obstacles asked for: the suites generated before (these
+    digests) stay what they were; 22 obstacles for 200 agents (N / 10 + 2) fit in a longer corridor."""
+    assert [_digest(generate(n, m, seed)) for n, m, seed in [(10, 3, 0), (40, 6, 7), (100, 12, 0), (200, 18, 1)]] == [
+        "8e6841ccea7f784e", "6865b948d64f1c14", "0dad5a5dbeef4112", "36801d05cfb19b70"]
+    held, fuller = generate(200, 18, 0), generate(200, 22, 0)
+    assert len(fuller.obstacles) == 22 and fuller.target_m[0] > held.target_m[0]
+    assert fuller.meta.duration_s > held.meta.duration_s  # (the longer way takes longer)
+    with pytest.raises(RuntimeError, match="could not place 400 obstacles"):
+        generate(10, 400, 0)
 
 
 def test_generate_rejects_bad_sizes():
