@@ -307,7 +307,9 @@ class AgentHost:
         return False
 
     def _flush(self) -> None:
-        self.out.flush({link.home for link in self.active.values() if link.home is not None})
+        """The round's beacons, if any are left to put (called before each command: once a round they are)."""
+        if self.out.pending:
+            self.out.flush({link.home for link in self.active.values() if link.home is not None})
 
     def close(self) -> None:
         self._flush()

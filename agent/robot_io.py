@@ -76,7 +76,7 @@ class HostKeys:
         self.z, self.keys, self.hid = session, keys, min(ids)
         self.pub: zenoh.Publisher | None = session.declare_publisher(
             keys.host(self.hid, "cmd"), congestion_control=zenoh.CongestionControl.BLOCK)
-        self.cmds: list[wire.Cmd] = []
+        self.cmds: dict[tuple[int, int], wire.Cmd] = {}  # (agent, tick) -> its command of this round, in order
 
     def subscribe(self, handler: Callable[[Tag, bool, bool], Any]) -> Any:
         """Our agents' states: urgent (they start a tick), counted for the rows each carries."""
@@ -85,17 +85,18 @@ class HostKeys:
     def add(self, c: wire.Cmd) -> None:
         """An agent's command of this round; one it sends again in the same round (its tick seen again more than
         once) replaces the earlier one of that tick."""
-        self.cmds = [x for x in self.cmds if (x.id, x.k) != (c.id, c.k)]
-        self.cmds.append(c)
+        self.cmds.pop((c.id, c.k), None)  # (the newer goes last, as it came)
+        self.cmds[c.id, c.k] = c
         trace.mark(trace.Mark.CMD_PUT, c.k, c.id)
 
     def flush(self) -> None:
         """Put the commands of this round, in one message."""
         if self.cmds and self.pub is not None:
-            trace.mark(trace.Mark.HOST_CMD_PUT, self.cmds[0].k, self.hid)
+            cmds = list(self.cmds.values())
+            trace.mark(trace.Mark.HOST_CMD_PUT, cmds[0].k, self.hid)
             # (its attachment: the rows the world's inbox counts it for)
-            self.pub.put(cmds_to_wire(self.hid, self.cmds), attachment=attachment(len(self.cmds)))
-        self.cmds = []
+            self.pub.put(cmds_to_wire(self.hid, cmds), attachment=attachment(len(cmds)))
+        self.cmds = {}
 
     def close(self) -> None:
         self.flush()
