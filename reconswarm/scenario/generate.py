@@ -5,8 +5,8 @@ Layout: starts on a jittered hexagonal lattice around the origin with spacing 2 
 p* = (D, 0) (SLOT_SPACING_M between neighbouring slots, each agent keeping its place), and M random
 convex polygons in the corridor between, apart from each other by more than the largest robot plus its
 safety band and out of reach of the target slots (Assumption 4.2). The corridor is 2.5 times the swarm's width;
-when it cannot hold M obstacles it grows by a quarter (up to GROWTHS times) and the target moves with it. The planner's gains are the
-paper's; R_c grows with the formation so every slot lies well inside the target disk.
+when it cannot hold M obstacles it grows by a quarter (up to GROWTHS times) and the target moves with it. The
+planner's gains are the paper's; R_c grows with the formation so every slot lies well inside the target disk.
 
 Why the formation is wider than the start: a filled lattice has interior slots, and an agent held up
 behind an obstacle arrives after the agents around its slot have settled. It can only pass between two

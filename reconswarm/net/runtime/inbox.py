@@ -45,7 +45,8 @@ class Inbox:
 
     def __init__(self, ordered: bool = False) -> None:
         self.ordered = ordered
-        self._samples: deque[tuple[Tag, Any, float, int, int]] = deque()  # (tag, sample, at, urgent n, counted n)
+        # (tag, sample, at, what it counts for among urgent ones, what it counts for, a batch with rows)
+        self._samples: deque[tuple[Tag, Any, float, int, int, bool]] = deque()
         self._ready = threading.Event()
         self._want: float = 1
         self._lock = threading.Lock()
@@ -53,13 +54,14 @@ class Inbox:
 
     def callback(self, tag: Tag = None, urgent: bool = False, rows: bool = False) -> Callable[[Any], None]:
         """The function zenoh (or a ROS 2 subscription) calls with each sample of one subscription. urgent: its
-        samples wake the loop (counted for the node of its tag); rows: a host's batch counts for the rows its
-        attachment says (4 bytes, little-endian, 1..MAX_ROWS; a wrong count only wakes the loop early, or at its
-        poll: the payload's own count is what is believed)."""
+        samples wake the loop (single samples count once per tag among urgent ones: one node's, its tag says
+        whose; a batch, for its rows); rows: a host's batch counts for the rows its attachment says (4 bytes,
+        little-endian, 1..MAX_ROWS; a wrong count only wakes the loop early, or at its poll: the payload's own
+        count is what is believed)."""
         def cb(sample: Any) -> None:
             n = _rows(sample) if rows else 1
             with self._lock:
-                self._samples.append((tag, sample, time.monotonic(), n if urgent else 0, n))
+                self._samples.append((tag, sample, time.monotonic(), n if urgent else 0, n, rows))
                 self._count += n
                 ready = urgent or self._count >= self._want
             if ready:
@@ -74,12 +76,11 @@ class Inbox:
         return zenoh.handlers.Callback(self.callback(tag, urgent, rows), indirect=not self.ordered)
 
     def _urgent(self) -> tuple[int, float]:
-        """How many nodes' urgent samples wait (one per tag of a sample for one agent, `("own", id)`; a batch its
-        rows; an untagged one each), and when the first came (inf: none)."""
-        got = [(at, tag, n) for tag, _s, at, n, _c in list(self._samples) if n]  # (list(): one atomic copy)
-        alone = {tag for _at, tag, _n in got if isinstance(tag, tuple) and tag[0] == "own"}
-        return len(alone) + sum(n for _at, tag, n in got if not (isinstance(tag, tuple) and tag[0] == "own")), min(
-            (at for at, _t, _n in got), default=math.inf)
+        """For how many nodes urgent samples wait (the tags of single samples, once each: two states of one agent
+        are one; the rows of batches), and when the first came (inf: none)."""
+        got = [(at, tag, n, batch) for tag, _s, at, n, _c, batch in list(self._samples) if n]  # (one atomic copy)
+        alone = {tag for _at, tag, _n, batch in got if not batch}
+        return len(alone) + sum(n for _at, _t, n, batch in got if batch), min((g[0] for g in got), default=math.inf)
 
     def take(self, want: int | None, timeout: float | None, urgent: int = 1) -> list[tuple[Tag, Item]]:
         """Every sample waiting with its tag, once `want` of them (None: only urgent ones) are in, or the urgent
@@ -102,7 +103,7 @@ class Inbox:
             got, self._count = list(self._samples), 0
             self._samples.clear()
         out = []
-        for tag, sample, at, _u, _n in got:
+        for tag, sample, at, _u, _n, _b in got:
             item = to_item(sample, at)
             if item is not None:
                 out.append((tag, item))
