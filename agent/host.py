@@ -111,11 +111,9 @@ class AgentHost:
     def listen(self, aid: int, c: Cells) -> None:
         """Agent aid listens to c.listen from now on (agent/listening.py); the newest set of each agent publishing in
         the cells it did not hear yet is replayed to it (what its own advanced subscriber's history would bring)."""
-        changed, old = self.cells.listen(aid, c.listen)
-        if changed:
-            hears = self.cells.hears
-            self.loop.newly_heard(aid, lambda cell: hears(old, cell), lambda cell: hears(c.listen, cell),
-                                  self.cells.cell_of)
+        gained = self.cells.listen(aid, c.listen)
+        if gained is not None:
+            self.loop.newly_heard(aid, gained)
 
     def _others(self, sender: int, key: str) -> list[int]:
         """Whom a co-hosted agent's beacon (under its handover label) or set (under its key) is for: the running

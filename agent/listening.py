@@ -11,7 +11,7 @@ own cells are declared already when it first commands (not all at once, on the m
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import zenoh
@@ -37,11 +37,12 @@ class CellListening:
         self._heard_by: dict[Cell | None, list[int]] = {}  # cell -> `listeners` (until listening or `active` change)
         self.subs: dict[Cell | None, tuple[Any, Any]] = {}  # the host's subscriptions (None: every cell)
 
-    def listen(self, aid: int, listen: Listen) -> tuple[bool, Listen]:
-        """Agent aid listens to `listen` from now on; (whether that changed anything, what it listened to before)."""
+    def listen(self, aid: int, listen: Listen) -> Callable[[str], bool] | None:
+        """Agent aid listens to `listen` from now on. None if nothing changed; else whether a key's cell is one it
+        hears now and did not before."""
         old = self.listening.get(aid, frozenset())
         if aid in self.listening and old == listen:
-            return False, old
+            return None
         self.listening[aid] = listen
         self._heard_by.clear()
         for cell in {None} if old is None else old:
@@ -49,7 +50,7 @@ class CellListening:
         for cell in {None} if listen is None else listen:
             self.by_cell.setdefault(cell, set()).add(aid)
         self._declare()
-        return True, old
+        return lambda key: self._hears(listen, cell := self.cell_of(key)) and not self._hears(old, cell)
 
     def forget(self, aid: int) -> None:
         """Agent aid stopped: it listens to nothing, and is no listener any more."""
@@ -86,7 +87,7 @@ class CellListening:
         return heard_by
 
     @staticmethod
-    def hears(listen: Listen, cell: Cell | None) -> bool:
+    def _hears(listen: Listen, cell: Cell | None) -> bool:
         return listen is None or cell in listen
 
     def cell_of(self, key: str) -> Cell | None:

@@ -21,7 +21,6 @@ from collections.abc import Callable
 
 from reconswarm.net.runtime.inbox import Item, Tag
 from reconswarm.net.wire import wire
-from reconswarm.net.wire.cells import Cell
 
 ECHOES = 4  # a hosted agent's own sets recognised when they come back from its cache: its newest puts
 
@@ -54,12 +53,10 @@ class Loopback:
         """A peer's set was admitted for the hosted agents (never one refused: it would stand in for the genuine)."""
         self.sets[publisher] = (tag, item)
 
-    def newly_heard(self, aid: int, heard_before: Callable[[Cell | None], bool],
-                    heard_now: Callable[[Cell | None], bool], cell_of: Callable[[str], Cell | None]) -> None:
-        """Agent aid changed the cells it listens to: the newest set of each publisher in the cells it did not
-        hear before, for it alone at the next round."""
-        self.replay += [(aid, tag, item) for tag, item in self.sets.values()
-                        if heard_now(cell := cell_of(item[0])) and not heard_before(cell)]
+    def newly_heard(self, aid: int, gained: Callable[[str], bool]) -> None:
+        """Agent aid changed the cells it listens to (`gained(key)`: a key in a cell it hears now and did not
+        before): the newest set of each publisher in those cells, for it alone at the next round."""
+        self.replay += [(aid, tag, item) for tag, item in self.sets.values() if gained(item[0])]
 
     def echo(self, key: str, payload: bytes) -> bool:
         """A set a hosted agent put (one of its ECHOES newest), as its publisher's cache held it: a cell subscription
