@@ -67,11 +67,13 @@ def test_the_hosts_subscriptions_take_remote_samples_tagged_with_history_and_non
     with two_sessions() as (z, out):
         h = None
         try:
-            # Before the host exists: agent 3's token and its obstacle set in the cache of an advanced publisher.
-            token = out.liveliness().declare_token(KEYS.alive_agent(3))
+            # Before the host exists: agent 3's obstacle set in the cache of an advanced publisher, then its token.
+            # The token is declared last: once the host's session has it, the publisher's cache (declared before it
+            # on the same link) is known there too, so the host's history query finds it.
             home3 = AgentNode(S, 3, 0.0).nb.home
             pub = ext.declare_advanced_publisher(out, KEYS.obstacles(home3, 3), cache=ext.CacheConfig(max_samples=1))
             pub.put(obstacle_set(3, home3)[1])
+            token = out.liveliness().declare_token(KEYS.alive_agent(3))
             wait_token(z, KEYS.alive_agent(3))
             h = make_host(z)
             for key in (KEYS.host(1, "state"), KEYS.clock, KEYS.host_beacons(home3, 3)):  # (the host's declarations)
