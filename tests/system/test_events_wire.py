@@ -3,7 +3,8 @@
 An outside subscriber (a plain zenoh-python session in its own process: docs/wire.md's example, nothing of
 reconswarm imported) follows a paper mission through the run's router and writes what it heard; that list must
 equal `reconswarm monitor events --json` (same events, same order, same fields). The mission is cut to 100 s:
-all of the paper's splits and merges (8, the last at t = 89.75 s) happen by then."""
+all of the paper's splits and merges (8, the last at t = 89.75 s) happen by then. Agents in hosts of 5 (lockstep: the
+same events as one process per agent, in a fifth of the wall time)."""
 
 from __future__ import annotations
 
@@ -53,7 +54,7 @@ def test_outside_subscriber_hears_every_recorded_event(tmp_path: Path, out: Path
         assert follower.stdout is not None
         assert follower.stdout.readline().strip() == "subscribed"
         scen = paper_with(tmp_path, **{"duration_s = 300.0": "duration_s = 100.0"})
-        cmd = launcher_cmd(out, "-s", str(scen), "--json", port=port)
+        cmd = launcher_cmd(out, "-s", str(scen), "--agents-per-process", "5", "--json", port=port)
         p = subprocess.run(cmd, capture_output=True, text=True, timeout=900, cwd=ROOT)
         assert p.returncode == 1 and json.loads(p.stdout)["end_reason"] == "duration", p.stderr[-3000:]
         recorded = events(out / "run.db")

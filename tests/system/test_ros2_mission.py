@@ -27,7 +27,20 @@ import pytest
 import zenoh
 from rosbags.typesys import Stores, get_typestore
 
-from tests.support import PAPER, ROOT, attempt, free_port, launcher_cmd, short_paper, summary, trajectories, wait_until
+from tests.support import (
+    PAPER,
+    ROOT,
+    attempt,
+    events,
+    faults_log,
+    free_port,
+    launcher_cmd,
+    positions,
+    short_paper,
+    summary,
+    trajectories,
+    wait_until,
+)
 from tests.unit.test_ros2 import PUBLISHED_ODOMETRY_HASH, PUBLISHED_TWIST_HASH
 
 pytestmark = pytest.mark.realtime  # (holds only if the machine keeps the clock's pace: run alone, last)
@@ -202,3 +215,12 @@ def test_ros2_paper_mission_seen_from_outside(tmp_path: Path, out: Path) -> None
     assert run["agents_lost"] == [3] and run["safety_violations"] == 0, run
     assert proc.returncode == 0
     assert summary(out / "run.db")["converged"]
+    # ---- the kill: robot 3 stops by the diamond's lower vertex, in the swarm's path, and the others go round it
+    # (reconswarm/paper/blocked.py); the monitor noticed within 1 s of wall time
+    lost_ev = [e for e in events(out / "run.db") if e["kind"] == "agent_lost"]
+    assert [e["agent"] for e in lost_ev] == [3]
+    (kill_wall, _kill_t, _), = faults_log(out)
+    assert lost_ev[0]["wall_unix"] - kill_wall <= 1.0
+    # The body stays where the robot stopped: held for 0.2 s, then still until the end.
+    track = [(t, x, y) for t, x, y in positions(out / "run.db", 3) if t >= lost_ev[0]["t"] + 0.5]
+    assert len(track) > 100 and max(abs(x - track[0][1]) + abs(y - track[0][2]) for _, x, y in track) == 0.0

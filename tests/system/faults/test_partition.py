@@ -26,10 +26,14 @@ def need_network_namespaces() -> None:
 def test_partition_between_hosts(tmp_path: Path) -> None:
     need_network_namespaces()
     out = tmp_path / "run"
-    # Half the robots stand still while cut off, so give the mission more simulated time than the paper's.
+    # Half the robots stand still while cut off, so give the mission more simulated time than the paper's. Agents in
+    # hosts of 5 (one process on each side, about 16x real time here): a cut of 4 s of wall time is about a minute
+    # of the mission, so host B's agents are back well before host A's would converge without them (t = 206 s).
+    # One process per agent through a partition: tests/system/faults/test_secure_hosts.py.
     scen = paper_with(tmp_path, **{"duration_s = 300.0": "duration_s = 600.0"})
     try:
-        p = run_launcher(out, "-s", str(scen), "--hosts", "2", "--fault", "partition@60+10", "--json", timeout=600)
+        p = run_launcher(out, "-s", str(scen), "--hosts", "2", "--agents-per-process", "5", "--fault", "partition@60+4",
+                         "--json", timeout=600)
     finally:
         assert_all_gone(out)
     assert p.returncode == 0, p.stderr[-3000:]

@@ -37,6 +37,7 @@ from tests.support import (
     read_run_id,
     reconswarm,
     run_launcher,
+    short_paper,
     wait_for_ticks,
     wait_until,
 )
@@ -135,17 +136,19 @@ def test_create_writes_private_credentials_and_configs(tmp_path: Path) -> None:
 # --- 1. the mission, secure -----------------------------------------------------------------------------
 
 def test_secure_mission_completes(tmp_path: Path) -> None:
+    """The paper's first leg (tests.support.short_paper), secure, converges when `reconswarm sim` does."""
     out = tmp_path / "run"
+    scen = short_paper(tmp_path)
     t0 = time.monotonic()
     try:
-        p = run_launcher(out, "--secure", "--json")
+        p = run_launcher(out, "-s", str(scen), "--secure", "--json")
     finally:
         assert_all_gone(out)
     wall = time.monotonic() - t0
     assert p.returncode == 0, p.stderr[-3000:]
     s = json.loads(p.stdout)
     assert s["converged"] and s["collisions"] == 0 and s["agents_lost"] == [] and s["messages_rejected"] == 0
-    ref = reconswarm("sim", str(PAPER), "-o", str(tmp_path / "sim"), "--json")
+    ref = reconswarm("sim", str(scen), "-o", str(tmp_path / "sim"), "--json")
     assert ref.returncode == 0, ref.stderr
     assert s["convergence_time_s"] == json.loads(ref.stdout)["convergence_time_s"]  # TLS + ACL change nothing
     d = out / "secrets"
@@ -153,7 +156,7 @@ def test_secure_mission_completes(tmp_path: Path) -> None:
     ids = [a.id for a in load(PAPER).agents]
     for name in ["monitor", "simworld", *(f"agent-{i}" for i in ids), "observer", "intruder", "router-A"]:
         zenoh.Config.from_file(str(d / f"{name}.json5"))
-    print(f"secure paper mission: {wall:.1f} s wall, converged at {s['convergence_time_s']} s")
+    print(f"secure mission (the paper's first leg): {wall:.1f} s wall, converged at {s['convergence_time_s']} s")
 
 
 # --- 2 and 3: against one live secure run ---------------------------------------------------------------
