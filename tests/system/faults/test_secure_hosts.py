@@ -188,7 +188,7 @@ def test_a_bad_deployment_file_is_one_line_exit_2(tmp_path: Path) -> None:
 # --- run_local.sh --secure --hosts 2 (network namespaces: root) -----------------------------------------------
 
 def test_secure_two_hosts_converge_through_a_partition_and_refuse_outsiders(tmp_path: Path) -> None:
-    """The paper at --secure --hosts 2 with the link between the hosts cut for 10 s: the routers relink over
+    """The paper at --secure --hosts 2 with the link between the hosts cut for 4 s: the routers relink over
     mutual TLS and the mission converges as in open mode; meanwhile a session without credentials is refused by
     host A's router and the CA-signed certificate no rule names hears nothing there."""
     import json
@@ -205,7 +205,7 @@ def test_secure_two_hosts_converge_through_a_partition_and_refuse_outsiders(tmp_
     err = tmp_path / "launcher.err"
     with err.open("wb") as fh:
         proc = subprocess.Popen(launcher_cmd(out, "-s", str(scen), "--secure", "--hosts", "2", "--fault",
-                                             "partition@60+10", "--json"), cwd=ROOT, stdout=subprocess.PIPE, stderr=fh)
+                                             "partition@60+4", "--json"), cwd=ROOT, stdout=subprocess.PIPE, stderr=fh)
     try:
         wait_for_ticks(out / "run.db", 20, proc, 300, lambda: err.read_text()[-3000:])
         secrets = out / "secrets"
@@ -232,7 +232,7 @@ def test_secure_two_hosts_converge_through_a_partition_and_refuse_outsiders(tmp_
         assert_all_gone(out)
     assert proc.returncode == 0, err.read_text()[-3000:]
     s = json.loads(stdout)
-    print(f"secure, two hosts, partition@60+10: converged {s['converged']} at {s['convergence_time_s']} s, "
+    print(f"secure, two hosts, partition@60+4: converged {s['converged']} at {s['convergence_time_s']} s, "
           f"collisions {s['collisions']}, intrusions {s['intrusions']}; outsider {anonymous}; "
           f"intruder heard {len(got)}")
     assert anonymous.startswith("refused") and len(got) == 0
